@@ -1,0 +1,93 @@
+// Geometry pass: terrain, trunks, limbs and every leaf and needle as triangles. Lambert sun
+// light through cascaded shadow maps, hemispherical sky ambient, two-sided leaves with some
+// light let through from behind, distance fog towards the horizon colour.
+
+@group(0) @binding(1) var shadow_map: texture_depth_2d_array;
+@group(0) @binding(2) var shadow_sampler: sampler_comparison;
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) color: vec3<f32>,
+    @location(3) foliage: f32,
+}
+
+@vertex
+fn vs_main(v: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
+    let model = instance_model(instance);
+    let world = model * vec4<f32>(v.position, 1.0);
+    var out: VertexOut;
+    out.clip = frame.view_proj * world;
+    out.world = world.xyz;
+    out.normal = (model * vec4<f32>(v.normal, 0.0)).xyz;
+    out.color = v.color * mix(vec3<f32>(1.0), instance_tint(instance), v.foliage);
+    out.foliage = v.foliage;
+    return out;
+}
+
+fn cascade_for(view_depth: f32) -> u32 {
+    if view_depth < frame.cascade_splits.x {
+        return 0u;
+    }
+    if view_depth < frame.cascade_splits.y {
+        return 1u;
+    }
+    return 2u;
+}
+
+// Fraction of the sun that reaches `world` (1 = lit), 3x3 PCF on the cascade's map.
+fn sun_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> f32 {
+    if frame.sun_dir.w < 0.5 {
+        return 1.0;
+    }
+    if view_depth >= frame.cascade_splits.z {
+        return 1.0;
+    }
+    let c = cascade_for(view_depth);
+    let texel = frame.cascade_splits.w;
+    // Offset along the normal by about a texel of this cascade, against acne.
+    let p = world + normal * frame.cascade_texel[c] * 1.5;
+    let lp = frame.light_view_proj[c] * vec4<f32>(p, 1.0);
+    let ndc = lp.xyz / lp.w;
+    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) || ndc.z > 1.0 {
+        return 1.0;
+    }
+    var lit = 0.0;
+    let r = frame.shadow_params.y;
+    for (var y = -1; y <= 1; y++) {
+        for (var x = -1; x <= 1; x++) {
+            let o = vec2<f32>(f32(x), f32(y)) * texel * r;
+            lit += textureSampleCompareLevel(shadow_map, shadow_sampler, uv + o, i32(c), ndc.z);
+        }
+    }
+    return lit / 9.0;
+}
+
+@fragment
+fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    var n = normalize(in.normal);
+    let leaf = in.foliage > 0.5;
+    if leaf && !front {
+        n = -n;
+    }
+    let to_eye = frame.camera_pos.xyz - in.world;
+    let dist = length(to_eye);
+    let l = frame.sun_dir.xyz;
+    let ndl = dot(n, l);
+    // Leaves let some light through: a leaf lit from behind still glows a little.
+    var direct = max(ndl, 0.0);
+    if leaf {
+        direct = max(ndl, 0.0) + 0.3 * max(-ndl, 0.0);
+    }
+    // View depth along the camera axis picks the cascade.
+    let view_depth = dot(-to_eye, frame.camera_forward.xyz);
+    let offset_normal = select(n, sign(ndl) * n, leaf);
+    let vis = sun_visibility(in.world, offset_normal, view_depth);
+    let ambient = mix(frame.ground_ambient.rgb, frame.sky_ambient.rgb, n.y * 0.5 + 0.5);
+    var c = in.color * (frame.sun_color.rgb * direct * vis + ambient);
+    let fog = 1.0 - exp(-dist * frame.camera_pos.w);
+    c = mix(c, frame.sky_horizon.rgb, fog);
+    return vec4<f32>(c * frame.shadow_params.z, 1.0);
+}

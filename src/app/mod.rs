@@ -1,0 +1,444 @@
+//! The viewer: a winit window with a wgpu surface, the render core drawing the 3D view into
+//! the surface texture, and egui on top. Thin by design: input goes to [`fly`], the panel is
+//! [`panel`], drawing is the render core's.
+
+pub mod fly;
+pub mod panel;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use winit::application::ApplicationHandler;
+use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
+use winit::keyboard::{KeyCode, ModifiersState, PhysicalKey};
+use winit::window::{Window, WindowId};
+
+use crate::model::World;
+use crate::render::{AdapterPreference, FrameDesc, GpuContext, Renderer};
+use crate::scene::Scene;
+use crate::{Error, Result};
+use fly::{FlyController, FlyKey};
+use panel::{PanelActions, PanelStats};
+
+/// Options of `canopy view` beyond the scene.
+#[derive(Clone, Debug, Default)]
+pub struct ViewOptions {
+    /// Take a screenshot of the 3D view to this path after `after_frames` frames, then quit
+    /// (for scripts and CI).
+    pub screenshot: Option<PathBuf>,
+    pub after_frames: u32,
+}
+
+/// Opens the viewer on a scene file, or on the embedded default forest.
+pub fn run(scene: Option<&Path>) -> Result<()> {
+    run_with(scene, ViewOptions::default())
+}
+
+pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
+    let scene = match scene_path {
+        Some(p) => Scene::load(p)?,
+        None => Scene::default_scene(),
+    };
+    let world = World::build(&scene)?;
+    let title = match scene_path {
+        Some(p) => format!("canopy: {}", p.display()),
+        None => "canopy: default forest".to_string(),
+    };
+    let event_loop = EventLoop::new().map_err(|e| {
+        Error::Window(format!(
+            "{e}; the viewer needs a display (set DISPLAY or WAYLAND_DISPLAY, or use `canopy render`)"
+        ))
+    })?;
+    event_loop.set_control_flow(ControlFlow::Poll);
+    let mut app = App {
+        frame: FrameDesc::from_scene(&scene),
+        world,
+        title,
+        options,
+        running: None,
+        fly: FlyController::default(),
+        modifiers: ModifiersState::empty(),
+        cursor: None,
+        stats: PanelStats::default(),
+        message: None,
+        last_frame: Instant::now(),
+        frames: 0,
+        fatal: None,
+    };
+    event_loop
+        .run_app(&mut app)
+        .map_err(|e| Error::Window(e.to_string()))?;
+    match app.fatal {
+        Some(e) => Err(e),
+        None => Ok(()),
+    }
+}
+
+struct Running {
+    window: Arc<Window>,
+    surface: wgpu::Surface<'static>,
+    config: wgpu::SurfaceConfiguration,
+    ctx: GpuContext,
+    renderer: Renderer,
+    egui_state: egui_winit::State,
+    egui_renderer: egui_wgpu::Renderer,
+}
+
+struct App {
+    frame: FrameDesc,
+    world: World,
+    title: String,
+    options: ViewOptions,
+    running: Option<Running>,
+    fly: FlyController,
+    modifiers: ModifiersState,
+    cursor: Option<(f64, f64)>,
+    stats: PanelStats,
+    /// Last screenshot result: text, and whether it is an error.
+    message: Option<(String, bool)>,
+    last_frame: Instant,
+    frames: u64,
+    fatal: Option<Error>,
+}
+
+impl App {
+    fn start(&mut self, event_loop: &ActiveEventLoop) -> Result<Running> {
+        let attrs = Window::default_attributes()
+            .with_title(self.title.clone())
+            .with_inner_size(winit::dpi::LogicalSize::new(1280.0, 720.0));
+        let window = Arc::new(
+            event_loop
+                .create_window(attrs)
+                .map_err(|e| Error::Window(e.to_string()))?,
+        );
+        let instance = wgpu::Instance::new(crate::render::context::instance_descriptor(Some(
+            Box::new(event_loop.owned_display_handle()),
+        )));
+        let surface = instance.create_surface(window.clone())?;
+        let ctx = GpuContext::for_surface(instance, &surface, AdapterPreference::Default)?;
+        let size = window.inner_size();
+        let mut config = surface
+            .get_default_config(&ctx.adapter, size.width.max(1), size.height.max(1))
+            .ok_or_else(|| {
+                Error::Gpu("the window surface is not supported by the adapter".into())
+            })?;
+        // Prefer an sRGB format: the render core writes linear colour.
+        let caps = surface.get_capabilities(&ctx.adapter);
+        if let Some(f) = caps
+            .formats
+            .iter()
+            .copied()
+            .find(wgpu::TextureFormat::is_srgb)
+        {
+            config.format = f;
+        }
+        config.present_mode = wgpu::PresentMode::AutoVsync;
+        if size.width > 0 && size.height > 0 {
+            surface.configure(&ctx.device, &config);
+        }
+        let renderer = Renderer::new(&ctx, &self.world)?;
+        let egui_ctx = egui::Context::default();
+        let egui_state = egui_winit::State::new(
+            egui_ctx,
+            egui::ViewportId::ROOT,
+            &window,
+            Some(window.scale_factor() as f32),
+            None,
+            Some(ctx.device.limits().max_texture_dimension_2d as usize),
+        );
+        let egui_renderer =
+            egui_wgpu::Renderer::new(&ctx.device, config.format, Default::default());
+        self.stats.adapter = ctx.adapter_name();
+        self.stats.trees_total = self.world.forest.instances.len();
+        Ok(Running {
+            window,
+            surface,
+            config,
+            ctx,
+            renderer,
+            egui_state,
+            egui_renderer,
+        })
+    }
+
+    fn fail(&mut self, event_loop: &ActiveEventLoop, e: Error) {
+        log::error!("{e}");
+        self.fatal = Some(e);
+        event_loop.exit();
+    }
+
+    fn key(&mut self, code: KeyCode, pressed: bool) -> bool {
+        let k = match code {
+            KeyCode::KeyW | KeyCode::ArrowUp => FlyKey::Forward,
+            KeyCode::KeyS | KeyCode::ArrowDown => FlyKey::Back,
+            KeyCode::KeyA | KeyCode::ArrowLeft => FlyKey::Left,
+            KeyCode::KeyD | KeyCode::ArrowRight => FlyKey::Right,
+            KeyCode::KeyQ => FlyKey::Down,
+            KeyCode::KeyE => FlyKey::Up,
+            KeyCode::ShiftLeft | KeyCode::ShiftRight => FlyKey::Fast,
+            _ => return false,
+        };
+        self.fly.key(k, pressed);
+        true
+    }
+
+    /// Renders the 3D view offscreen at window resolution and writes it to `path`.
+    fn screenshot(&mut self, path: &Path) {
+        let Some(r) = &mut self.running else { return };
+        let (w, h) = (r.config.width, r.config.height);
+        let result = r
+            .renderer
+            .render_image(&r.ctx, &self.frame, w, h, 1)
+            .and_then(|(img, _)| crate::imageio::save_png(path, &img));
+        self.message = Some(match result {
+            Ok(()) => (format!("saved {}", path.display()), false),
+            Err(e) => (e.to_string(), true),
+        });
+    }
+
+    fn redraw(&mut self, event_loop: &ActiveEventLoop) {
+        let now = Instant::now();
+        let dt = now.duration_since(self.last_frame).as_secs_f32();
+        self.last_frame = now;
+        self.fly.update(&mut self.frame.camera, dt);
+        // Stay above the ground.
+        let p = self.frame.camera.position;
+        let ground = self.world.terrain.height_at(p.x, p.z) + 1.5;
+        if p.y < ground {
+            self.frame.camera.position.y = ground;
+        }
+        let Some(r) = &mut self.running else { return };
+        if r.config.width == 0 || r.config.height == 0 {
+            return; // minimised
+        }
+        if r.ctx.is_lost() {
+            let e = Error::Gpu("the GPU device was lost; restart canopy".into());
+            self.fail(event_loop, e);
+            return;
+        }
+        let surface_texture = match r.surface.get_current_texture() {
+            wgpu::CurrentSurfaceTexture::Success(t)
+            | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
+            wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => return,
+            wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
+                r.surface.configure(&r.ctx.device, &r.config);
+                return;
+            }
+            other => {
+                log::warn!("could not get the next frame: {other:?}");
+                return;
+            }
+        };
+        let view = surface_texture
+            .texture
+            .create_view(&wgpu::TextureViewDescriptor::default());
+        match r.renderer.render(
+            &r.ctx,
+            &self.frame,
+            crate::render::FrameTarget {
+                view: &view,
+                format: r.config.format,
+                width: r.config.width,
+                height: r.config.height,
+            },
+            false,
+        ) {
+            Ok(s) => {
+                self.stats.trees_drawn = s.trees_drawn;
+                self.stats.triangles = s.triangles;
+                self.stats.shadow_triangles = s.shadow_triangles;
+                self.stats.draw_calls = s.draw_calls;
+            }
+            Err(e) => {
+                self.message = Some((e.to_string(), true));
+            }
+        }
+        self.stats.gpu_frame_ms = r.renderer.last_gpu_ms();
+        self.stats.cpu_frame_ms = 0.9 * self.stats.cpu_frame_ms + 0.1 * f64::from(dt) * 1e3;
+        self.stats.camera_speed = self.fly.speed;
+
+        // egui on top of the 3D view.
+        let raw = r.egui_state.take_egui_input(&r.window);
+        let mut actions = PanelActions::default();
+        let frame = &mut self.frame;
+        let stats = &self.stats;
+        let message = self.message.as_ref();
+        let out = r.egui_state.egui_ctx().run_ui(raw, |ui| {
+            egui::Panel::right("controls")
+                .default_size(280.0)
+                .show(ui, |ui| {
+                    egui::ScrollArea::vertical().show(ui, |ui| {
+                        actions = panel::controls(ui, frame, stats, message);
+                    });
+                });
+        });
+        r.egui_state
+            .handle_platform_output(&r.window, out.platform_output);
+        let ppp = out.pixels_per_point;
+        let jobs = r.egui_state.egui_ctx().tessellate(out.shapes, ppp);
+        let screen = egui_wgpu::ScreenDescriptor {
+            size_in_pixels: [r.config.width, r.config.height],
+            pixels_per_point: ppp,
+        };
+        for (id, deltas) in &out.textures_delta.set {
+            for delta in deltas {
+                r.egui_renderer
+                    .update_texture(&r.ctx.device, &r.ctx.queue, *id, delta);
+            }
+        }
+        let mut encoder = r
+            .ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("egui"),
+            });
+        let extra = r.egui_renderer.update_buffers(
+            &r.ctx.device,
+            &r.ctx.queue,
+            &mut encoder,
+            &jobs,
+            &screen,
+        );
+        {
+            let pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("egui"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Load,
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            let mut pass = pass.forget_lifetime();
+            r.egui_renderer.render(&mut pass, &jobs, &screen);
+        }
+        r.ctx
+            .queue
+            .submit(extra.into_iter().chain(std::iter::once(encoder.finish())));
+        for id in &out.textures_delta.free {
+            r.egui_renderer.free_texture(id);
+        }
+        r.window.pre_present_notify();
+        r.ctx.queue.present(surface_texture);
+        self.frames += 1;
+
+        if actions.screenshot {
+            let path = crate::imageio::timestamped_path(Path::new("screenshots"));
+            self.screenshot(&path);
+        }
+        if actions.screenshot_as {
+            let picked = rfd::FileDialog::new()
+                .add_filter("PNG image", &["png"])
+                .set_file_name("canopy.png")
+                .save_file();
+            if let Some(path) = picked {
+                self.screenshot(&path);
+            }
+        }
+        if let Some(path) = self.options.screenshot.clone()
+            && self.frames >= u64::from(self.options.after_frames.max(1))
+        {
+            self.screenshot(&path);
+            match self.message.take() {
+                Some((m, true)) => self.fail(event_loop, Error::WriteImage { path, reason: m }),
+                Some((m, false)) => {
+                    println!("{m}");
+                    event_loop.exit();
+                }
+                None => event_loop.exit(),
+            }
+        }
+    }
+}
+
+impl ApplicationHandler for App {
+    fn resumed(&mut self, event_loop: &ActiveEventLoop) {
+        if self.running.is_some() {
+            return;
+        }
+        match self.start(event_loop) {
+            Ok(r) => {
+                r.window.request_redraw();
+                self.running = Some(r);
+            }
+            Err(e) => self.fail(event_loop, e),
+        }
+    }
+
+    fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        let Some(r) = &mut self.running else { return };
+        let consumed = r.egui_state.on_window_event(&r.window, &event).consumed;
+        let egui_pointer = r.egui_state.egui_ctx().egui_wants_pointer_input();
+        let egui_keys = r.egui_state.egui_ctx().egui_wants_keyboard_input();
+        match event {
+            WindowEvent::CloseRequested => event_loop.exit(),
+            WindowEvent::Resized(size) => {
+                r.config.width = size.width;
+                r.config.height = size.height;
+                if size.width > 0 && size.height > 0 {
+                    r.surface.configure(&r.ctx.device, &r.config);
+                }
+            }
+            WindowEvent::Focused(false) => self.fly.release_all(),
+            WindowEvent::ModifiersChanged(m) => self.modifiers = m.state(),
+            WindowEvent::KeyboardInput { event, .. } => {
+                let pressed = event.state == ElementState::Pressed;
+                if let PhysicalKey::Code(code) = event.physical_key {
+                    if code == KeyCode::F12 && pressed && !event.repeat {
+                        let path = crate::imageio::timestamped_path(Path::new("screenshots"));
+                        self.screenshot(&path);
+                    } else if code == KeyCode::Escape && pressed {
+                        self.fly.release_all();
+                    } else if !egui_keys || !pressed {
+                        self.key(code, pressed);
+                    }
+                }
+            }
+            WindowEvent::MouseInput { state, button, .. } => {
+                let pressed = state == ElementState::Pressed;
+                match button {
+                    MouseButton::Right => {
+                        self.fly.set_looking(pressed && !(consumed && egui_pointer))
+                    }
+                    MouseButton::Left => {
+                        let ctrl = self.modifiers.control_key();
+                        self.fly.set_dragging_sun(pressed && ctrl && !egui_pointer);
+                    }
+                    _ => {}
+                }
+            }
+            WindowEvent::CursorMoved { position, .. } => {
+                if let Some((x, y)) = self.cursor {
+                    let (dx, dy) = ((position.x - x) as f32, (position.y - y) as f32);
+                    self.fly
+                        .mouse_moved(dx, dy, &mut self.frame.camera, &mut self.frame.sun);
+                }
+                self.cursor = Some((position.x, position.y));
+            }
+            WindowEvent::MouseWheel { delta, .. } if !egui_pointer => {
+                let notches = match delta {
+                    MouseScrollDelta::LineDelta(_, y) => y,
+                    MouseScrollDelta::PixelDelta(p) => (p.y / 40.0) as f32,
+                };
+                self.fly.wheel(notches);
+            }
+            WindowEvent::RedrawRequested => self.redraw(event_loop),
+            _ => {}
+        }
+    }
+
+    fn about_to_wait(&mut self, _event_loop: &ActiveEventLoop) {
+        if let Some(r) = &self.running {
+            r.window.request_redraw();
+        }
+    }
+}

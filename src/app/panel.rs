@@ -1,0 +1,135 @@
+//! The egui side panel: stats, method, sun and shadow controls, screenshot buttons. Pure UI
+//! over plain state, so it is tested headless with egui_kittest.
+
+use crate::render::{FrameDesc, Method};
+
+/// What the panel shows that the app measured.
+#[derive(Clone, Debug, Default)]
+pub struct PanelStats {
+    pub cpu_frame_ms: f64,
+    pub gpu_frame_ms: Option<f64>,
+    pub trees_drawn: u32,
+    pub trees_total: usize,
+    pub triangles: u64,
+    pub shadow_triangles: u64,
+    pub draw_calls: u32,
+    pub adapter: String,
+    pub camera_speed: f32,
+}
+
+/// What the user asked for this frame.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct PanelActions {
+    pub screenshot: bool,
+    pub screenshot_as: bool,
+}
+
+/// Draws the panel's contents into `ui`, editing `frame` in place.
+pub fn controls(
+    ui: &mut egui::Ui,
+    frame: &mut FrameDesc,
+    stats: &PanelStats,
+    message: Option<&(String, bool)>,
+) -> PanelActions {
+    let mut actions = PanelActions::default();
+    ui.heading("canopy");
+    egui::Grid::new("stats").num_columns(2).show(ui, |ui| {
+        ui.label("frame (CPU)");
+        ui.label(format!("{:.1} ms", stats.cpu_frame_ms));
+        ui.end_row();
+        ui.label("frame (GPU)");
+        ui.label(match stats.gpu_frame_ms {
+            Some(ms) => format!("{ms:.2} ms"),
+            None => "n/a".to_string(),
+        });
+        ui.end_row();
+        ui.label("trees drawn");
+        ui.label(format!("{} / {}", stats.trees_drawn, stats.trees_total));
+        ui.end_row();
+        ui.label("triangles");
+        ui.label(format_count(stats.triangles));
+        ui.end_row();
+        ui.label("shadow triangles");
+        ui.label(format_count(stats.shadow_triangles));
+        ui.end_row();
+        ui.label("draw calls");
+        ui.label(stats.draw_calls.to_string());
+        ui.end_row();
+        ui.label("speed");
+        ui.label(format!("{:.1} m/s", stats.camera_speed));
+        ui.end_row();
+    });
+    ui.small(&stats.adapter);
+    ui.separator();
+
+    ui.label("Method");
+    ui.horizontal(|ui| {
+        for m in Method::ALL {
+            ui.selectable_value(&mut frame.method, *m, m.name());
+        }
+    });
+    ui.separator();
+
+    ui.label("Sun (Ctrl + left drag in the view)");
+    ui.add(egui::Slider::new(&mut frame.sun.azimuth_deg, 0.0..=360.0).text("azimuth °"));
+    ui.add(egui::Slider::new(&mut frame.sun.elevation_deg, -10.0..=90.0).text("elevation °"));
+    ui.add(egui::Slider::new(&mut frame.sun.intensity, 0.0..=10.0).text("sun intensity"));
+    ui.add(egui::Slider::new(&mut frame.sky.intensity, 0.0..=4.0).text("sky intensity"));
+    ui.separator();
+
+    ui.checkbox(&mut frame.shadows.enabled, "sun shadows");
+    ui.add_enabled_ui(frame.shadows.enabled, |ui| {
+        egui::ComboBox::from_label("shadow map")
+            .selected_text(frame.shadows.map_size.to_string())
+            .show_ui(ui, |ui| {
+                for s in [512u32, 1024, 2048, 4096] {
+                    ui.selectable_value(&mut frame.shadows.map_size, s, s.to_string());
+                }
+            });
+        ui.add(
+            egui::Slider::new(&mut frame.shadows.distance, 50.0..=2000.0).text("shadow distance m"),
+        );
+    });
+    ui.add(egui::Slider::new(&mut frame.fog_density, 0.0..=0.005).text("fog"));
+    ui.add(egui::Slider::new(&mut frame.camera.fov_y_deg, 20.0..=100.0).text("field of view °"));
+    ui.separator();
+
+    ui.horizontal(|ui| {
+        if ui.button("Screenshot (F12)").clicked() {
+            actions.screenshot = true;
+        }
+        if ui.button("Save as…").clicked() {
+            actions.screenshot_as = true;
+        }
+    });
+    if let Some((text, is_error)) = message {
+        if *is_error {
+            ui.colored_label(egui::Color32::from_rgb(230, 80, 70), text);
+        } else {
+            ui.label(text);
+        }
+    }
+    ui.separator();
+    ui.small("WASD move · Q/E down/up · Shift faster · wheel: speed · right drag: look");
+    actions
+}
+
+fn format_count(n: u64) -> String {
+    match n {
+        0..1_000 => n.to_string(),
+        1_000..1_000_000 => format!("{:.1} k", n as f64 / 1e3),
+        _ => format!("{:.2} M", n as f64 / 1e6),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn counts_are_readable() {
+        assert_eq!(format_count(999), "999");
+        assert_eq!(format_count(12_345), "12.3 k");
+        assert_eq!(format_count(120_000_000), "120.00 M");
+    }
+}

@@ -1,0 +1,14 @@
+//! canopy: a real-time forest viewer. The library holds everything but the window: the
+//! scene file, the procedural tree hierarchies and terrain (`model`), the window-free GPU
+//! render core (`render`), image metrics (`metrics`) and the viewer shell (`app`), which
+//! the `canopy` binary drives.
+
+pub mod app;
+pub mod error;
+pub mod imageio;
+pub mod metrics;
+pub mod model;
+pub mod render;
+pub mod scene;
+
+pub use error::{Error, Result};

@@ -1,0 +1,358 @@
+//! Forest placement: seeded dart throwing with a minimum spacing between trunks
+//! (grid-accelerated, bounded number of attempts), each tree standing on the terrain with a
+//! species drawn by weight, a yaw, a scale and a foliage tint.
+
+use glam::{Mat4, Vec2, Vec3};
+
+use super::ModelError;
+use super::rng::Rng;
+use super::terrain::Terrain;
+use crate::scene::ForestParams;
+
+/// Largest number of grid cells per side of the placement acceleration grid.
+const MAX_GRID: usize = 1024;
+/// Dart-throwing attempts per requested tree (plus a fixed allowance).
+const ATTEMPTS_PER_TREE: u64 = 60;
+
+/// One tree of the forest.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TreeInstance {
+    /// Index into the world's species list.
+    pub species: u32,
+    /// Base of the trunk, on the terrain surface (m).
+    pub position: Vec3,
+    /// Rotation about +Y (radians).
+    pub yaw: f32,
+    /// Uniform scale (1 = the species' size).
+    pub scale: f32,
+    /// Multiplicative foliage colour variation around 1.0.
+    pub tint: Vec3,
+}
+
+impl TreeInstance {
+    /// Tree frame to world: translate * rotate_y(yaw) * uniform scale.
+    pub fn transform(&self) -> Mat4 {
+        Mat4::from_translation(self.position)
+            * Mat4::from_rotation_y(self.yaw)
+            * Mat4::from_scale(Vec3::splat(self.scale))
+    }
+}
+
+/// All placed trees.
+#[derive(Clone, Debug, Default)]
+pub struct Forest {
+    /// The trees, in placement order.
+    pub instances: Vec<TreeInstance>,
+}
+
+/// Uniform grid over the placement square; each cell is at least `min_spacing` wide, so any
+/// neighbour closer than the spacing is in the 3x3 cells around a point.
+struct Grid {
+    origin: f32,
+    cell: f32,
+    cells: usize,
+    head: Vec<u32>,
+    next: Vec<u32>,
+}
+
+impl Grid {
+    fn new(origin: f32, span: f32, min_spacing: f32) -> Grid {
+        let cell = min_spacing.max(span / MAX_GRID as f32).max(1e-6);
+        let cells = ((span / cell).ceil() as usize).clamp(1, MAX_GRID);
+        Grid {
+            origin,
+            cell,
+            cells,
+            head: vec![u32::MAX; cells * cells],
+            next: Vec::new(),
+        }
+    }
+
+    fn cell_of(&self, p: Vec2) -> (usize, usize) {
+        let c = |v: f32| (((v - self.origin) / self.cell).max(0.0) as usize).min(self.cells - 1);
+        (c(p.x), c(p.y))
+    }
+
+    fn is_free(&self, points: &[Vec2], p: Vec2, min_sq: f32) -> bool {
+        let (ci, cj) = self.cell_of(p);
+        for j in cj.saturating_sub(1)..=(cj + 1).min(self.cells - 1) {
+            for i in ci.saturating_sub(1)..=(ci + 1).min(self.cells - 1) {
+                let mut k = self.head[j * self.cells + i];
+                while k != u32::MAX {
+                    if points[k as usize].distance_squared(p) < min_sq {
+                        return false;
+                    }
+                    k = self.next[k as usize];
+                }
+            }
+        }
+        true
+    }
+
+    fn insert(&mut self, index: u32, p: Vec2) {
+        let (i, j) = self.cell_of(p);
+        let slot = j * self.cells + i;
+        self.next.push(self.head[slot]);
+        self.head[slot] = index;
+    }
+}
+
+impl Forest {
+    /// Places `p.count` trees on `terrain`, choosing among `species_count` species by the
+    /// weights in `p.mix`. Deterministic for its inputs. Fails with
+    /// [`ModelError::ForestDoesNotFit`] when the trees cannot be placed at the spacing.
+    pub fn place(
+        p: &ForestParams,
+        terrain: &Terrain,
+        species_count: usize,
+    ) -> Result<Forest, ModelError> {
+        p.check(species_count)
+            .map_err(|e| ModelError::invalid("forest", e))?;
+        super::check::positive("size", terrain.size)
+            .map_err(|e| ModelError::invalid("terrain", e))?;
+        let n = p.count as usize;
+        if n == 0 {
+            return Ok(Forest::default());
+        }
+        let half = 0.5 * terrain.size;
+        // Keep trunks a little inside the terrain's edge.
+        let margin = (0.5 * p.min_spacing).min(0.25 * terrain.size);
+        let lo = -half + margin;
+        let span = 2.0 * (half - margin);
+        let mut grid = Grid::new(lo, span, p.min_spacing);
+        let min_sq = p.min_spacing * p.min_spacing;
+        let mut points: Vec<Vec2> = Vec::with_capacity(n);
+        let mut rng = Rng::derive(p.seed, 0);
+        let max_attempts = n as u64 * ATTEMPTS_PER_TREE + 1000;
+        let mut attempts = 0u64;
+        while points.len() < n && attempts < max_attempts {
+            attempts += 1;
+            let q = Vec2::new(lo + span * rng.f32(), lo + span * rng.f32());
+            if grid.is_free(&points, q, min_sq) {
+                grid.insert(points.len() as u32, q);
+                points.push(q);
+            }
+        }
+        if points.len() < n {
+            return Err(ModelError::ForestDoesNotFit {
+                placed: points.len() as u32,
+                requested: p.count,
+                min_spacing: p.min_spacing,
+                size: terrain.size,
+                attempts,
+            });
+        }
+
+        // Attributes come from their own stream, so positions do not depend on them.
+        let mut rng = Rng::derive(p.seed, 1);
+        let total: f32 = p.mix.iter().sum();
+        let instances = points
+            .iter()
+            .map(|q| {
+                let mut pick = rng.f32() * total;
+                let mut species = 0u32;
+                for (i, w) in p.mix.iter().enumerate() {
+                    species = i as u32;
+                    if pick < *w {
+                        break;
+                    }
+                    pick -= w;
+                }
+                // Never pick a zero-weight species through rounding at the end of the list.
+                while p.mix.get(species as usize).is_some_and(|w| *w <= 0.0) && species > 0 {
+                    species -= 1;
+                }
+                let yaw_draw = rng.f32() * std::f32::consts::TAU;
+                let yaw = if p.random_yaw { yaw_draw } else { 0.0 };
+                let scale = p.scale_min + (p.scale_max - p.scale_min) * rng.f32();
+                let tv = p.tint_variation;
+                let brightness = 1.0 + tv * rng.signed();
+                let tint = Vec3::new(
+                    brightness * (1.0 + 0.3 * tv * rng.signed()),
+                    brightness,
+                    brightness * (1.0 + 0.3 * tv * rng.signed()),
+                )
+                .max(Vec3::ZERO);
+                // Stand on the lowest ground around the trunk so it never floats on a slope.
+                let r = 0.4 * scale;
+                let y = [(0.0, 0.0), (r, 0.0), (-r, 0.0), (0.0, r), (0.0, -r)]
+                    .iter()
+                    .map(|(dx, dz)| terrain.height_at(q.x + dx, q.y + dz))
+                    .fold(f32::INFINITY, f32::min);
+                TreeInstance {
+                    species,
+                    position: Vec3::new(q.x, y, q.y),
+                    yaw,
+                    scale,
+                    tint,
+                }
+            })
+            .collect();
+        Ok(Forest { instances })
+    }
+
+    /// Number of trees of each species (`species_count` entries).
+    pub fn species_histogram(&self, species_count: usize) -> Vec<usize> {
+        let mut h = vec![0; species_count];
+        for t in &self.instances {
+            if let Some(c) = h.get_mut(t.species as usize) {
+                *c += 1;
+            }
+        }
+        h
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::TerrainParams;
+
+    fn terrain() -> Terrain {
+        let p = TerrainParams {
+            size: 400.0,
+            resolution: 65,
+            seed: 5,
+            relief: 30.0,
+            feature_size: 150.0,
+            ..TerrainParams::default()
+        };
+        match Terrain::generate(&p) {
+            Ok(t) => t,
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    fn params(count: u32) -> ForestParams {
+        ForestParams {
+            count,
+            seed: 9,
+            min_spacing: 6.0,
+            mix: vec![0.6, 0.4],
+            scale_min: 0.8,
+            scale_max: 1.2,
+            random_yaw: true,
+            tint_variation: 0.15,
+        }
+    }
+
+    #[test]
+    fn places_the_count_with_spacing_on_the_ground() {
+        let t = terrain();
+        let f = match Forest::place(&params(500), &t, 2) {
+            Ok(f) => f,
+            Err(e) => panic!("{e}"),
+        };
+        assert_eq!(f.instances.len(), 500);
+        for (i, a) in f.instances.iter().enumerate() {
+            assert!(a.position.x.abs() <= 200.0 && a.position.z.abs() <= 200.0);
+            let ground = t.height_at(a.position.x, a.position.z);
+            assert!(a.position.y <= ground + 1e-4 && a.position.y > ground - 1.0);
+            assert!((0.8..=1.2).contains(&a.scale));
+            assert!(a.species < 2);
+            assert!((0.0..std::f32::consts::TAU).contains(&a.yaw));
+            assert!(a.tint.min_element() > 0.7 && a.tint.max_element() < 1.3);
+            for b in &f.instances[i + 1..] {
+                let d = Vec2::new(a.position.x - b.position.x, a.position.z - b.position.z);
+                assert!(d.length() >= 6.0 - 1e-4, "trees {d} apart");
+            }
+        }
+        let h = f.species_histogram(2);
+        assert!((250..=350).contains(&h[0]), "{h:?}");
+        // Spread over the whole terrain, not a clump: every quadrant has trees.
+        for (sx, sz) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
+            let q = f
+                .instances
+                .iter()
+                .filter(|t| t.position.x * sx > 0.0 && t.position.z * sz > 0.0)
+                .count();
+            assert!(q > 80, "quadrant has {q}");
+        }
+    }
+
+    #[test]
+    fn deterministic() {
+        let t = terrain();
+        let a = Forest::place(&params(200), &t, 2)
+            .map(|f| f.instances)
+            .unwrap_or_default();
+        let b = Forest::place(&params(200), &t, 2)
+            .map(|f| f.instances)
+            .unwrap_or_default();
+        assert_eq!(a.len(), 200);
+        assert_eq!(a, b);
+        let mut p = params(200);
+        p.seed = 10;
+        let c = Forest::place(&p, &t, 2)
+            .map(|f| f.instances)
+            .unwrap_or_default();
+        assert_ne!(a, c);
+    }
+
+    #[test]
+    fn too_many_trees_is_a_clear_error() {
+        let t = terrain();
+        // 400 m square at 6 m spacing holds roughly 2,500 by dart throwing, not 5,000.
+        let e = Forest::place(&params(5000), &t, 2).err();
+        let Some(ModelError::ForestDoesNotFit {
+            placed, requested, ..
+        }) = &e
+        else {
+            panic!("expected ForestDoesNotFit, got {e:?}");
+        };
+        assert_eq!(*requested, 5000);
+        assert!(*placed > 1000 && *placed < 5000);
+        let msg = e.map(|e| e.to_string()).unwrap_or_default();
+        assert!(
+            msg.contains("forest.count")
+                && msg.contains("forest.min_spacing")
+                && msg.contains("only"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn zero_weight_species_is_never_chosen_and_yaw_can_be_fixed() {
+        let t = terrain();
+        let mut p = params(300);
+        p.mix = vec![0.0, 1.0, 0.0];
+        p.random_yaw = false;
+        let f = Forest::place(&p, &t, 3)
+            .map(|f| f.instances)
+            .unwrap_or_default();
+        assert_eq!(f.len(), 300);
+        assert!(f.iter().all(|t| t.species == 1 && t.yaw == 0.0));
+    }
+
+    #[test]
+    fn transform_is_translate_rotate_scale() {
+        let t = TreeInstance {
+            species: 0,
+            position: Vec3::new(1.0, 2.0, 3.0),
+            yaw: std::f32::consts::FRAC_PI_2,
+            scale: 2.0,
+            tint: Vec3::ONE,
+        };
+        let m = t.transform();
+        let p = m.transform_point3(Vec3::new(1.0, 1.0, 0.0));
+        // +X rotated 90 degrees about Y is -Z.
+        assert!((p - Vec3::new(1.0, 4.0, 1.0)).length() < 1e-5, "{p}");
+    }
+
+    #[test]
+    fn invalid_parameters_are_rejected() {
+        let t = terrain();
+        let e = Forest::place(&params(10), &t, 3)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("mix"), "{e}");
+        let mut p = params(10);
+        p.count = 1_000_000;
+        let e = Forest::place(&p, &t, 2)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("count"), "{e}");
+    }
+}

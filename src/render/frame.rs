@@ -1,0 +1,214 @@
+//! The plain description of one frame (camera, sun, sky, method, settings) that callers hand
+//! to the render core, the statistics it hands back, and the uniform block the shaders see.
+
+use glam::{Mat4, Vec3};
+
+use super::camera::Camera;
+use crate::scene::{Scene, sun_direction};
+
+/// How the forest is drawn. Each method can draw the whole scene alone.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Every leaf, needle and branch as triangles: the ground truth.
+    #[default]
+    Geometry,
+}
+
+impl Method {
+    pub const ALL: &'static [Method] = &[Method::Geometry];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Geometry => "geometry",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Method> {
+        Self::ALL.iter().copied().find(|m| m.name() == s)
+    }
+}
+
+/// The sun: a directional light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sun {
+    /// Degrees from +Z (north) towards +X (east).
+    pub azimuth_deg: f32,
+    /// Degrees above the horizon; at or below 0 the sun gives no direct light.
+    pub elevation_deg: f32,
+    pub color: Vec3,
+    pub intensity: f32,
+}
+
+impl Sun {
+    /// Unit vector from the ground towards the sun.
+    pub fn direction(&self) -> Vec3 {
+        sun_direction(self.azimuth_deg, self.elevation_deg)
+    }
+
+    /// Radiance scale of the direct term (zero once the sun has set).
+    pub fn radiance(&self) -> Vec3 {
+        if self.elevation_deg <= 0.0 {
+            Vec3::ZERO
+        } else {
+            self.color * self.intensity
+        }
+    }
+}
+
+/// Hemispherical sky light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sky {
+    pub color: Vec3,
+    pub ground_color: Vec3,
+    pub intensity: f32,
+}
+
+/// Sun shadows by cascaded shadow maps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShadowSettings {
+    pub enabled: bool,
+    /// Side of each cascade's depth map, in texels.
+    pub map_size: u32,
+    /// View distance (m) beyond which nothing receives sun shadows.
+    pub distance: f32,
+}
+
+impl Default for ShadowSettings {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            map_size: 2048,
+            distance: 600.0,
+        }
+    }
+}
+
+/// Everything that may change from one frame to the next.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameDesc {
+    pub camera: Camera,
+    pub sun: Sun,
+    pub sky: Sky,
+    pub method: Method,
+    pub shadows: ShadowSettings,
+    /// Fog density per metre (0 = none): far trees fade towards the horizon colour.
+    pub fog_density: f32,
+    pub exposure: f32,
+}
+
+impl FrameDesc {
+    /// The frame a scene file describes: its start camera, sun and sky.
+    pub fn from_scene(scene: &Scene) -> Self {
+        let c = &scene.camera;
+        Self {
+            camera: Camera::look_at(Vec3::from(c.position), Vec3::from(c.look_at), c.fov_deg),
+            sun: Sun {
+                azimuth_deg: scene.sun.azimuth,
+                elevation_deg: scene.sun.elevation,
+                color: Vec3::from(scene.sun.color),
+                intensity: scene.sun.intensity,
+            },
+            sky: Sky {
+                color: Vec3::from(scene.sky.color),
+                ground_color: Vec3::from(scene.sky.ground_color),
+                intensity: scene.sky.intensity,
+            },
+            method: Method::Geometry,
+            shadows: ShadowSettings::default(),
+            fog_density: 0.0006,
+            exposure: 1.0,
+        }
+    }
+}
+
+/// What the render core did for one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FrameStats {
+    pub width: u32,
+    pub height: u32,
+    /// Trees that passed frustum culling and were drawn in the main view.
+    pub trees_drawn: u32,
+    /// Trees drawn into the shadow maps (summed over cascades).
+    pub shadow_casters: u32,
+    /// Triangles drawn in the main view (terrain included).
+    pub triangles: u64,
+    /// Triangles drawn into the shadow maps.
+    pub shadow_triangles: u64,
+    pub draw_calls: u32,
+    /// GPU time of the frame from timestamp queries, when the adapter has them and the
+    /// caller asked for a blocking measurement.
+    pub gpu_ms: Option<f64>,
+}
+
+/// The uniform block of `common.wgsl` (`struct Frame`), byte for byte.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct FrameUniforms {
+    pub view_proj: [[f32; 4]; 4],
+    pub inv_view_proj: [[f32; 4]; 4],
+    pub light_view_proj: [[[f32; 4]; 4]; 3],
+    pub camera_pos: [f32; 4],
+    pub camera_forward: [f32; 4],
+    pub sun_dir: [f32; 4],
+    pub sun_color: [f32; 4],
+    pub sky_ambient: [f32; 4],
+    pub ground_ambient: [f32; 4],
+    pub sky_zenith: [f32; 4],
+    pub sky_horizon: [f32; 4],
+    pub cascade_splits: [f32; 4],
+    pub cascade_texel: [f32; 4],
+    pub shadow_params: [f32; 4],
+}
+
+impl FrameUniforms {
+    /// Uniforms for the main view.
+    pub fn new(frame: &FrameDesc, aspect: f32, cascades: &super::shadow::Cascades) -> Self {
+        let vp = frame.camera.view_projection(aspect);
+        let sun = frame.sun.radiance();
+        let sky = frame.sky.color * frame.sky.intensity;
+        let ground = frame.sky.ground_color * frame.sky.intensity;
+        let horizon = frame.sky.color.lerp(Vec3::new(0.85, 0.88, 0.92), 0.55);
+        let shadows_on = frame.shadows.enabled && frame.sun.elevation_deg > 0.0;
+        Self {
+            view_proj: vp.to_cols_array_2d(),
+            inv_view_proj: vp.inverse().to_cols_array_2d(),
+            light_view_proj: cascades.matrices.map(|m| m.to_cols_array_2d()),
+            camera_pos: frame
+                .camera
+                .position
+                .extend(frame.fog_density.max(0.0))
+                .to_array(),
+            camera_forward: frame.camera.forward().extend(0.0).to_array(),
+            sun_dir: frame
+                .sun
+                .direction()
+                .extend(if shadows_on { 1.0 } else { 0.0 })
+                .to_array(),
+            sun_color: sun.extend(0.0).to_array(),
+            sky_ambient: sky.extend(0.0).to_array(),
+            ground_ambient: ground.extend(0.0).to_array(),
+            sky_zenith: frame.sky.color.extend(1.0).to_array(),
+            sky_horizon: horizon.extend(1.0).to_array(),
+            cascade_splits: [
+                cascades.splits[0],
+                cascades.splits[1],
+                cascades.splits[2],
+                1.0 / frame.shadows.map_size.max(1) as f32,
+            ],
+            cascade_texel: [
+                cascades.texel_world[0],
+                cascades.texel_world[1],
+                cascades.texel_world[2],
+                0.0,
+            ],
+            shadow_params: [0.0, 1.0, frame.exposure, 0.0],
+        }
+    }
+
+    /// The same block for a shadow pass: only `view_proj` matters there.
+    pub fn for_light(mut self, light_view_proj: Mat4) -> Self {
+        self.view_proj = light_view_proj.to_cols_array_2d();
+        self
+    }
+}

@@ -1,0 +1,492 @@
+//! The render core: draws a frame of the forest into any `TextureView`, from a plain
+//! [`FrameDesc`]. It never sees a window, so the viewer, the `render` command and the tests
+//! all drive the same code. Per frame: cull trees against the view and each shadow cascade,
+//! upload the instance lists once, draw the shadow cascades, then sky, terrain and trees.
+
+pub mod camera;
+pub mod context;
+pub mod frame;
+mod pipelines;
+pub mod shaders;
+pub mod shadow;
+pub mod target;
+pub mod timing;
+pub mod world_gpu;
+
+use std::collections::HashMap;
+
+use image::RgbaImage;
+
+pub use camera::{Camera, Frustum};
+pub use context::{AdapterPreference, GpuContext};
+pub use frame::{FrameDesc, FrameStats, Method, ShadowSettings, Sky, Sun};
+pub use target::{OFFSCREEN_FORMAT, OffscreenTarget};
+
+use frame::FrameUniforms;
+use pipelines::{ColorPipelines, Layouts};
+use shadow::{CASCADES, Cascades};
+use timing::GpuTimer;
+use world_gpu::{TreeRun, WorldGpu};
+
+use crate::model::World;
+use crate::{Error, Result};
+
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+pub const SHADOW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// Largest shadow-map side accepted.
+pub const MAX_SHADOW_MAP: u32 = 8192;
+
+struct ShadowMaps {
+    size: u32,
+    /// One view per cascade, to render into.
+    layer_views: Vec<wgpu::TextureView>,
+    frame_bind_group: wgpu::BindGroup,
+}
+
+struct DepthTarget {
+    size: (u32, u32),
+    view: wgpu::TextureView,
+}
+
+/// Where a frame goes: a view of a colour texture, its format and size.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameTarget<'a> {
+    pub view: &'a wgpu::TextureView,
+    pub format: wgpu::TextureFormat,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Owns the GPU side of a world and the pipelines; created once, then asked for frames.
+pub struct Renderer {
+    layouts: Layouts,
+    world: WorldGpu,
+    shadow_pipeline: wgpu::RenderPipeline,
+    color_pipelines: HashMap<wgpu::TextureFormat, ColorPipelines>,
+    frame_uniforms: wgpu::Buffer,
+    shadow_uniforms: Vec<(wgpu::Buffer, wgpu::BindGroup)>,
+    shadow_sampler: wgpu::Sampler,
+    shadows: Option<ShadowMaps>,
+    depth: Option<DepthTarget>,
+    timer: Option<GpuTimer>,
+}
+
+impl Renderer {
+    pub fn new(ctx: &GpuContext, world: &World) -> Result<Self> {
+        let device = &ctx.device;
+        let layouts = Layouts::new(device);
+        let world_gpu = WorldGpu::new(ctx, world, &layouts.trees, &layouts.parts)?;
+        let shadow_pipeline = ctx.checked("building the shadow pipeline", || {
+            pipelines::shadow_pipeline(device, &layouts)
+        })?;
+        let uniform_size = std::mem::size_of::<FrameUniforms>() as u64;
+        let frame_uniforms = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame uniforms"),
+            size: uniform_size,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let shadow_uniforms = (0..CASCADES)
+            .map(|i| {
+                let buf = device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(&format!("shadow cascade {i} uniforms")),
+                    size: uniform_size,
+                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
+                let bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("shadow cascade"),
+                    layout: &layouts.shadow_frame,
+                    entries: &[wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: buf.as_entire_binding(),
+                    }],
+                });
+                (buf, bg)
+            })
+            .collect();
+        let shadow_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("shadow comparison"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            compare: Some(wgpu::CompareFunction::LessEqual),
+            ..Default::default()
+        });
+        Ok(Self {
+            layouts,
+            world: world_gpu,
+            shadow_pipeline,
+            color_pipelines: HashMap::new(),
+            frame_uniforms,
+            shadow_uniforms,
+            shadow_sampler,
+            shadows: None,
+            depth: None,
+            timer: GpuTimer::new(ctx),
+        })
+    }
+
+    /// Triangles of one tree of each species, by species name.
+    pub fn triangles_per_species(&self) -> Vec<(String, u64)> {
+        self.world
+            .species
+            .iter()
+            .map(|s| (s.name.clone(), s.triangles_per_tree()))
+            .collect()
+    }
+
+    /// Bytes of meshes and part transforms on the GPU.
+    pub fn mesh_bytes(&self) -> u64 {
+        self.world.mesh_bytes
+    }
+
+    /// The newest GPU frame time measured without blocking (the viewer's readout).
+    pub fn last_gpu_ms(&self) -> Option<f64> {
+        self.timer.as_ref().and_then(|t| t.last_ms)
+    }
+
+    fn ensure_shadow_maps(&mut self, ctx: &GpuContext, size: u32) -> Result<()> {
+        let size = size.clamp(
+            16,
+            MAX_SHADOW_MAP.min(ctx.device.limits().max_texture_dimension_2d),
+        );
+        if self.shadows.as_ref().is_some_and(|s| s.size == size) {
+            return Ok(());
+        }
+        let texture = ctx.checked("allocating the shadow maps", || {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("shadow cascades"),
+                size: wgpu::Extent3d {
+                    width: size,
+                    height: size,
+                    depth_or_array_layers: CASCADES as u32,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: SHADOW_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            })
+        })?;
+        let array_view = texture.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let layer_views = (0..CASCADES as u32)
+            .map(|i| {
+                texture.create_view(&wgpu::TextureViewDescriptor {
+                    dimension: Some(wgpu::TextureViewDimension::D2),
+                    base_array_layer: i,
+                    array_layer_count: Some(1),
+                    ..Default::default()
+                })
+            })
+            .collect();
+        let frame_bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame"),
+            layout: &self.layouts.frame,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.frame_uniforms.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&array_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(&self.shadow_sampler),
+                },
+            ],
+        });
+        self.shadows = Some(ShadowMaps {
+            size,
+            layer_views,
+            frame_bind_group,
+        });
+        Ok(())
+    }
+
+    fn ensure_depth(&mut self, ctx: &GpuContext, width: u32, height: u32) -> Result<()> {
+        if self
+            .depth
+            .as_ref()
+            .is_some_and(|d| d.size == (width, height))
+        {
+            return Ok(());
+        }
+        let texture = ctx.checked("allocating the depth buffer", || {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("depth"),
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: DEPTH_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            })
+        })?;
+        self.depth = Some(DepthTarget {
+            size: (width, height),
+            view: texture.create_view(&Default::default()),
+        });
+        Ok(())
+    }
+
+    /// Draws `frame` into `target` and submits the work. With `measure_gpu`, waits for the GPU and returns its frame time in
+    /// the stats; otherwise the time arrives a few frames later in [`Self::last_gpu_ms`].
+    pub fn render(
+        &mut self,
+        ctx: &GpuContext,
+        frame: &FrameDesc,
+        target: FrameTarget<'_>,
+        measure_gpu: bool,
+    ) -> Result<FrameStats> {
+        let FrameTarget {
+            view: target,
+            format,
+            width,
+            height,
+        } = target;
+        target::check_size(width, height, Some(ctx))?;
+        if ctx.is_lost() {
+            return Err(Error::Gpu("the GPU device was lost; restart canopy".into()));
+        }
+        self.ensure_depth(ctx, width, height)?;
+        self.ensure_shadow_maps(ctx, frame.shadows.map_size)?;
+        if !self.color_pipelines.contains_key(&format) {
+            let p = ctx.checked("building the render pipelines", || {
+                ColorPipelines::new(&ctx.device, &self.layouts, format)
+            })?;
+            self.color_pipelines.insert(format, p);
+        }
+
+        let aspect = width as f32 / height as f32;
+        let cam = &frame.camera;
+        let sun_up = frame.sun.elevation_deg > 0.0;
+        let shadows_on = frame.shadows.enabled && sun_up;
+        let cascades = if shadows_on {
+            Cascades::fit(
+                cam,
+                aspect,
+                frame.sun.direction(),
+                &frame.shadows,
+                &self.world.scene_bounds,
+            )
+        } else {
+            Cascades::none()
+        };
+
+        // Cull: the camera's list, then each cascade's casters.
+        let mut lists = vec![self.world.cull(&cam.frustum(aspect))];
+        if shadows_on {
+            for m in &cascades.matrices {
+                lists.push(self.world.cull(&Frustum::from_ortho(*m)));
+            }
+        }
+        let runs = self.world.upload_lists(ctx, &lists);
+
+        let uniforms = FrameUniforms::new(frame, aspect, &cascades);
+        ctx.queue
+            .write_buffer(&self.frame_uniforms, 0, bytemuck::bytes_of(&uniforms));
+        if shadows_on {
+            for (i, (buf, _)) in self.shadow_uniforms.iter().enumerate() {
+                let u = uniforms.for_light(cascades.matrices[i]);
+                ctx.queue.write_buffer(buf, 0, bytemuck::bytes_of(&u));
+            }
+        }
+
+        let mut stats = FrameStats {
+            width,
+            height,
+            ..Default::default()
+        };
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("frame"),
+            });
+        let queries = self.timer.as_mut().and_then(|t| t.begin()).cloned();
+        let (Some(shadows), Some(depth), Some(pipes)) = (
+            &self.shadows,
+            &self.depth,
+            self.color_pipelines.get(&format),
+        ) else {
+            return Err(Error::Gpu("render targets were not created".into()));
+        };
+
+        let cascades_drawn = if shadows_on { CASCADES } else { 0 };
+        for c in 0..CASCADES {
+            // Cleared even when off, so a stale map never shades a frame.
+            let first = c == 0;
+            let ts = queries
+                .as_ref()
+                .filter(|_| first)
+                .map(|q| wgpu::RenderPassTimestampWrites {
+                    query_set: q,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: None,
+                });
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("shadow cascade"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &shadows.layer_views[c],
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: ts,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            if c >= cascades_drawn {
+                continue;
+            }
+            pass.set_pipeline(&self.shadow_pipeline);
+            pass.set_bind_group(0, &self.shadow_uniforms[c].1, &[]);
+            pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
+            let (tris, casters, calls) = draw_world(&mut pass, &self.world, &runs[c + 1], None);
+            stats.shadow_triangles += tris;
+            stats.shadow_casters += casters;
+            stats.draw_calls += calls;
+        }
+
+        {
+            let ts = queries.as_ref().map(|q| wgpu::RenderPassTimestampWrites {
+                query_set: q,
+                beginning_of_pass_write_index: None,
+                end_of_pass_write_index: Some(1),
+            });
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("main"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: target,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth.view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: ts,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, &shadows.frame_bind_group, &[]);
+            pass.set_pipeline(&pipes.sky);
+            pass.draw(0..3, 0..1);
+            pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
+            let (tris, trees, calls) = draw_world(&mut pass, &self.world, &runs[0], Some(pipes));
+            stats.triangles = tris;
+            stats.trees_drawn = trees;
+            stats.draw_calls += calls + 1;
+        }
+        if let Some(t) = &self.timer {
+            t.resolve(&mut encoder);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        if let Some(t) = &mut self.timer {
+            t.after_submit();
+            stats.gpu_ms = t.collect(ctx, measure_gpu).filter(|_| measure_gpu);
+        }
+        if let Some(e) = ctx.take_error() {
+            return Err(Error::Gpu(e));
+        }
+        Ok(stats)
+    }
+
+    /// Renders one frame offscreen and reads it back; with `supersample` > 1, renders that
+    /// many times larger on each side and averages down (coverage-correct ground truth).
+    pub fn render_image(
+        &mut self,
+        ctx: &GpuContext,
+        frame: &FrameDesc,
+        width: u32,
+        height: u32,
+        supersample: u32,
+    ) -> Result<(RgbaImage, FrameStats)> {
+        let ss = supersample.max(1);
+        let (w, h) = (width.saturating_mul(ss), height.saturating_mul(ss));
+        target::check_size(w, h, Some(ctx))?;
+        let target = OffscreenTarget::new(ctx, w, h)?;
+        let stats = self.render(
+            ctx,
+            frame,
+            FrameTarget {
+                view: &target.view,
+                format: OFFSCREEN_FORMAT,
+                width: w,
+                height: h,
+            },
+            true,
+        )?;
+        let img = target.read(ctx)?;
+        Ok((target::downsample(&img, ss), stats))
+    }
+}
+
+/// Draws the terrain and the trees of `runs`; with no colour pipelines it is the shadow pass
+/// (one pipeline already set). Returns (triangles, trees, draw calls).
+fn draw_world(
+    pass: &mut wgpu::RenderPass<'_>,
+    world: &WorldGpu,
+    runs: &[TreeRun],
+    pipes: Option<&ColorPipelines>,
+) -> (u64, u32, u32) {
+    let mut tris = 0u64;
+    let mut calls = 0u32;
+    let mut trees = 0u32;
+    if let Some(p) = pipes {
+        pass.set_pipeline(&p.opaque);
+    }
+    let mut draw =
+        |pass: &mut wgpu::RenderPass<'_>, set: &world_gpu::PartSet, first: u32, n: u32| {
+            pass.set_bind_group(2, &set.bind_group, &[]);
+            pass.set_vertex_buffer(0, set.mesh.vertices.slice(..));
+            pass.set_index_buffer(set.mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+            let start = first * set.count;
+            pass.draw_indexed(0..set.mesh.index_count, 0, start..start + n * set.count);
+            tris += set.mesh.triangles() * u64::from(n) * u64::from(set.count);
+            calls += 1;
+        };
+    draw(pass, &world.terrain, 0, 1);
+    // Opaque parts of every species first, then foliage, to switch pipelines twice only.
+    for foliage in [false, true] {
+        if let Some(p) = pipes {
+            pass.set_pipeline(if foliage { &p.foliage } else { &p.opaque });
+        }
+        for run in runs {
+            for set in world.species[run.species]
+                .parts
+                .iter()
+                .filter(|s| s.foliage == foliage)
+            {
+                draw(pass, set, run.first, run.count);
+            }
+        }
+    }
+    for run in runs {
+        trees += run.count;
+    }
+    (tris, trees, calls)
+}

@@ -1,0 +1,342 @@
+//! The world on the GPU: each species' trunk, limb and twig meshes with the transforms of
+//! their parts in the tree frame (the hierarchy as the model keeps it), the terrain, and a
+//! per-frame buffer of tree instances filled from the culled lists.
+
+use glam::{Mat4, Vec3};
+use wgpu::util::DeviceExt;
+
+use super::GpuContext;
+use super::camera::Frustum;
+use crate::model::World;
+use crate::model::mesh::{Aabb, Mesh, Vertex};
+use crate::{Error, Result};
+
+/// Largest forest the GPU buffers are sized for (the scene file allows no more).
+pub const MAX_TREES: usize = 100_000;
+
+/// One tree instance as `common.wgsl` reads it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TreeGpu {
+    pub model: [[f32; 4]; 4],
+    pub tint: [f32; 4],
+}
+
+pub struct GpuMesh {
+    pub vertices: wgpu::Buffer,
+    pub indices: wgpu::Buffer,
+    pub index_count: u32,
+}
+
+impl GpuMesh {
+    fn new(ctx: &GpuContext, label: &str, mesh: &Mesh) -> Option<Self> {
+        if mesh.indices.is_empty() || mesh.vertices.is_empty() {
+            return None;
+        }
+        let vertices = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(&format!("{label} vertices")),
+                contents: bytemuck::cast_slice(&mesh.vertices),
+                usage: wgpu::BufferUsages::VERTEX,
+            });
+        let indices = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(&format!("{label} indices")),
+                contents: bytemuck::cast_slice(&mesh.indices),
+                usage: wgpu::BufferUsages::INDEX,
+            });
+        Some(Self {
+            vertices,
+            indices,
+            index_count: mesh.indices.len() as u32,
+        })
+    }
+
+    pub fn triangles(&self) -> u64 {
+        u64::from(self.index_count / 3)
+    }
+
+    pub fn bytes(&self) -> u64 {
+        self.vertices.size() + self.indices.size()
+    }
+}
+
+/// A mesh drawn once per part of a tree: the trunk (one part), the limbs (one per main
+/// branch) or the twigs (one per twig of the whole tree).
+pub struct PartSet {
+    pub mesh: GpuMesh,
+    pub count: u32,
+    pub bind_group: wgpu::BindGroup,
+    /// Leaves and needles: drawn two-sided.
+    pub foliage: bool,
+}
+
+impl PartSet {
+    fn new(
+        ctx: &GpuContext,
+        layout: &wgpu::BindGroupLayout,
+        label: &str,
+        mesh: &Mesh,
+        parts: &[Mat4],
+        foliage: bool,
+    ) -> Option<Self> {
+        let mesh = GpuMesh::new(ctx, label, mesh)?;
+        if parts.is_empty() {
+            return None;
+        }
+        let matrices: Vec<[[f32; 4]; 4]> = parts.iter().map(|m| m.to_cols_array_2d()).collect();
+        let parts_buf = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(&format!("{label} parts")),
+                contents: bytemuck::cast_slice(&matrices),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+        let params = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(&format!("{label} part set")),
+                contents: bytemuck::cast_slice(&[parts.len() as u32, 0, 0, 0]),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: parts_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: params.as_entire_binding(),
+                },
+            ],
+        });
+        Some(Self {
+            mesh,
+            count: parts.len() as u32,
+            bind_group,
+            foliage,
+        })
+    }
+
+    /// Triangles drawn for one tree.
+    pub fn triangles_per_tree(&self) -> u64 {
+        self.mesh.triangles() * u64::from(self.count)
+    }
+}
+
+/// One species' three part sets, drawn in this order.
+pub struct SpeciesGpu {
+    pub name: String,
+    pub parts: Vec<PartSet>,
+}
+
+impl SpeciesGpu {
+    pub fn triangles_per_tree(&self) -> u64 {
+        self.parts.iter().map(PartSet::triangles_per_tree).sum()
+    }
+}
+
+/// A contiguous run of one species' trees in the per-frame instance buffer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TreeRun {
+    pub species: usize,
+    pub first: u32,
+    pub count: u32,
+}
+
+pub struct WorldGpu {
+    pub terrain: PartSet,
+    pub species: Vec<SpeciesGpu>,
+    /// Per tree: species, world transform + tint, world bounds.
+    pub tree_species: Vec<u32>,
+    pub tree_data: Vec<TreeGpu>,
+    pub tree_bounds: Vec<Aabb>,
+    pub scene_bounds: Aabb,
+    pub trees_buffer: wgpu::Buffer,
+    pub trees_bind_group: wgpu::BindGroup,
+    capacity: usize,
+    /// Bytes of mesh and part data on the GPU.
+    pub mesh_bytes: u64,
+}
+
+impl WorldGpu {
+    pub fn new(
+        ctx: &GpuContext,
+        world: &World,
+        trees_layout: &wgpu::BindGroupLayout,
+        parts_layout: &wgpu::BindGroupLayout,
+    ) -> Result<Self> {
+        let n = world.forest.instances.len();
+        if n > MAX_TREES {
+            return Err(Error::BadInput(format!(
+                "the forest has {n} trees; canopy draws at most {MAX_TREES}"
+            )));
+        }
+        let terrain_mesh = world.terrain.mesh();
+        let terrain = PartSet::new(
+            ctx,
+            parts_layout,
+            "terrain",
+            &terrain_mesh,
+            &[Mat4::IDENTITY],
+            false,
+        )
+        .ok_or_else(|| Error::BadInput("the terrain has no triangles".into()))?;
+        let mut mesh_bytes = terrain.mesh.bytes();
+        let mut species = Vec::with_capacity(world.species.len());
+        for tree in &world.species {
+            let twigs = tree.twigs_in_tree_frame();
+            let limbs = &tree.tree_branches;
+            let sets = [
+                PartSet::new(
+                    ctx,
+                    parts_layout,
+                    &format!("{} trunk", tree.name),
+                    &tree.trunk,
+                    &[Mat4::IDENTITY],
+                    false,
+                ),
+                PartSet::new(
+                    ctx,
+                    parts_layout,
+                    &format!("{} limbs", tree.name),
+                    &tree.branch_limb,
+                    limbs,
+                    false,
+                ),
+                PartSet::new(
+                    ctx,
+                    parts_layout,
+                    &format!("{} twigs", tree.name),
+                    &tree.twig,
+                    &twigs,
+                    true,
+                ),
+            ];
+            let parts: Vec<PartSet> = sets.into_iter().flatten().collect();
+            mesh_bytes += parts
+                .iter()
+                .map(|p| p.mesh.bytes() + 64 * u64::from(p.count))
+                .sum::<u64>();
+            species.push(SpeciesGpu {
+                name: tree.name.clone(),
+                parts,
+            });
+        }
+
+        let mut tree_species = Vec::with_capacity(n);
+        let mut tree_data = Vec::with_capacity(n);
+        let mut tree_bounds = Vec::with_capacity(n);
+        let mut scene_bounds = world.terrain.bounds();
+        for inst in &world.forest.instances {
+            let Some(model) = world.species.get(inst.species as usize) else {
+                return Err(Error::BadInput(format!(
+                    "a tree refers to species {} but the scene has {}",
+                    inst.species,
+                    world.species.len()
+                )));
+            };
+            let m = inst.transform();
+            let b = model.tree_bounds.transformed(m);
+            scene_bounds = scene_bounds.union(b);
+            tree_species.push(inst.species);
+            tree_data.push(TreeGpu {
+                model: m.to_cols_array_2d(),
+                tint: inst.tint.extend(1.0).to_array(),
+            });
+            tree_bounds.push(b);
+        }
+
+        // Terrain identity + the camera list + one list per shadow cascade.
+        let capacity = 1 + (1 + super::shadow::CASCADES) * n.max(1);
+        let trees_buffer = ctx.checked("allocating the tree instance buffer", || {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("tree instances"),
+                size: (capacity * std::mem::size_of::<TreeGpu>()) as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        })?;
+        let trees_bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("tree instances"),
+            layout: trees_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: trees_buffer.as_entire_binding(),
+            }],
+        });
+        Ok(Self {
+            terrain,
+            species,
+            tree_species,
+            tree_data,
+            tree_bounds,
+            scene_bounds,
+            trees_buffer,
+            trees_bind_group,
+            capacity,
+            mesh_bytes,
+        })
+    }
+
+    /// Indices of the trees inside `frustum`, grouped by species (in species order).
+    pub fn cull(&self, frustum: &Frustum) -> Vec<Vec<u32>> {
+        let mut by_species = vec![Vec::new(); self.species.len()];
+        for (i, b) in self.tree_bounds.iter().enumerate() {
+            if frustum.intersects(b) {
+                by_species[self.tree_species[i] as usize].push(i as u32);
+            }
+        }
+        by_species
+    }
+
+    /// Builds the instance list for this frame: index 0 is the terrain's identity, then each
+    /// list's trees by species. Returns the runs of each list. Uploads once per frame.
+    pub fn upload_lists(&self, ctx: &GpuContext, lists: &[Vec<Vec<u32>>]) -> Vec<Vec<TreeRun>> {
+        let mut data = Vec::with_capacity(self.capacity);
+        data.push(TreeGpu {
+            model: Mat4::IDENTITY.to_cols_array_2d(),
+            tint: Vec3::ONE.extend(1.0).to_array(),
+        });
+        let mut runs = Vec::with_capacity(lists.len());
+        for list in lists {
+            let mut list_runs = Vec::new();
+            for (species, trees) in list.iter().enumerate() {
+                if trees.is_empty() || data.len() + trees.len() > self.capacity {
+                    continue;
+                }
+                let first = data.len() as u32;
+                data.extend(trees.iter().map(|&t| self.tree_data[t as usize]));
+                list_runs.push(TreeRun {
+                    species,
+                    first,
+                    count: trees.len() as u32,
+                });
+            }
+            runs.push(list_runs);
+        }
+        ctx.queue
+            .write_buffer(&self.trees_buffer, 0, bytemuck::cast_slice(&data));
+        runs
+    }
+}
+
+/// Vertex buffer layout of `model::mesh::Vertex`.
+pub fn vertex_layout() -> wgpu::VertexBufferLayout<'static> {
+    const ATTRS: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
+        0 => Float32x3,
+        1 => Float32x3,
+        2 => Float32x3,
+        3 => Float32,
+    ];
+    wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<Vertex>() as u64,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &ATTRS,
+    }
+}

@@ -1,0 +1,169 @@
+//! The `canopy` binary end to end: `render` writes a PNG and prints its stats as JSON,
+//! `compare` reports FLIP, and bad input exits with 2 and a message saying what is wrong.
+
+mod common;
+
+use std::process::Command;
+
+fn canopy() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_canopy"));
+    c.env("RUST_LOG", "error");
+    c
+}
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("canopy-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn render_then_compare_end_to_end() {
+    let out = tmp("small.png");
+    let scene = common::data("small.toml");
+    let o = canopy()
+        .args(["render"])
+        .arg(&scene)
+        .args(["--out"])
+        .arg(&out)
+        .args(["--size", "96x64", "--frames", "2", "--cpu", "--json"])
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "render failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&o.stdout).expect("stdout is one JSON object");
+    assert_eq!(json["method"], "geometry");
+    assert_eq!(json["width"], 96);
+    assert_eq!(json["height"], 64);
+    assert!(json["frame_ms"].as_f64().unwrap() > 0.0);
+    assert!(json["trees_drawn"].as_u64().unwrap() > 0);
+    assert!(json["triangles"].as_u64().unwrap() > 0);
+    let img = image::open(&out).unwrap();
+    assert_eq!((img.width(), img.height()), (96, 64));
+
+    // The same image against itself: zero error.
+    let o = canopy()
+        .arg("compare")
+        .arg(&out)
+        .arg(&out)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    for key in ["mean", "p50", "p90", "p99"] {
+        assert_eq!(s[key].as_f64(), Some(0.0), "{key}");
+    }
+
+    // Another sun: a positive error, and a diff image on request.
+    let out2 = tmp("small-sun.png");
+    let o = canopy()
+        .arg("render")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out2)
+        .args([
+            "--size", "96x64", "--frames", "1", "--cpu", "--sun", "300,15",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let diff = tmp("diff.png");
+    let o = canopy()
+        .arg("compare")
+        .arg(&out)
+        .arg(&out2)
+        .arg("--json")
+        .arg("--diff")
+        .arg(&diff)
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(s["mean"].as_f64().unwrap() > 0.01, "{s}");
+    assert!(diff.exists());
+}
+
+#[test]
+fn bad_input_exits_with_2_and_says_what_is_wrong() {
+    // A missing scene file.
+    let o = canopy()
+        .args(["render", "/nonexistent/scene.toml", "--out", "/tmp/x.png"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("/nonexistent/scene.toml"));
+
+    // A scene with a typo.
+    let bad = tmp("typo.toml");
+    let text = std::fs::read_to_string(common::data("small.toml"))
+        .unwrap()
+        .replacen("[forest]\n", "[forest]\ncuont = 3\n", 1);
+    std::fs::write(&bad, text).unwrap();
+    let o = canopy()
+        .arg("render")
+        .arg(&bad)
+        .args(["--out", "/tmp/x.png"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("cuont"), "{err}");
+
+    // Bad arguments.
+    for args in [
+        vec!["render", "--out", "/tmp/x.png", "--size", "0x10"],
+        vec!["render", "--out", "/tmp/x.png", "--sun", "10"],
+        vec!["render", "--out", "/tmp/x.png", "--method", "nope"],
+        vec![
+            "render",
+            "--out",
+            "/tmp/x.png",
+            "--camera",
+            "1,2,nan",
+            "--look-at",
+            "0,0,0",
+        ],
+    ] {
+        let o = canopy().args(&args).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+    }
+
+    // Comparing images of different sizes, and a missing image.
+    let a = tmp("a.png");
+    let b = tmp("b.png");
+    image::RgbaImage::new(4, 4).save(&a).unwrap();
+    image::RgbaImage::new(5, 4).save(&b).unwrap();
+    let o = canopy().arg("compare").arg(&a).arg(&b).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("differ in size"));
+    let o = canopy()
+        .arg("compare")
+        .arg(&a)
+        .arg("/nonexistent.png")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+}
+
+#[test]
+fn an_unwritable_output_path_is_an_error_and_leaves_nothing() {
+    let blocker = tmp("file-not-dir");
+    std::fs::write(&blocker, b"x").unwrap();
+    let out = blocker.join("out.png");
+    let o = canopy()
+        .arg("render")
+        .arg(common::data("small.toml"))
+        .arg("--out")
+        .arg(&out)
+        .args(["--size", "32x32", "--frames", "1", "--cpu"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("out.png"));
+    assert!(!out.exists());
+}

@@ -1,0 +1,89 @@
+//! Helpers shared by the headless GPU tests: a CPU-adapter context, the small test scene,
+//! and FLIP snapshot comparison that writes the actual and difference images on failure.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+use canopy::model::World;
+use canopy::render::{AdapterPreference, FrameDesc, GpuContext, Renderer};
+use canopy::scene::Scene;
+use image::RgbaImage;
+
+pub fn gpu() -> GpuContext {
+    GpuContext::headless(AdapterPreference::Cpu).expect(
+        "no GPU adapter: install a Vulkan driver (on Debian: apt-get install mesa-vulkan-drivers)",
+    )
+}
+
+pub fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+pub fn small_scene() -> Scene {
+    Scene::load(&data("small.toml")).expect("tests/data/small.toml parses")
+}
+
+pub fn render(ctx: &GpuContext, world: &World, frame: &FrameDesc, w: u32, h: u32) -> RgbaImage {
+    let mut r = Renderer::new(ctx, world).expect("renderer");
+    r.render_image(ctx, frame, w, h, 1).expect("frame").0
+}
+
+pub fn rgb(img: &RgbaImage) -> image::RgbImage {
+    image::DynamicImage::ImageRgba8(img.clone()).to_rgb8()
+}
+
+/// Compares `actual` with `tests/snapshots/{name}.png` by mean FLIP. With
+/// UPDATE_SNAPSHOTS=1 (or no reference yet) the reference is (re)written instead.
+pub fn check_snapshot(name: &str, actual: &RgbaImage, max_mean_flip: f32) -> f32 {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/snapshots");
+    let reference = dir.join(format!("{name}.png"));
+    if std::env::var_os("UPDATE_SNAPSHOTS").is_some() {
+        canopy::imageio::save_png(&reference, actual).unwrap();
+        return 0.0;
+    }
+    assert!(
+        reference.exists(),
+        "missing snapshot {}; run with UPDATE_SNAPSHOTS=1 to create it",
+        reference.display()
+    );
+    let want = canopy::metrics::load_rgb(&reference).unwrap();
+    let got = rgb(actual);
+    let result = canopy::metrics::flip(&want, &got).unwrap();
+    let mean = result.stats.mean;
+    if mean > max_mean_flip {
+        let actual_path = dir.join(format!("{name}.actual.png"));
+        let diff_path = dir.join(format!("{name}.diff.png"));
+        canopy::imageio::save_png(&actual_path, actual).unwrap();
+        let diff = image::DynamicImage::ImageRgb8(result.error_image()).to_rgba8();
+        canopy::imageio::save_png(&diff_path, &diff).unwrap();
+        panic!(
+            "{name}: mean FLIP {mean:.4} > {max_mean_flip} (p90 {:.4}); wrote {} and {}",
+            result.stats.p90,
+            actual_path.display(),
+            diff_path.display()
+        );
+    }
+    mean
+}
+
+/// Mean linear luminance of the pixels in a square of `half` pixels around (cx, cy).
+pub fn mean_luminance(img: &RgbaImage, cx: i64, cy: i64, half: i64) -> f32 {
+    let mut sum = 0.0;
+    let mut n = 0;
+    for y in (cy - half)..=(cy + half) {
+        for x in (cx - half)..=(cx + half) {
+            if x < 0 || y < 0 || x >= i64::from(img.width()) || y >= i64::from(img.height()) {
+                continue;
+            }
+            let p = img.get_pixel(x as u32, y as u32).0;
+            let lin = |c: u8| (f32::from(c) / 255.0).powf(2.2);
+            sum += 0.2126 * lin(p[0]) + 0.7152 * lin(p[1]) + 0.0722 * lin(p[2]);
+            n += 1;
+        }
+    }
+    assert!(n > 0, "window outside the image");
+    sum / n as f32
+}
