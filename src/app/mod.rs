@@ -80,6 +80,8 @@ struct Running {
     window: Arc<Window>,
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
+    /// Format of the view the 3D scene is drawn through (sRGB where the surface allows).
+    scene_format: wgpu::TextureFormat,
     ctx: GpuContext,
     renderer: Renderer,
     egui_state: egui_winit::State,
@@ -124,16 +126,22 @@ impl App {
             .ok_or_else(|| {
                 Error::Gpu("the window surface is not supported by the adapter".into())
             })?;
-        // Prefer an sRGB format: the render core writes linear colour.
+        // The 3D view is drawn through an sRGB view (the render core writes linear colour),
+        // egui through a plain one (it blends in gamma space), both on the same texture.
         let caps = surface.get_capabilities(&ctx.adapter);
-        if let Some(f) = caps
+        let plain = caps
             .formats
             .iter()
             .copied()
-            .find(wgpu::TextureFormat::is_srgb)
-        {
-            config.format = f;
-        }
+            .find(|f| !f.is_srgb() && f.add_srgb_suffix().is_srgb())
+            .unwrap_or(config.format);
+        config.format = plain;
+        let scene_format = plain.add_srgb_suffix();
+        config.view_formats = if scene_format == plain {
+            vec![]
+        } else {
+            vec![scene_format]
+        };
         config.present_mode = wgpu::PresentMode::AutoVsync;
         if size.width > 0 && size.height > 0 {
             surface.configure(&ctx.device, &config);
@@ -156,6 +164,7 @@ impl App {
             window,
             surface,
             config,
+            scene_format,
             ctx,
             renderer,
             egui_state,
@@ -234,12 +243,18 @@ impl App {
         let view = surface_texture
             .texture
             .create_view(&wgpu::TextureViewDescriptor::default());
+        let scene_view = surface_texture
+            .texture
+            .create_view(&wgpu::TextureViewDescriptor {
+                format: Some(r.scene_format),
+                ..Default::default()
+            });
         match r.renderer.render(
             &r.ctx,
             &self.frame,
             crate::render::FrameTarget {
-                view: &view,
-                format: r.config.format,
+                view: &scene_view,
+                format: r.scene_format,
                 width: r.config.width,
                 height: r.config.height,
             },
@@ -265,7 +280,7 @@ impl App {
         let frame = &mut self.frame;
         let stats = &self.stats;
         let message = self.message.as_ref();
-        let out = r.egui_state.egui_ctx().run_ui(raw, |ui| {
+        let mut out = r.egui_state.egui_ctx().run_ui(raw, |ui| {
             egui::Panel::right("controls")
                 .default_size(280.0)
                 .show(ui, |ui| {
@@ -282,10 +297,12 @@ impl App {
             size_in_pixels: [r.config.width, r.config.height],
             pixels_per_point: ppp,
         };
-        for (id, deltas) in &out.textures_delta.set {
+        // Every delta must be applied (egui asserts so when they are dropped).
+        let mut textures = std::mem::take(&mut out.textures_delta);
+        for (id, deltas) in textures.set.drain() {
             for delta in deltas {
                 r.egui_renderer
-                    .update_texture(&r.ctx.device, &r.ctx.queue, *id, delta);
+                    .update_texture(&r.ctx.device, &r.ctx.queue, id, &delta);
             }
         }
         let mut encoder = r
@@ -324,8 +341,8 @@ impl App {
         r.ctx
             .queue
             .submit(extra.into_iter().chain(std::iter::once(encoder.finish())));
-        for id in &out.textures_delta.free {
-            r.egui_renderer.free_texture(id);
+        for id in textures.free.drain() {
+            r.egui_renderer.free_texture(&id);
         }
         r.window.pre_present_notify();
         r.ctx.queue.present(surface_texture);
