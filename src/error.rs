@@ -14,6 +14,9 @@ pub enum Error {
     #[error(transparent)]
     Model(#[from] crate::model::ModelError),
 
+    #[error(transparent)]
+    Format(#[from] crate::format::FormatError),
+
     #[error(
         "no GPU adapter found{0}; on a machine without a GPU install a software Vulkan driver \
          (Debian: apt-get install mesa-vulkan-drivers)"
@@ -80,6 +83,9 @@ impl Error {
     /// True when the error comes from what the user gave (a file, an argument) rather than
     /// from the machine; the CLI exits with 2 for these and 1 for the rest.
     pub fn is_bad_input(&self) -> bool {
+        if let Error::Format(f) = self {
+            return f.needs_rebake();
+        }
         matches!(
             self,
             Error::Scene(_)

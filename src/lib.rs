@@ -4,11 +4,15 @@
 //! the `canopy` binary drives.
 
 pub mod app;
+pub mod bake;
 pub mod error;
+pub mod format;
 pub mod imageio;
+pub mod lod;
 pub mod metrics;
 pub mod model;
 pub mod render;
 pub mod scene;
+pub mod sphere;
 
 pub use error::{Error, Result};

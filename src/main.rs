@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 use glam::Vec3;
 
 use canopy::model::World;
+use canopy::render::btf::PlaneMode;
 use canopy::render::{AdapterPreference, Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 
@@ -40,6 +41,20 @@ enum Command {
     },
     /// Render one frame to a PNG, no window needed.
     Render(RenderArgs),
+    /// Bake the BTF image sets of a scene (default: into the cache the viewer and `render` use).
+    Bake {
+        /// Scene file (TOML). Omit for the embedded default forest.
+        scene: Option<PathBuf>,
+        /// Write the baked file here instead of the cache.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Prefer the CPU (software) adapter.
+        #[arg(long)]
+        cpu: bool,
+        /// Print one JSON object describing the bake on stdout.
+        #[arg(long)]
+        json: bool,
+    },
     /// Mean FLIP and percentiles between two images (A is the reference).
     Compare {
         a: PathBuf,
@@ -90,6 +105,18 @@ struct RenderArgs {
     /// Side of each shadow cascade's map, in texels.
     #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(16..=8192))]
     shadow_map: u32,
+    /// btf: a level is used while its largest texel projects below this many pixels.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
+    lod_scale: f32,
+    /// btf: images whose blending weight is below this are skipped (0..1).
+    #[arg(long, default_value_t = 0.0, value_parser = parse_unit)]
+    weight_threshold: f32,
+    /// btf: one camera-facing plane per billboard, or three crossed planes.
+    #[arg(long, default_value = "single", value_parser = parse_planes)]
+    planes: PlaneMode,
+    /// btf: colour billboards by level (twig red, main branch yellow, tree blue).
+    #[arg(long)]
+    show_lod: bool,
     /// Prefer the CPU (software) adapter.
     #[arg(long)]
     cpu: bool,
@@ -106,6 +133,29 @@ fn parse_method(s: &str) -> Result<Method, String> {
             names.join(", ")
         )
     })
+}
+
+fn parse_planes(s: &str) -> Result<PlaneMode, String> {
+    PlaneMode::parse(s)
+        .ok_or_else(|| format!("unknown plane mode {s:?}; expected single or crossed"))
+}
+
+fn parse_positive(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|_| format!("{s:?} is not a number"))?;
+    if v.is_finite() && v > 0.0 && v <= 1000.0 {
+        Ok(v)
+    } else {
+        Err(format!("{v} must be above 0 and at most 1000"))
+    }
+}
+
+fn parse_unit(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|_| format!("{s:?} is not a number"))?;
+    if (0.0..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} must be between 0 and 1"))
+    }
 }
 
 fn parse_floats<const N: usize>(s: &str, what: &str) -> Result<[f32; N], String> {
@@ -183,6 +233,12 @@ fn main() -> ExitCode {
         )
         .map_err(anyhow::Error::from),
         Some(Command::Render(args)) => render(args),
+        Some(Command::Bake {
+            scene,
+            out,
+            cpu,
+            json,
+        }) => bake(scene.as_deref(), out.as_deref(), cpu, json),
         Some(Command::Compare { a, b, json, diff }) => compare(&a, &b, json, diff.as_deref()),
         Some(Command::Info { scene, json }) => info(scene.as_deref(), json),
     };
@@ -224,6 +280,16 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     };
     let ctx = GpuContext::headless(pref)?;
     let mut renderer = Renderer::new(&ctx, &world)?;
+    frame.btf = canopy::render::btf::BtfSettings {
+        lod_scale: args.lod_scale,
+        weight_threshold: args.weight_threshold,
+        planes: args.planes,
+        show_lod: args.show_lod,
+    };
+    if args.method == Method::Btf {
+        let (baked, _) = bake_with_progress(&ctx, &scene, &world)?;
+        renderer.attach_btf(&ctx, &baked, &world)?;
+    }
 
     let progress = indicatif::ProgressBar::new(u64::from(args.frames) + 1);
     progress.set_style(
@@ -275,6 +341,25 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
             "adapter": ctx.adapter_name(),
             "out": args.out.display().to_string(),
         });
+        let mut json = json;
+        if let Some(b) = &stats.btf {
+            json["billboards"] = serde_json::json!({
+                "twig": b.billboards[0],
+                "main_branch": b.billboards[1],
+                "tree": b.billboards[2],
+            });
+            json["trees_per_level"] = serde_json::json!({
+                "twig": b.trees_per_level[0],
+                "main_branch": b.trees_per_level[1],
+                "tree": b.trees_per_level[2],
+            });
+            json["images_per_billboard"] = serde_json::json!(b.images_per_billboard());
+            json["fetches_saved"] = serde_json::json!(b.fetches_saved);
+            json["btf_bytes"] = serde_json::json!(renderer.btf_bytes());
+            json["lod_scale"] = serde_json::json!(args.lod_scale);
+            json["weight_threshold"] = serde_json::json!(args.weight_threshold);
+            json["planes"] = serde_json::json!(args.planes.name());
+        }
         println!("{json}");
     } else {
         println!(
@@ -286,6 +371,128 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
             stats.triangles,
             ctx.adapter_name()
         );
+    }
+    Ok(())
+}
+
+/// The scene's bake from the cache, or baked now with a progress bar on the terminal.
+fn bake_with_progress(
+    ctx: &GpuContext,
+    scene: &Scene,
+    world: &World,
+) -> anyhow::Result<(canopy::format::Baked, canopy::bake::Source)> {
+    let bar = indicatif::ProgressBar::new(0);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "baking {msg:24} [{bar:30}] {pos}/{len} images ({eta} left)",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let result = canopy::bake::load_or_bake(ctx, scene, world, &mut |p| {
+        bar.set_length(p.total);
+        bar.set_position(p.done);
+        bar.set_message(p.what.clone());
+    });
+    bar.finish_and_clear();
+    Ok(result?)
+}
+
+fn bake(
+    scene_path: Option<&Path>,
+    out: Option<&Path>,
+    cpu: bool,
+    json: bool,
+) -> anyhow::Result<()> {
+    let scene = load_scene(scene_path)?;
+    let world = World::build(&scene).map_err(canopy::Error::from)?;
+    let pref = if cpu {
+        AdapterPreference::Cpu
+    } else {
+        AdapterPreference::Default
+    };
+    let ctx = GpuContext::headless(pref)?;
+    let settings = canopy::bake::cache::settings_of(&scene);
+    let path = out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| canopy::bake::cache::cache_path(&scene));
+    let bar =
+        indicatif::ProgressBar::new(canopy::bake::image_count(&settings, world.species.len()));
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "baking {msg:24} [{bar:30}] {pos}/{len} images ({eta} left)",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let t0 = Instant::now();
+    let baked = canopy::bake::bake_btf(
+        &ctx,
+        &world,
+        &settings,
+        canopy::bake::cache::scene_hash(&scene),
+        &mut |p| {
+            bar.set_position(p.done);
+            bar.set_message(p.what.clone());
+        },
+    )?;
+    bar.finish_and_clear();
+    let seconds = t0.elapsed().as_secs_f64();
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|source| canopy::Error::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+    }
+    canopy::format::write_atomic(&path, &baked).map_err(canopy::Error::from)?;
+    let size = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+    let sets: Vec<_> = baked
+        .btf
+        .iter()
+        .map(|s| {
+            serde_json::json!({
+                "species": world.species.get(s.species as usize).map(|t| t.name.clone()).unwrap_or_default(),
+                "level": canopy::bake::level_name(s.level),
+                "bytes": s.direct.len() + s.ambient.len(),
+                "radius_m": s.radius,
+                "texel_m": s.texel_size,
+            })
+        })
+        .collect();
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "out": path.display().to_string(),
+                "file_bytes": size,
+                "btf_bytes": baked.btf_bytes(),
+                "seconds": seconds,
+                "views": settings.views,
+                "lights": settings.lights,
+                "resolution": settings.resolution,
+                "supersample": settings.supersample,
+                "sets": sets,
+            })
+        );
+    } else {
+        println!(
+            "baked {} image sets ({} views x {} lights + {} sky images, {}x{} texels) in {seconds:.1} s",
+            baked.btf.len(),
+            settings.views,
+            settings.lights,
+            settings.views,
+            settings.resolution,
+            settings.resolution
+        );
+        for s in &sets {
+            println!(
+                "  {:<10} {:<12} {:>9} bytes, radius {:.2} m, texel {:.3} m",
+                s["species"].as_str().unwrap_or("?"),
+                s["level"].as_str().unwrap_or("?"),
+                s["bytes"],
+                s["radius_m"].as_f64().unwrap_or(0.0),
+                s["texel_m"].as_f64().unwrap_or(0.0)
+            );
+        }
+        println!("wrote {} ({size} bytes)", path.display());
     }
     Ok(())
 }

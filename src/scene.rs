@@ -45,6 +45,55 @@ pub struct Scene {
     pub sky: SkyParams,
     /// `[camera]`
     pub camera: CameraParams,
+    /// `[bake]`: how BTF images are sampled. Optional, every key too.
+    #[serde(default)]
+    pub bake: BakeParams,
+}
+
+/// `[bake]`: the sampling of the BTF image sets.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct BakeParams {
+    /// View directions per image set: 6, 18, 66 or 258 (default 18).
+    pub views: u32,
+    /// Light directions per view: 6, 18, 66 or 258 (default 6).
+    pub lights: u32,
+    /// Image side in texels: 32, 64 or 128 (default 64).
+    pub resolution: u32,
+    /// Supersampling per side when rendering the images (1..=8, default 4): alpha is coverage.
+    pub supersample: u32,
+}
+
+impl Default for BakeParams {
+    fn default() -> Self {
+        Self {
+            views: 18,
+            lights: 6,
+            resolution: 64,
+            supersample: 4,
+        }
+    }
+}
+
+/// Direction counts the bake accepts (octahedron subdivisions).
+pub const BAKE_DIRECTIONS: [u32; 4] = [6, 18, 66, 258];
+/// Image sides the bake accepts.
+pub const BAKE_RESOLUTIONS: [u32; 3] = [32, 64, 128];
+
+impl BakeParams {
+    pub fn check(&self) -> Result<(), FieldError> {
+        for (key, v) in [("views", self.views), ("lights", self.lights)] {
+            if !BAKE_DIRECTIONS.contains(&v) {
+                return Err(FieldError::new(key, "must be one of 6, 18, 66, 258").with_found(v));
+            }
+        }
+        if !BAKE_RESOLUTIONS.contains(&self.resolution) {
+            return Err(FieldError::new("resolution", "must be one of 32, 64, 128")
+                .with_found(self.resolution));
+        }
+        check::range_u32("supersample", self.supersample, 1, 8)?;
+        Ok(())
+    }
 }
 
 fn default_feature_size() -> f32 {
@@ -493,6 +542,7 @@ impl Scene {
             ));
         }
         check::range("camera.fov_deg", cam.fov_deg, 1.0, 170.0)?;
+        self.bake.check().map_err(|e| e.prefixed("bake"))?;
         Ok(())
     }
 }

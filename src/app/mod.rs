@@ -6,7 +6,7 @@ pub mod fly;
 pub mod panel;
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use winit::application::ApplicationHandler;
@@ -16,7 +16,7 @@ use winit::keyboard::{KeyCode, ModifiersState, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::model::World;
-use crate::render::{AdapterPreference, FrameDesc, GpuContext, Renderer};
+use crate::render::{AdapterPreference, FrameDesc, GpuContext, Method, Renderer};
 use crate::scene::Scene;
 use crate::{Error, Result};
 use fly::{FlyController, FlyKey};
@@ -54,7 +54,9 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
     event_loop.set_control_flow(ControlFlow::Poll);
     let mut app = App {
         frame: FrameDesc::from_scene(&scene),
+        scene,
         world,
+        bake_job: None,
         title,
         options,
         running: None,
@@ -88,9 +90,17 @@ struct Running {
     egui_renderer: egui_wgpu::Renderer,
 }
 
+/// A bake running on its own thread and GPU device, so the viewer stays responsive.
+struct BakeJob {
+    progress: Arc<Mutex<crate::bake::Progress>>,
+    handle: std::thread::JoinHandle<Result<(crate::format::Baked, crate::bake::Source)>>,
+}
+
 struct App {
     frame: FrameDesc,
+    scene: Scene,
     world: World,
+    bake_job: Option<BakeJob>,
     title: String,
     options: ViewOptions,
     running: Option<Running>,
@@ -197,9 +207,13 @@ impl App {
     fn screenshot(&mut self, path: &Path) {
         let Some(r) = &mut self.running else { return };
         let (w, h) = (r.config.width, r.config.height);
+        let mut frame = self.frame;
+        if frame.method == Method::Btf && !r.renderer.has_btf() {
+            frame.method = Method::Geometry;
+        }
         let result = r
             .renderer
-            .render_image(&r.ctx, &self.frame, w, h, 1)
+            .render_image(&r.ctx, &frame, w, h, 1)
             .and_then(|(img, _)| crate::imageio::save_png(path, &img));
         self.message = Some(match result {
             Ok(()) => (format!("saved {}", path.display()), false),
@@ -207,7 +221,75 @@ impl App {
         });
     }
 
+    /// The btf method needs a bake: start one in the background, or attach a finished one.
+    fn tend_bake(&mut self) {
+        let Some(r) = &mut self.running else { return };
+        if self.frame.method == Method::Btf && !r.renderer.has_btf() && self.bake_job.is_none() {
+            let progress = Arc::new(Mutex::new(crate::bake::Progress {
+                done: 0,
+                total: 1,
+                what: "starting".into(),
+            }));
+            let sink = progress.clone();
+            let scene = self.scene.clone();
+            let world = self.world.clone();
+            let handle = std::thread::spawn(move || {
+                let ctx = GpuContext::headless(AdapterPreference::Default)?;
+                crate::bake::load_or_bake(&ctx, &scene, &world, &mut |p| {
+                    if let Ok(mut slot) = sink.lock() {
+                        *slot = p.clone();
+                    }
+                })
+            });
+            self.bake_job = Some(BakeJob { progress, handle });
+        }
+        self.stats.bake_progress = self.bake_job.as_ref().and_then(|j| {
+            j.progress
+                .lock()
+                .ok()
+                .map(|p| (p.done, p.total, p.what.clone()))
+        });
+        if self
+            .bake_job
+            .as_ref()
+            .is_some_and(|j| j.handle.is_finished())
+        {
+            let Some(job) = self.bake_job.take() else {
+                return;
+            };
+            self.stats.bake_progress = None;
+            let result = job
+                .handle
+                .join()
+                .unwrap_or_else(|_| Err(Error::Gpu("the bake thread stopped unexpectedly".into())))
+                .and_then(|(baked, source)| {
+                    r.renderer.attach_btf(&r.ctx, &baked, &self.world)?;
+                    Ok(source)
+                });
+            self.message = Some(match result {
+                Ok(crate::bake::Source::Cache) => {
+                    ("BTF images loaded from the cache".into(), false)
+                }
+                Ok(crate::bake::Source::Baked { replaced: None }) => {
+                    ("BTF images baked and cached".into(), false)
+                }
+                Ok(crate::bake::Source::Baked {
+                    replaced: Some(why),
+                }) => (
+                    format!("the cached bake could not be used ({why}); baked again"),
+                    false,
+                ),
+                Err(e) => {
+                    self.frame.method = Method::Geometry;
+                    (format!("bake failed: {e}"), true)
+                }
+            });
+        }
+        self.stats.btf_bytes = r.renderer.btf_bytes();
+    }
+
     fn redraw(&mut self, event_loop: &ActiveEventLoop) {
+        self.tend_bake();
         let now = Instant::now();
         let dt = now.duration_since(self.last_frame).as_secs_f32();
         self.last_frame = now;
@@ -221,6 +303,11 @@ impl App {
         let Some(r) = &mut self.running else { return };
         if r.config.width == 0 || r.config.height == 0 {
             return; // minimised
+        }
+        // Until its bake is ready, the btf method is shown as geometry.
+        let mut frame = self.frame;
+        if frame.method == Method::Btf && !r.renderer.has_btf() {
+            frame.method = Method::Geometry;
         }
         if r.ctx.is_lost() {
             let e = Error::Gpu("the GPU device was lost; restart canopy".into());
@@ -251,7 +338,7 @@ impl App {
             });
         match r.renderer.render(
             &r.ctx,
-            &self.frame,
+            &frame,
             crate::render::FrameTarget {
                 view: &scene_view,
                 format: r.scene_format,
@@ -265,6 +352,7 @@ impl App {
                 self.stats.triangles = s.triangles;
                 self.stats.shadow_triangles = s.shadow_triangles;
                 self.stats.draw_calls = s.draw_calls;
+                self.stats.btf = s.btf;
             }
             Err(e) => {
                 self.message = Some((e.to_string(), true));

@@ -1,6 +1,7 @@
 //! The egui side panel: stats, method, sun and shadow controls, screenshot buttons. Pure UI
 //! over plain state, so it is tested headless with egui_kittest.
 
+use crate::render::btf::PlaneMode;
 use crate::render::{FrameDesc, Method};
 
 /// What the panel shows that the app measured.
@@ -15,6 +16,12 @@ pub struct PanelStats {
     pub draw_calls: u32,
     pub adapter: String,
     pub camera_speed: f32,
+    /// What the btf method did last frame.
+    pub btf: Option<crate::render::btf::BtfStats>,
+    /// Bytes of BTF images on the GPU.
+    pub btf_bytes: u64,
+    /// A bake running in the background: done, total, what.
+    pub bake_progress: Option<(u64, u64, String)>,
 }
 
 /// What the user asked for this frame.
@@ -68,6 +75,54 @@ pub fn controls(
             ui.selectable_value(&mut frame.method, *m, m.name());
         }
     });
+    if let Some((done, total, what)) = &stats.bake_progress {
+        let f = if *total > 0 {
+            *done as f32 / *total as f32
+        } else {
+            0.0
+        };
+        ui.label(format!("baking BTF images: {what}"));
+        ui.add(egui::ProgressBar::new(f).show_percentage());
+    }
+    if frame.method == Method::Btf {
+        let b = &mut frame.btf;
+        ui.add(
+            egui::Slider::new(&mut b.lod_scale, 0.25..=16.0)
+                .logarithmic(true)
+                .text("LOD scale px"),
+        );
+        ui.add(egui::Slider::new(&mut b.weight_threshold, 0.0..=0.5).text("weight threshold"));
+        ui.horizontal(|ui| {
+            ui.selectable_value(&mut b.planes, PlaneMode::Single, "single plane");
+            ui.selectable_value(&mut b.planes, PlaneMode::Crossed, "3 crossed planes");
+        });
+        ui.checkbox(&mut b.show_lod, "show LOD level");
+        if let Some(s) = &stats.btf {
+            egui::Grid::new("btf stats").num_columns(2).show(ui, |ui| {
+                ui.label("billboards twig/branch/tree");
+                ui.label(format!(
+                    "{} / {} / {}",
+                    s.billboards[0], s.billboards[1], s.billboards[2]
+                ));
+                ui.end_row();
+                ui.label("trees twig/branch/tree");
+                ui.label(format!(
+                    "{} / {} / {}",
+                    s.trees_per_level[0], s.trees_per_level[1], s.trees_per_level[2]
+                ));
+                ui.end_row();
+                ui.label("images per billboard");
+                ui.label(format!("{:.2}", s.images_per_billboard()));
+                ui.end_row();
+                ui.label("fetches saved");
+                ui.label(format_count(s.fetches_saved));
+                ui.end_row();
+                ui.label("BTF memory");
+                ui.label(format!("{:.1} MB", stats.btf_bytes as f64 / 1e6));
+                ui.end_row();
+            });
+        }
+    }
     ui.separator();
 
     ui.label("Sun (Ctrl + left drag in the view)");

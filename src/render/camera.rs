@@ -15,10 +15,24 @@ pub struct Camera {
     pub pitch: f32,
     pub fov_y_deg: f32,
     pub near: f32,
+    /// Orthographic instead of perspective, with an explicit orientation. Used by the bake,
+    /// which photographs one object along each sampled direction, straight up and down too.
+    pub ortho: Option<OrthoView>,
+}
+
+/// An orthographic view: where it looks, which way is up in the image, and half the image's
+/// height in metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OrthoView {
+    pub forward: Vec3,
+    pub up: Vec3,
+    pub half_height: f32,
 }
 
 impl Camera {
     pub const MAX_PITCH: f32 = 1.55;
+    /// Depth range of an orthographic camera (m).
+    pub const ORTHO_DEPTH: f32 = 10_000.0;
 
     /// A camera at `position` looking at `target`.
     pub fn look_at(position: Vec3, target: Vec3, fov_y_deg: f32) -> Self {
@@ -34,10 +48,27 @@ impl Camera {
             pitch,
             fov_y_deg: fov_y_deg.clamp(1.0, 170.0),
             near: 0.1,
+            ortho: None,
         }
     }
 
+    /// An orthographic camera at `position` looking along `forward`, with `up` (orthogonal
+    /// to it) as the image's up, seeing `half_height` metres above and below its axis.
+    pub fn orthographic(position: Vec3, forward: Vec3, up: Vec3, half_height: f32) -> Self {
+        let mut c = Self::look_at(position, position + forward, 60.0);
+        c.ortho = Some(OrthoView {
+            forward: forward.normalize_or(Vec3::NEG_Z),
+            up: up.normalize_or(Vec3::Y),
+            half_height: half_height.max(1e-4),
+        });
+        c.near = 0.0;
+        c
+    }
+
     pub fn forward(&self) -> Vec3 {
+        if let Some(o) = self.ortho {
+            return o.forward;
+        }
         Vec3::new(
             self.yaw.sin() * self.pitch.cos(),
             self.pitch.sin(),
@@ -45,20 +76,35 @@ impl Camera {
         )
     }
 
-    /// Right vector, horizontal.
+    /// Right vector (horizontal for the perspective camera).
     pub fn right(&self) -> Vec3 {
+        if let Some(o) = self.ortho {
+            return o.forward.cross(o.up).normalize_or(Vec3::X);
+        }
         Vec3::new(-self.yaw.cos(), 0.0, self.yaw.sin())
     }
 
     pub fn up(&self) -> Vec3 {
+        if let Some(o) = self.ortho {
+            return o.up;
+        }
         self.right().cross(self.forward()).normalize_or(Vec3::Y)
     }
 
     pub fn view(&self) -> Mat4 {
+        if let Some(o) = self.ortho {
+            return glam::camera::rh::view::look_to_mat4(self.position, o.forward, o.up);
+        }
         glam::camera::rh::view::look_to_mat4(self.position, self.forward(), Vec3::Y)
     }
 
     pub fn projection(&self, aspect: f32) -> Mat4 {
+        if let Some(OrthoView { half_height: h, .. }) = self.ortho {
+            // Reversed Z as for perspective: depth 1 at the camera, 0 far away.
+            let far = Self::ORTHO_DEPTH;
+            let w = h * aspect.max(1e-4);
+            return glam::camera::rh::proj::directx::orthographic(-w, w, -h, h, far, self.near);
+        }
         glam::camera::rh::proj::directx::perspective_infinite_reverse(
             self.fov_y_deg.to_radians(),
             aspect.max(1e-4),
@@ -78,6 +124,9 @@ impl Camera {
 
     /// The view frustum (near plane and four sides; the far plane is at infinity).
     pub fn frustum(&self, aspect: f32) -> Frustum {
+        if self.ortho.is_some() {
+            return Frustum::from_ortho(self.view_projection(aspect));
+        }
         let f = self.forward();
         let r = self.right();
         let u = self.up();
@@ -182,6 +231,22 @@ mod tests {
             let tiny = Aabb { min: p, max: p };
             assert_eq!(fr.intersects(&tiny), inside, "ndc ({x}, {y})");
         }
+    }
+
+    #[test]
+    fn orthographic_camera_uses_reversed_depth() {
+        let cam = Camera::orthographic(Vec3::new(0.0, 0.0, 10.0), -Vec3::Z, Vec3::Y, 2.0);
+        let vp = cam.view_projection(1.0);
+        let near = vp.project_point3(Vec3::new(1.0, 1.0, 9.0));
+        let far = vp.project_point3(Vec3::new(1.0, 1.0, -9.0));
+        assert!(
+            near.z > far.z && near.z <= 1.0 && far.z >= 0.0,
+            "{near} {far}"
+        );
+        assert!((near.x - 0.5).abs() < 1e-4 && (near.y - 0.5).abs() < 1e-4);
+        let fr = cam.frustum(1.0);
+        assert!(fr.intersects(&unit_box_at(Vec3::ZERO)));
+        assert!(!fr.intersects(&unit_box_at(Vec3::new(5.0, 0.0, 0.0))));
     }
 
     #[test]

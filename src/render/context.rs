@@ -63,6 +63,7 @@ impl GpuContext {
         let supported = adapter.limits();
         let required_limits = wgpu::Limits {
             max_texture_dimension_2d: supported.max_texture_dimension_2d.min(16384),
+            max_texture_array_layers: supported.max_texture_array_layers,
             max_buffer_size: supported.max_buffer_size,
             max_storage_buffer_binding_size: supported.max_storage_buffer_binding_size,
             ..wgpu::Limits::default()

@@ -13,14 +13,17 @@ pub enum Method {
     /// Every leaf, needle and branch as triangles: the ground truth.
     #[default]
     Geometry,
+    /// BTF billboards of the twig / main branch / tree hierarchy (needs a bake).
+    Btf,
 }
 
 impl Method {
-    pub const ALL: &'static [Method] = &[Method::Geometry];
+    pub const ALL: &'static [Method] = &[Method::Geometry, Method::Btf];
 
     pub fn name(self) -> &'static str {
         match self {
             Method::Geometry => "geometry",
+            Method::Btf => "btf",
         }
     }
 
@@ -46,6 +49,17 @@ impl Sun {
         sun_direction(self.azimuth_deg, self.elevation_deg)
     }
 
+    /// A sun shining from `to_sun` (a unit vector towards it).
+    pub fn from_direction(to_sun: Vec3, color: Vec3, intensity: f32) -> Self {
+        let d = to_sun.normalize_or(Vec3::Y);
+        Self {
+            azimuth_deg: d.x.atan2(d.z).to_degrees().rem_euclid(360.0),
+            elevation_deg: d.y.clamp(-1.0, 1.0).asin().to_degrees(),
+            color,
+            intensity,
+        }
+    }
+
     /// Radiance scale of the direct term (zero once the sun has set).
     pub fn radiance(&self) -> Vec3 {
         if self.elevation_deg <= 0.0 {
@@ -62,6 +76,18 @@ pub struct Sky {
     pub color: Vec3,
     pub ground_color: Vec3,
     pub intensity: f32,
+}
+
+/// What surrounds what is drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Stage {
+    /// The scene: sky behind, terrain drawn, no sun below the horizon.
+    #[default]
+    World,
+    /// One object alone, as the bake photographs it: transparent background, no terrain,
+    /// light from any direction (object frames are turned every way), one shadow map
+    /// fitted around the object.
+    Studio,
 }
 
 /// Sun shadows by cascaded shadow maps.
@@ -95,6 +121,9 @@ pub struct FrameDesc {
     /// Fog density per metre (0 = none): far trees fade towards the horizon colour.
     pub fog_density: f32,
     pub exposure: f32,
+    pub stage: Stage,
+    /// Knobs of the `btf` method.
+    pub btf: super::btf::BtfSettings,
 }
 
 impl FrameDesc {
@@ -118,6 +147,8 @@ impl FrameDesc {
             shadows: ShadowSettings::default(),
             fog_density: 0.0006,
             exposure: 1.0,
+            stage: Stage::World,
+            btf: Default::default(),
         }
     }
 }
@@ -139,6 +170,8 @@ pub struct FrameStats {
     /// GPU time of the frame from timestamp queries, when the adapter has them and the
     /// caller asked for a blocking measurement.
     pub gpu_ms: Option<f64>,
+    /// What the `btf` method did (absent for other methods).
+    pub btf: Option<super::btf::BtfStats>,
 }
 
 /// The uniform block of `common.wgsl` (`struct Frame`), byte for byte.
@@ -165,11 +198,16 @@ impl FrameUniforms {
     /// Uniforms for the main view.
     pub fn new(frame: &FrameDesc, aspect: f32, cascades: &super::shadow::Cascades) -> Self {
         let vp = frame.camera.view_projection(aspect);
-        let sun = frame.sun.radiance();
+        let studio = frame.stage == Stage::Studio;
+        let sun = if studio {
+            frame.sun.color * frame.sun.intensity
+        } else {
+            frame.sun.radiance()
+        };
         let sky = frame.sky.color * frame.sky.intensity;
         let ground = frame.sky.ground_color * frame.sky.intensity;
         let horizon = frame.sky.color.lerp(Vec3::new(0.85, 0.88, 0.92), 0.55);
-        let shadows_on = frame.shadows.enabled && frame.sun.elevation_deg > 0.0;
+        let shadows_on = frame.shadows.enabled && (studio || frame.sun.elevation_deg > 0.0);
         Self {
             view_proj: vp.to_cols_array_2d(),
             inv_view_proj: vp.inverse().to_cols_array_2d(),

@@ -3,6 +3,7 @@
 //! all drive the same code. Per frame: cull trees against the view and each shadow cascade,
 //! upload the instance lists once, draw the shadow cascades, then sky, terrain and trees.
 
+pub mod btf;
 pub mod camera;
 pub mod context;
 pub mod frame;
@@ -17,16 +18,16 @@ use std::collections::HashMap;
 
 use image::RgbaImage;
 
-pub use camera::{Camera, Frustum};
+pub use camera::{Camera, Frustum, OrthoView};
 pub use context::{AdapterPreference, GpuContext};
-pub use frame::{FrameDesc, FrameStats, Method, ShadowSettings, Sky, Sun};
+pub use frame::{FrameDesc, FrameStats, Method, ShadowSettings, Sky, Stage, Sun};
 pub use target::{OFFSCREEN_FORMAT, OffscreenTarget};
 
 use frame::FrameUniforms;
 use pipelines::{ColorPipelines, Layouts};
 use shadow::{CASCADES, Cascades};
 use timing::GpuTimer;
-use world_gpu::{TreeRun, WorldGpu};
+use world_gpu::{PartKind, TreeRun, WorldGpu};
 
 use crate::model::World;
 use crate::{Error, Result};
@@ -70,6 +71,7 @@ pub struct Renderer {
     shadows: Option<ShadowMaps>,
     depth: Option<DepthTarget>,
     timer: Option<GpuTimer>,
+    btf: Option<btf::BtfAssets>,
 }
 
 impl Renderer {
@@ -124,7 +126,33 @@ impl Renderer {
             shadows: None,
             depth: None,
             timer: GpuTimer::new(ctx),
+            btf: None,
         })
+    }
+
+    /// Loads baked BTF image sets for the `btf` method (replacing any loaded before).
+    pub fn attach_btf(
+        &mut self,
+        ctx: &GpuContext,
+        baked: &crate::format::Baked,
+        world: &World,
+    ) -> Result<()> {
+        self.btf = Some(btf::BtfAssets::new(ctx, baked, world)?);
+        Ok(())
+    }
+
+    pub fn has_btf(&self) -> bool {
+        self.btf.is_some()
+    }
+
+    /// Texel sizes of a species' three levels, from the attached bake.
+    pub fn btf_texels(&self, species: usize) -> Option<crate::lod::LevelTexels> {
+        self.btf.as_ref().and_then(|b| b.texel_sizes(species))
+    }
+
+    /// Bytes of BTF images on the GPU (0 without a bake).
+    pub fn btf_bytes(&self) -> u64 {
+        self.btf.as_ref().map_or(0, |b| b.bytes)
     }
 
     /// Triangles of one tree of each species, by species name.
@@ -272,9 +300,26 @@ impl Renderer {
 
         let aspect = width as f32 / height as f32;
         let cam = &frame.camera;
+        let studio = frame.stage == Stage::Studio;
         let sun_up = frame.sun.elevation_deg > 0.0;
-        let shadows_on = frame.shadows.enabled && sun_up;
-        let cascades = if shadows_on {
+        let is_btf = frame.method == Method::Btf;
+        if is_btf && self.btf.is_none() {
+            return Err(Error::BadInput(
+                "the btf method needs baked BTF images: run `canopy bake` (the viewer bakes on first use)".into(),
+            ));
+        }
+        // The btf method gets its shadows from visibility cube maps and alpha shadow maps
+        // (not built yet); it draws no sun shadow maps.
+        let shadows_on = frame.shadows.enabled && (sun_up || studio) && !is_btf;
+        let cascades = if shadows_on && studio {
+            let b = &self.world.forest_bounds;
+            Cascades::fit_sphere(
+                frame.sun.direction(),
+                b.center(),
+                0.5 * b.extent().length(),
+                frame.shadows.map_size,
+            )
+        } else if shadows_on {
             Cascades::fit(
                 cam,
                 aspect,
@@ -286,16 +331,39 @@ impl Renderer {
             Cascades::none()
         };
 
-        // Cull: the camera's list, then each cascade's casters.
-        let mut lists = vec![self.world.cull(&cam.frustum(aspect))];
-        if shadows_on {
-            for m in &cascades.matrices {
-                lists.push(self.world.cull(&Frustum::from_ortho(*m)));
+        // Cull: the camera's list, then each cascade's casters. The btf method turns the
+        // camera's list into billboards plus the trunks and limbs of the nearer trees.
+        let frustum = cam.frustum(aspect);
+        let visible = self.world.cull(&frustum);
+        let mut btf_frame = None;
+        let lists = if let (true, Some(b)) = (is_btf, self.btf.as_mut()) {
+            let bf = b.prepare(
+                ctx,
+                &self.world,
+                &visible,
+                cam,
+                cam.focal_px(height),
+                frame.sun.direction(),
+                &frustum,
+                &frame.btf,
+            );
+            let lists = vec![bf.trunk_only.clone(), bf.trunk_and_limbs.clone()];
+            btf_frame = Some(bf);
+            lists
+        } else {
+            let mut lists = vec![visible];
+            if shadows_on {
+                for m in &cascades.matrices {
+                    lists.push(self.world.cull(&Frustum::from_ortho(*m)));
+                }
             }
-        }
+            lists
+        };
         let runs = self.world.upload_lists(ctx, &lists);
 
-        let uniforms = FrameUniforms::new(frame, aspect, &cascades);
+        let mut uniform_frame = *frame;
+        uniform_frame.shadows.enabled = shadows_on;
+        let uniforms = FrameUniforms::new(&uniform_frame, aspect, &cascades);
         ctx.queue
             .write_buffer(&self.frame_uniforms, 0, bytemuck::bytes_of(&uniforms));
         if shadows_on {
@@ -315,6 +383,10 @@ impl Renderer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
+        let btf_pipeline = match (is_btf, self.btf.as_mut()) {
+            (true, Some(b)) => Some(b.pipeline(&ctx.device, &self.layouts.frame, format).clone()),
+            _ => None,
+        };
         let queries = self.timer.as_mut().and_then(|t| t.begin()).cloned();
         let (Some(shadows), Some(depth), Some(pipes)) = (
             &self.shadows,
@@ -357,7 +429,14 @@ impl Renderer {
             pass.set_pipeline(&self.shadow_pipeline);
             pass.set_bind_group(0, &self.shadow_uniforms[c].1, &[]);
             pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
-            let (tris, casters, calls) = draw_world(&mut pass, &self.world, &runs[c + 1], None);
+            let (tris, casters, calls) = draw_world(
+                &mut pass,
+                &self.world,
+                &runs[c + 1],
+                None,
+                !studio,
+                &[PartKind::Trunk, PartKind::Limbs, PartKind::Twigs],
+            );
             stats.shadow_triangles += tris;
             stats.shadow_casters += casters;
             stats.draw_calls += calls;
@@ -376,7 +455,11 @@ impl Renderer {
                     depth_slice: None,
                     resolve_target: None,
                     ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                        load: wgpu::LoadOp::Clear(if studio {
+                            wgpu::Color::TRANSPARENT
+                        } else {
+                            wgpu::Color::BLACK
+                        }),
                         store: wgpu::StoreOp::Store,
                     },
                 })],
@@ -393,13 +476,54 @@ impl Renderer {
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &shadows.frame_bind_group, &[]);
-            pass.set_pipeline(&pipes.sky);
-            pass.draw(0..3, 0..1);
+            if !studio {
+                pass.set_pipeline(&pipes.sky);
+                pass.draw(0..3, 0..1);
+                stats.draw_calls += 1;
+            }
             pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
-            let (tris, trees, calls) = draw_world(&mut pass, &self.world, &runs[0], Some(pipes));
-            stats.triangles = tris;
-            stats.trees_drawn = trees;
-            stats.draw_calls += calls + 1;
+            if let Some(bf) = &btf_frame {
+                let (t0, _, c0) = draw_world(
+                    &mut pass,
+                    &self.world,
+                    &runs[0],
+                    Some(pipes),
+                    !studio,
+                    &[PartKind::Trunk],
+                );
+                let (t1, _, c1) = draw_world(
+                    &mut pass,
+                    &self.world,
+                    &runs[1],
+                    Some(pipes),
+                    false,
+                    &[PartKind::Trunk, PartKind::Limbs],
+                );
+                stats.triangles = t0 + t1 + 2 * u64::from(bf.billboards);
+                stats.trees_drawn = bf.stats.trees_per_level.iter().sum();
+                stats.draw_calls += c0 + c1;
+                if let (Some(b), Some(pipeline)) = (&self.btf, &btf_pipeline)
+                    && bf.billboards > 0
+                {
+                    pass.set_pipeline(pipeline);
+                    pass.set_bind_group(1, b.bind_group(), &[]);
+                    pass.draw(0..6, 0..bf.billboards);
+                    stats.draw_calls += 1;
+                }
+                stats.btf = Some(bf.stats);
+            } else {
+                let (tris, trees, calls) = draw_world(
+                    &mut pass,
+                    &self.world,
+                    &runs[0],
+                    Some(pipes),
+                    !studio,
+                    &[PartKind::Trunk, PartKind::Limbs, PartKind::Twigs],
+                );
+                stats.triangles = tris;
+                stats.trees_drawn = trees;
+                stats.draw_calls += calls;
+            }
         }
         if let Some(t) = &self.timer {
             t.resolve(&mut encoder);
@@ -445,13 +569,15 @@ impl Renderer {
     }
 }
 
-/// Draws the terrain and the trees of `runs`; with no colour pipelines it is the shadow pass
+/// Draws the terrain (when asked) and the trees of `runs`; with no colour pipelines it is the shadow pass
 /// (one pipeline already set). Returns (triangles, trees, draw calls).
 fn draw_world(
     pass: &mut wgpu::RenderPass<'_>,
     world: &WorldGpu,
     runs: &[TreeRun],
     pipes: Option<&ColorPipelines>,
+    terrain: bool,
+    kinds: &[PartKind],
 ) -> (u64, u32, u32) {
     let mut tris = 0u64;
     let mut calls = 0u32;
@@ -469,7 +595,9 @@ fn draw_world(
             tris += set.mesh.triangles() * u64::from(n) * u64::from(set.count);
             calls += 1;
         };
-    draw(pass, &world.terrain, 0, 1);
+    if terrain {
+        draw(pass, &world.terrain, 0, 1);
+    }
     // Opaque parts of every species first, then foliage, to switch pipelines twice only.
     for foliage in [false, true] {
         if let Some(p) = pipes {
@@ -479,7 +607,7 @@ fn draw_world(
             for set in world.species[run.species]
                 .parts
                 .iter()
-                .filter(|s| s.foliage == foliage)
+                .filter(|s| s.foliage == foliage && kinds.contains(&s.kind))
             {
                 draw(pass, set, run.first, run.count);
             }

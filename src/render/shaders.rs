@@ -1,15 +1,23 @@
-//! WGSL sources. Each pass has its own file in `shaders/`; `common.wgsl` (frame uniforms,
-//! the instanced hierarchy, the vertex format) is prepended to each, since WGSL has no
-//! include. Everything is embedded at build time, so the binary runs from any directory.
+//! WGSL sources. Each pass has its own file in `shaders/`; the shared parts (`frame.wgsl`:
+//! the frame uniforms; `instancing.wgsl`: the instanced hierarchy and vertex format) are
+//! prepended, since WGSL has no include. Everything is embedded at build time, so the binary
+//! runs from any directory.
 
-const COMMON: &str = include_str!("../../shaders/common.wgsl");
+const FRAME: &str = include_str!("../../shaders/frame.wgsl");
+const INSTANCING: &str = include_str!("../../shaders/instancing.wgsl");
 const GEOMETRY: &str = include_str!("../../shaders/geometry.wgsl");
 const SHADOW: &str = include_str!("../../shaders/shadow.wgsl");
 const SKY: &str = include_str!("../../shaders/sky.wgsl");
+const BTF: &str = include_str!("../../shaders/btf.wgsl");
 
-/// A pass's full WGSL module: the shared prelude and the pass's own file.
-fn with_common(pass: &str) -> String {
-    format!("{COMMON}\n{pass}")
+/// A mesh pass's module: frame uniforms, instancing, then the pass's own file.
+fn with_instancing(pass: &str) -> String {
+    format!("{FRAME}\n{INSTANCING}\n{pass}")
+}
+
+/// A pass that draws no meshes: frame uniforms, then the pass's own file.
+fn with_frame(pass: &str) -> String {
+    format!("{FRAME}\n{pass}")
 }
 
 /// Every shader module the render core builds, by name, for validation and for pipelines.
@@ -18,17 +26,22 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("geometry", geometry()),
         ("shadow", shadow()),
         ("sky", sky()),
+        ("btf", btf()),
     ]
 }
 
 pub fn geometry() -> String {
-    with_common(GEOMETRY)
+    with_instancing(GEOMETRY)
 }
 
 pub fn shadow() -> String {
-    with_common(SHADOW)
+    with_instancing(SHADOW)
 }
 
 pub fn sky() -> String {
-    with_common(SKY)
+    with_frame(SKY)
+}
+
+pub fn btf() -> String {
+    with_frame(BTF)
 }

@@ -94,6 +94,26 @@ impl Cascades {
     }
 }
 
+impl Cascades {
+    /// One map covering a sphere (the bake's studio: every pixel uses cascade 0).
+    pub fn fit_sphere(to_sun: Vec3, center: Vec3, radius: f32, map_size: u32) -> Self {
+        let up = if to_sun.y.abs() > 0.99 {
+            Vec3::Z
+        } else {
+            Vec3::Y
+        };
+        let r = radius.max(1e-3);
+        let view = glam::camera::rh::view::look_to_mat4(center + to_sun * 2.0 * r, -to_sun, up);
+        let proj = glam::camera::rh::proj::directx::orthographic(-r, r, -r, r, 0.0, 4.0 * r);
+        let m = proj * view;
+        Self {
+            matrices: [m; CASCADES],
+            splits: [f32::MAX; CASCADES],
+            texel_world: [2.0 * r / map_size.max(16) as f32; CASCADES],
+        }
+    }
+}
+
 /// Split depths between `near` and `far`: a blend of logarithmic and uniform splits
 /// (the "practical split scheme", weight 0.75 on the logarithmic one).
 pub fn split_depths(near: f32, far: f32) -> [f32; CASCADES] {

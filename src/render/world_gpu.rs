@@ -63,9 +63,18 @@ impl GpuMesh {
     }
 }
 
+/// Which parts of a tree a [`PartSet`] draws.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PartKind {
+    Trunk,
+    Limbs,
+    Twigs,
+}
+
 /// A mesh drawn once per part of a tree: the trunk (one part), the limbs (one per main
 /// branch) or the twigs (one per twig of the whole tree).
 pub struct PartSet {
+    pub kind: PartKind,
     pub mesh: GpuMesh,
     pub count: u32,
     pub bind_group: wgpu::BindGroup,
@@ -77,6 +86,7 @@ impl PartSet {
     fn new(
         ctx: &GpuContext,
         layout: &wgpu::BindGroupLayout,
+        kind: PartKind,
         label: &str,
         mesh: &Mesh,
         parts: &[Mat4],
@@ -116,6 +126,7 @@ impl PartSet {
             ],
         });
         Some(Self {
+            kind,
             mesh,
             count: parts.len() as u32,
             bind_group,
@@ -157,6 +168,8 @@ pub struct WorldGpu {
     pub tree_data: Vec<TreeGpu>,
     pub tree_bounds: Vec<Aabb>,
     pub scene_bounds: Aabb,
+    /// Bounds of the trees alone (the object, in the bake's studio).
+    pub forest_bounds: Aabb,
     pub trees_buffer: wgpu::Buffer,
     pub trees_bind_group: wgpu::BindGroup,
     capacity: usize,
@@ -181,6 +194,7 @@ impl WorldGpu {
         let terrain = PartSet::new(
             ctx,
             parts_layout,
+            PartKind::Trunk,
             "terrain",
             &terrain_mesh,
             &[Mat4::IDENTITY],
@@ -196,6 +210,7 @@ impl WorldGpu {
                 PartSet::new(
                     ctx,
                     parts_layout,
+                    PartKind::Trunk,
                     &format!("{} trunk", tree.name),
                     &tree.trunk,
                     &[Mat4::IDENTITY],
@@ -204,6 +219,7 @@ impl WorldGpu {
                 PartSet::new(
                     ctx,
                     parts_layout,
+                    PartKind::Limbs,
                     &format!("{} limbs", tree.name),
                     &tree.branch_limb,
                     limbs,
@@ -212,6 +228,7 @@ impl WorldGpu {
                 PartSet::new(
                     ctx,
                     parts_layout,
+                    PartKind::Twigs,
                     &format!("{} twigs", tree.name),
                     &tree.twig,
                     &twigs,
@@ -233,6 +250,7 @@ impl WorldGpu {
         let mut tree_data = Vec::with_capacity(n);
         let mut tree_bounds = Vec::with_capacity(n);
         let mut scene_bounds = world.terrain.bounds();
+        let mut forest_bounds = Aabb::EMPTY;
         for inst in &world.forest.instances {
             let Some(model) = world.species.get(inst.species as usize) else {
                 return Err(Error::BadInput(format!(
@@ -244,6 +262,7 @@ impl WorldGpu {
             let m = inst.transform();
             let b = model.tree_bounds.transformed(m);
             scene_bounds = scene_bounds.union(b);
+            forest_bounds = forest_bounds.union(b);
             tree_species.push(inst.species);
             tree_data.push(TreeGpu {
                 model: m.to_cols_array_2d(),
@@ -277,6 +296,7 @@ impl WorldGpu {
             tree_data,
             tree_bounds,
             scene_bounds,
+            forest_bounds,
             trees_buffer,
             trees_bind_group,
             capacity,

@@ -1,0 +1,106 @@
+// BTF billboard pass (Meyer 2001, ch. 5 and annex A, on one fragment pass): each billboard
+// blends its 3 nearest views x (3 nearest lights + the sky-lit image), weighted, from one
+// texture array, and is composited back to front with premultiplied alpha,
+// T = M + (1 - M_alpha) T0, which is the thesis' equation A.2 without its extra passes.
+
+struct Billboard {
+    // xyz: world centre; w: world radius (half the quad's side)
+    center: vec4<f32>,
+    // xyz: the quad's right axis in the world (unit); w: crossed-plane slot, or -1
+    plane_right: vec4<f32>,
+    // xyz: the quad's up axis in the world (unit); w: opacity (LOD fade)
+    plane_up: vec4<f32>,
+    // the quad's axes in the object frame, where the images were taken
+    obj_right: vec4<f32>,
+    obj_up: vec4<f32>,
+    // xyz: sample indices of the 3 views; w: first layer of this object's image set
+    view_index: vec4<u32>,
+    // xyz: sample indices of the 3 lights; w: number of light samples
+    light_index: vec4<u32>,
+    // xyz: view weights (0 = culled); w: number of view samples
+    view_weight: vec4<f32>,
+    // xyz: light weights (0 = culled)
+    light_weight: vec4<f32>,
+    // rgb: colour tint of the tree (or the LOD overlay colour); a: 1 to replace by the tint
+    tint: vec4<f32>,
+}
+
+@group(1) @binding(0) var<storage, read> billboards: array<Billboard>;
+// Two entries per view sample: the image's right and up axes in the object frame.
+@group(1) @binding(1) var<storage, read> view_axes: array<vec4<f32>>;
+@group(1) @binding(2) var btf_images: texture_2d_array<f32>;
+@group(1) @binding(3) var btf_sampler: sampler;
+
+struct BillboardOut {
+    @builtin(position) clip: vec4<f32>,
+    // position on the quad in the object frame, in units of the object's radius
+    @location(0) p: vec3<f32>,
+    @location(1) world: vec3<f32>,
+    @location(2) @interpolate(flat) instance: u32,
+}
+
+@vertex
+fn vs_billboard(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance: u32) -> BillboardOut {
+    let b = billboards[instance];
+    // Two triangles: corners (-1,-1) (1,-1) (1,1), (-1,-1) (1,1) (-1,1).
+    var xs = array<f32, 6>(-1.0, 1.0, 1.0, -1.0, 1.0, -1.0);
+    var ys = array<f32, 6>(-1.0, -1.0, 1.0, -1.0, 1.0, 1.0);
+    let a = xs[vi % 6u];
+    let c = ys[vi % 6u];
+    let world = b.center.xyz + (a * b.plane_right.xyz + c * b.plane_up.xyz) * b.center.w;
+    var out: BillboardOut;
+    out.clip = frame.view_proj * vec4<f32>(world, 1.0);
+    out.p = a * b.obj_right.xyz + c * b.obj_up.xyz;
+    out.world = world;
+    out.instance = instance;
+    return out;
+}
+
+@fragment
+fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
+    let b = billboards[in.instance];
+    // Derivatives in uniform control flow; the samples below use them explicitly.
+    let dpx = dpdx(in.p);
+    let dpy = dpdy(in.p);
+    let slot = i32(b.plane_right.w);
+    let lights = b.light_index.w;
+    let views = u32(b.view_weight.w);
+    let base = b.view_index.w;
+    var color = vec3<f32>(0.0);
+    var alpha = 0.0;
+    for (var k = 0; k < 3; k++) {
+        let wv = b.view_weight[k];
+        if wv <= 0.0 || (slot >= 0 && slot != k) {
+            continue;
+        }
+        let v = b.view_index[k];
+        let r = view_axes[2u * v].xyz;
+        let u = view_axes[2u * v + 1u].xyz;
+        let uv = vec2<f32>(dot(in.p, r), -dot(in.p, u)) * 0.5 + 0.5;
+        let gx = vec2<f32>(dot(dpx, r), -dot(dpx, u)) * 0.5;
+        let gy = vec2<f32>(dot(dpy, r), -dot(dpy, u)) * 0.5;
+        let amb = textureSampleGrad(btf_images, btf_sampler, uv, i32(base + views * lights + v), gx, gy);
+        var c = amb.rgb * frame.sky_ambient.rgb;
+        for (var j = 0; j < 3; j++) {
+            let wl = b.light_weight[j];
+            if wl <= 0.0 {
+                continue;
+            }
+            let layer = base + v * lights + b.light_index[j];
+            let d = textureSampleGrad(btf_images, btf_sampler, uv, i32(layer), gx, gy);
+            c += wl * d.rgb * frame.sun_color.rgb;
+        }
+        color += wv * c;
+        alpha += wv * amb.a;
+    }
+    if b.tint.a > 0.5 {
+        color = b.tint.rgb * alpha;
+    } else {
+        color *= b.tint.rgb;
+    }
+    let dist = length(frame.camera_pos.xyz - in.world);
+    let fog = 1.0 - exp(-dist * frame.camera_pos.w);
+    color = mix(color, frame.sky_horizon.rgb * alpha, fog);
+    let opacity = b.plane_up.w;
+    return vec4<f32>(color * frame.shadow_params.z, alpha) * opacity;
+}

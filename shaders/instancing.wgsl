@@ -1,0 +1,40 @@
+// The instanced tree hierarchy (tree instances x parts) and the vertex format, shared by the
+// passes that draw meshes. Prepended after frame.wgsl.
+
+// One tree in the world: its transform and a foliage colour variation.
+struct TreeInstance {
+    model: mat4x4<f32>,
+    tint: vec4<f32>,
+}
+
+// A set of parts drawn with one mesh: the trunk (1 part), the main branches' limbs (one per
+// branch) or every twig of the tree (one per twig), each with its transform in the tree frame.
+struct PartSet {
+    count: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+}
+
+@group(1) @binding(0) var<storage, read> trees: array<TreeInstance>;
+@group(2) @binding(0) var<storage, read> parts: array<mat4x4<f32>>;
+@group(2) @binding(1) var<uniform> part_set: PartSet;
+
+struct VertexIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) color: vec3<f32>,
+    @location(3) foliage: f32,
+}
+
+// Instance `i` of a draw is part `i % count` of tree `i / count`: the hierarchy is drawn
+// as it is stored, never flattened into per-part world matrices.
+fn instance_model(instance: u32) -> mat4x4<f32> {
+    let count = max(part_set.count, 1u);
+    return trees[instance / count].model * parts[instance % count];
+}
+
+fn instance_tint(instance: u32) -> vec3<f32> {
+    let count = max(part_set.count, 1u);
+    return trees[instance / count].tint.rgb;
+}

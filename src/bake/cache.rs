@@ -1,0 +1,123 @@
+//! The bake cache: baked files are kept under a key made from the scene (as parsed, so
+//! comments and spacing do not matter), the bake settings and the generator's revision.
+//! A file that is missing, corrupt, of another version or of another scene is baked again.
+
+use std::path::{Path, PathBuf};
+
+use crate::format::{BakeSettings, Baked};
+use crate::scene::Scene;
+
+/// Bumped whenever the generator or the bake changes what it makes: old caches are rebaked.
+pub const BAKE_REVISION: u32 = 1;
+
+/// The bake settings a scene asks for.
+pub fn settings_of(scene: &Scene) -> BakeSettings {
+    BakeSettings {
+        views: scene.bake.views,
+        lights: scene.bake.lights,
+        resolution: scene.bake.resolution,
+        supersample: scene.bake.supersample,
+        vcm_resolution: 32,
+    }
+}
+
+/// FNV-1a, 64 bits: stable across runs, platforms and Rust versions.
+fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
+/// The key of a scene's bake: its species, terrain and forest, the bake settings and the
+/// generator's revision (sun, sky and camera do not change what is baked).
+pub fn scene_hash(scene: &Scene) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325;
+    let species = toml::to_string(&SpeciesOnly {
+        species: &scene.species,
+    })
+    .unwrap_or_default();
+    h = fnv1a(species.as_bytes(), h);
+    let forest = toml::to_string(&ForestOnly {
+        forest: &scene.forest,
+        terrain: &scene.terrain,
+    })
+    .unwrap_or_default();
+    h = fnv1a(forest.as_bytes(), h);
+    let s = settings_of(scene);
+    for v in [
+        s.views,
+        s.lights,
+        s.resolution,
+        s.supersample,
+        s.vcm_resolution,
+        BAKE_REVISION,
+    ] {
+        h = fnv1a(&v.to_le_bytes(), h);
+    }
+    h
+}
+
+#[derive(serde::Serialize)]
+struct SpeciesOnly<'a> {
+    species: &'a [crate::scene::SpeciesEntry],
+}
+
+#[derive(serde::Serialize)]
+struct ForestOnly<'a> {
+    forest: &'a crate::scene::ForestParams,
+    terrain: &'a crate::scene::TerrainParams,
+}
+
+/// Where baked files are kept: `$CANOPY_CACHE_DIR`, else `$XDG_CACHE_HOME/canopy`, else
+/// `~/.cache/canopy`, else `.canopy-cache` in the working directory.
+pub fn cache_dir() -> PathBuf {
+    if let Some(d) = std::env::var_os("CANOPY_CACHE_DIR") {
+        return PathBuf::from(d);
+    }
+    if let Some(d) = std::env::var_os("XDG_CACHE_HOME") {
+        return Path::new(&d).join("canopy");
+    }
+    if let Some(h) = std::env::var_os("HOME") {
+        return Path::new(&h).join(".cache").join("canopy");
+    }
+    PathBuf::from(".canopy-cache")
+}
+
+/// The cache file of a scene.
+pub fn cache_path(scene: &Scene) -> PathBuf {
+    cache_dir().join(format!("{:016x}.canopy", scene_hash(scene)))
+}
+
+/// Reads a scene's bake from `path` if it is there and valid for this scene. The error of a
+/// file that exists but cannot be used is returned so the caller can say why it re-bakes.
+pub fn load(path: &Path, scene: &Scene) -> Option<Result<Baked, crate::format::FormatError>> {
+    if !path.exists() {
+        return None;
+    }
+    Some(crate::format::read_expecting(path, scene_hash(scene)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_key_follows_what_is_baked_and_ignores_the_rest() {
+        let a = Scene::default_scene();
+        let mut b = a.clone();
+        b.sun.azimuth += 10.0;
+        b.camera.fov_deg += 5.0;
+        assert_eq!(scene_hash(&a), scene_hash(&b));
+        let mut c = a.clone();
+        c.bake.views = 66;
+        assert_ne!(scene_hash(&a), scene_hash(&c));
+        let mut d = a.clone();
+        d.forest.seed += 1;
+        assert_ne!(scene_hash(&a), scene_hash(&d));
+        let mut e = a.clone();
+        e.species[0].seed += 1;
+        assert_ne!(scene_hash(&a), scene_hash(&e));
+    }
+}

@@ -1,0 +1,312 @@
+//! The bake: photographs every level of every species (twig, main branch, tree) from each
+//! sampled view direction, lit by each sampled light direction (sun only, self-shadowed) and
+//! by the sky alone, with the same render core as the ground truth, offscreen and
+//! supersampled so that alpha is coverage. Views and lights are in the object's own frame,
+//! so one bake serves every rotated, scaled instance.
+
+pub mod cache;
+
+use glam::{Mat4, Vec3};
+
+use crate::format::{BakeSettings, Baked, BtfImageSet, Level};
+use crate::model::World;
+use crate::model::forest::{Forest, TreeInstance};
+use crate::model::mesh::{Aabb, Mesh};
+use crate::model::terrain::Terrain;
+use crate::model::tree::TreeModel;
+use crate::render::{
+    Camera, FrameDesc, GpuContext, Method, Renderer, ShadowSettings, Sky, Stage, Sun,
+};
+use crate::sphere::DirectionSet;
+use crate::{Error, Result};
+
+/// The levels in bake order, finest first.
+pub const LEVELS: [Level; 3] = [Level::Twig, Level::Branch, Level::Tree];
+
+/// Image axes of the billboard seen from `view` (a unit vector from the object towards the
+/// viewer): (right, up). The bake's camera and the billboards at render time use the same
+/// rule, so an image lands on its plane the way it was taken.
+pub fn billboard_axes(view: Vec3) -> (Vec3, Vec3) {
+    let v = view.normalize_or(Vec3::Z);
+    let hint = if v.y.abs() > 0.999 { Vec3::Z } else { Vec3::Y };
+    let right = hint.cross(v).normalize_or(Vec3::X);
+    let up = v.cross(right).normalize_or(Vec3::Y);
+    (right, up)
+}
+
+/// One level of a species as an object of its own, in the level's frame: the twig alone;
+/// a main branch (limb + its twigs); or the whole tree.
+pub fn level_object(tree: &TreeModel, level: Level) -> TreeModel {
+    let mut o = tree.clone();
+    match level {
+        Level::Twig => {
+            o.trunk = Mesh::default();
+            o.branch_limb = Mesh::default();
+            o.tree_branches.clear();
+            o.branch_twigs.clear();
+            o.tree_twigs = vec![Mat4::IDENTITY];
+            o.tree_bounds = tree.twig_bounds;
+        }
+        Level::Branch => {
+            o.trunk = tree.branch_limb.clone();
+            o.branch_limb = Mesh::default();
+            o.tree_branches.clear();
+            o.branch_twigs.clear();
+            o.tree_twigs = tree.branch_twigs.clone();
+            o.tree_bounds = tree.branch_bounds;
+        }
+        Level::Tree => {}
+    }
+    o
+}
+
+/// The bounding sphere (centre, radius) of a box: the billboard's frame.
+pub fn bounding_sphere(b: &Aabb) -> (Vec3, f32) {
+    (b.center(), (0.5 * b.extent().length()).max(1e-3))
+}
+
+/// A world holding just `object`, once, at the origin.
+fn studio_world(object: TreeModel) -> World {
+    World {
+        terrain: Terrain::flat(1.0, 2),
+        species: vec![object],
+        forest: Forest {
+            instances: vec![TreeInstance {
+                species: 0,
+                position: Vec3::ZERO,
+                yaw: 0.0,
+                scale: 1.0,
+                tint: Vec3::ONE,
+            }],
+        },
+    }
+}
+
+/// What a bake step reports to a progress bar.
+#[derive(Clone, Debug)]
+pub struct Progress {
+    pub done: u64,
+    pub total: u64,
+    pub what: String,
+}
+
+/// Number of images the bake renders for `species` species.
+pub fn image_count(settings: &BakeSettings, species: usize) -> u64 {
+    let per_level = u64::from(settings.views) * (u64::from(settings.lights) + 1);
+    per_level * LEVELS.len() as u64 * species as u64
+}
+
+/// Bakes the BTF image sets of every species and level of `world`.
+pub fn bake_btf(
+    ctx: &GpuContext,
+    world: &World,
+    settings: &BakeSettings,
+    scene_hash: u64,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<Baked> {
+    let views = DirectionSet::with_count(settings.views as usize)
+        .map_err(|e| Error::BadInput(e.to_string()))?;
+    let lights = DirectionSet::with_count(settings.lights as usize)
+        .map_err(|e| Error::BadInput(e.to_string()))?;
+    let total = image_count(settings, world.species.len());
+    let mut done = 0u64;
+    let mut btf = Vec::new();
+    for (s, tree) in world.species.iter().enumerate() {
+        for level in LEVELS {
+            let object = level_object(tree, level);
+            let (center, radius) = bounding_sphere(&object.tree_bounds);
+            let studio = studio_world(object);
+            let mut renderer = Renderer::new(ctx, &studio)?;
+            let res = settings.resolution;
+            // Twice the rendered image's resolution: self-shadows as sharp as the image.
+            let shadow_map = (2 * res * settings.supersample).clamp(256, 2048);
+            let image_bytes = (res * res * 4) as usize;
+            let mut direct = Vec::with_capacity(views.len() * lights.len() * image_bytes);
+            let mut ambient = Vec::with_capacity(views.len() * image_bytes);
+            for &v in views.directions() {
+                let (_, up) = billboard_axes(v);
+                let camera = Camera::orthographic(center + v * (2.0 * radius), -v, up, radius);
+                for &l in lights.directions() {
+                    let frame = studio_frame(
+                        camera,
+                        Sun::from_direction(l, Vec3::ONE, 1.0),
+                        0.0,
+                        shadow_map,
+                    );
+                    direct.extend_from_slice(
+                        renderer
+                            .render_image(ctx, &frame, res, res, settings.supersample)?
+                            .0
+                            .as_raw(),
+                    );
+                    done += 1;
+                    progress(&Progress {
+                        done,
+                        total,
+                        what: format!("{} {}", tree.name, level_name(level)),
+                    });
+                }
+                let frame = studio_frame(
+                    camera,
+                    Sun::from_direction(Vec3::Y, Vec3::ZERO, 0.0),
+                    1.0,
+                    shadow_map,
+                );
+                ambient.extend_from_slice(
+                    renderer
+                        .render_image(ctx, &frame, res, res, settings.supersample)?
+                        .0
+                        .as_raw(),
+                );
+                done += 1;
+                progress(&Progress {
+                    done,
+                    total,
+                    what: format!("{} {}", tree.name, level_name(level)),
+                });
+            }
+            btf.push(BtfImageSet {
+                species: s as u32,
+                level,
+                views: settings.views,
+                lights: settings.lights,
+                resolution: res,
+                center: center.to_array(),
+                radius,
+                texel_size: 2.0 * radius / res as f32,
+                direct,
+                ambient,
+            });
+        }
+    }
+    Ok(Baked {
+        scene_hash,
+        settings: *settings,
+        btf,
+        vcm: Vec::new(),
+    })
+}
+
+/// A studio frame: the object alone, lit by the sun only (`sky` = 0) or the sky only.
+fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDesc {
+    FrameDesc {
+        camera,
+        sun,
+        sky: Sky {
+            color: Vec3::ONE,
+            ground_color: Vec3::ZERO,
+            intensity: sky,
+        },
+        method: Method::Geometry,
+        shadows: ShadowSettings {
+            enabled: sky == 0.0,
+            map_size: shadow_map,
+            distance: 0.0,
+        },
+        fog_density: 0.0,
+        exposure: 1.0,
+        stage: Stage::Studio,
+        btf: Default::default(),
+    }
+}
+
+/// Where a bake came from.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Source {
+    /// Read from the cache file.
+    Cache,
+    /// Baked now (and written to the cache); the reason the cache was not used, if it
+    /// existed.
+    Baked { replaced: Option<String> },
+}
+
+/// The scene's bake from the cache, or baked now and cached (atomically: an interrupted
+/// bake leaves no half file). `progress` sees every image.
+pub fn load_or_bake(
+    ctx: &GpuContext,
+    scene: &crate::scene::Scene,
+    world: &World,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<(Baked, Source)> {
+    load_or_bake_at(&cache::cache_path(scene), ctx, scene, world, progress)
+}
+
+/// [`load_or_bake`] with the cache file at `path`.
+pub fn load_or_bake_at(
+    path: &std::path::Path,
+    ctx: &GpuContext,
+    scene: &crate::scene::Scene,
+    world: &World,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<(Baked, Source)> {
+    let path = path.to_path_buf();
+    let mut replaced = None;
+    match cache::load(&path, scene) {
+        Some(Ok(b)) => return Ok((b, Source::Cache)),
+        Some(Err(e)) => {
+            log::warn!(
+                "re-baking: the cached bake {} cannot be used: {e}",
+                path.display()
+            );
+            replaced = Some(e.to_string());
+        }
+        None => {}
+    }
+    let settings = cache::settings_of(scene);
+    let baked = bake_btf(ctx, world, &settings, cache::scene_hash(scene), progress)?;
+    // A cache that cannot be written costs a re-bake next time, not this run.
+    if let Some(dir) = path.parent() {
+        let _ = std::fs::create_dir_all(dir);
+    }
+    if let Err(e) = crate::format::write_atomic(&path, &baked) {
+        log::warn!("could not cache the bake at {}: {e}", path.display());
+    }
+    Ok((baked, Source::Baked { replaced }))
+}
+
+pub fn level_name(level: Level) -> &'static str {
+    match level {
+        Level::Twig => "twig",
+        Level::Branch => "main branch",
+        Level::Tree => "tree",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn billboard_axes_are_orthonormal_everywhere() {
+        for v in [
+            Vec3::X,
+            Vec3::Y,
+            -Vec3::Y,
+            Vec3::Z,
+            Vec3::new(1.0, 2.0, 3.0).normalize_or_zero(),
+        ] {
+            let (r, u) = billboard_axes(v);
+            assert!((r.length() - 1.0).abs() < 1e-5 && (u.length() - 1.0).abs() < 1e-5);
+            assert!(r.dot(u).abs() < 1e-5 && r.dot(v).abs() < 1e-5 && u.dot(v).abs() < 1e-5);
+            // right, up, view form a right-handed frame: the viewer sees right to the right.
+            assert!((r.cross(u) - v).length() < 1e-4, "{v}");
+        }
+    }
+
+    #[test]
+    fn level_objects_hold_the_parts_of_their_level() {
+        let p = crate::model::species::preset("fir").unwrap();
+        let tree = TreeModel::generate(&p, 1).unwrap();
+        let twig = level_object(&tree, Level::Twig);
+        assert_eq!(twig.twigs_in_tree_frame().len(), 1);
+        assert!(twig.trunk.indices.is_empty());
+        let branch = level_object(&tree, Level::Branch);
+        assert_eq!(branch.twigs_in_tree_frame().len(), tree.branch_twigs.len());
+        assert_eq!(branch.trunk.indices, tree.branch_limb.indices);
+        let whole = level_object(&tree, Level::Tree);
+        assert_eq!(
+            whole.twigs_in_tree_frame().len(),
+            tree.twigs_in_tree_frame().len()
+        );
+    }
+}

@@ -1,0 +1,742 @@
+//! The `btf` method: every tree as BTF billboards of its chosen level (Meyer, Neyret, Poulin
+//! 2001). Per frame, on the CPU: choose each visible tree's level by the texel criterion,
+//! expand it into billboards (the tree; its main branches; or its twigs, at their instance
+//! transforms), find each billboard's view and light directions in its object frame and the
+//! 3 nearest samples of each with their weights, cull small weights, sort back to front.
+//! On the GPU: one instanced draw samples a single texture array holding every image set.
+
+use std::collections::HashMap;
+
+use glam::{Mat3, Mat4, Vec3};
+
+use super::GpuContext;
+use super::camera::Frustum;
+use super::world_gpu::WorldGpu;
+use crate::bake::billboard_axes;
+use crate::format::{Baked, Level};
+use crate::lod::{self, LevelTexels};
+use crate::model::World;
+use crate::model::mesh::Aabb;
+use crate::sphere::DirectionSet;
+use crate::{Error, Result};
+
+/// How each billboard is drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PlaneMode {
+    /// One plane facing the eye; each view's image is reprojected onto it along its view.
+    #[default]
+    Single,
+    /// Three planes, each view's image on the plane facing its own sampled view.
+    Crossed,
+}
+
+impl PlaneMode {
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "single" => Some(Self::Single),
+            "crossed" => Some(Self::Crossed),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Single => "single",
+            Self::Crossed => "crossed",
+        }
+    }
+}
+
+/// The knobs of the `btf` method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BtfSettings {
+    /// A level is valid while its largest texel projects below this many pixels.
+    pub lod_scale: f32,
+    /// Images whose weight is below this are skipped and the others renormalised.
+    pub weight_threshold: f32,
+    pub planes: PlaneMode,
+    /// Colour each billboard by its level instead of its images.
+    pub show_lod: bool,
+}
+
+impl Default for BtfSettings {
+    fn default() -> Self {
+        Self {
+            lod_scale: 1.0,
+            weight_threshold: 0.0,
+            planes: PlaneMode::Single,
+            show_lod: false,
+        }
+    }
+}
+
+/// What the `btf` method did in one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct BtfStats {
+    /// Billboards drawn per level: twig, main branch, tree.
+    pub billboards: [u32; 3],
+    /// Trees drawn at each level: twig, main branch, tree.
+    pub trees_per_level: [u32; 3],
+    /// Image fetches per fragment summed over billboards (views x (lights + ambient)).
+    pub images_sampled: u64,
+    /// Fetches skipped by image-weight culling, against 3 x (3 + 1) = 12 per billboard.
+    pub fetches_saved: u64,
+    /// Billboards left out because the instance buffer would pass the GPU's limit.
+    pub dropped: u32,
+}
+
+impl BtfStats {
+    pub fn total_billboards(&self) -> u32 {
+        self.billboards.iter().sum()
+    }
+
+    /// Images sampled per billboard, on average.
+    pub fn images_per_billboard(&self) -> f64 {
+        let n = self.total_billboards();
+        if n == 0 {
+            0.0
+        } else {
+            self.images_sampled as f64 / f64::from(n)
+        }
+    }
+}
+
+/// One billboard as `btf.wgsl` reads it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct BillboardGpu {
+    pub center: [f32; 4],
+    pub plane_right: [f32; 4],
+    pub plane_up: [f32; 4],
+    pub obj_right: [f32; 4],
+    pub obj_up: [f32; 4],
+    pub view_index: [u32; 4],
+    pub light_index: [u32; 4],
+    pub view_weight: [f32; 4],
+    pub light_weight: [f32; 4],
+    pub tint: [f32; 4],
+}
+
+/// Where one image set sits in the texture array, and its billboard frame.
+#[derive(Clone, Copy, Debug)]
+struct SetInfo {
+    layer_base: u32,
+    center: Vec3,
+    radius: f32,
+}
+
+/// Per species: the part transforms that finer levels expand a tree into.
+struct SpeciesParts {
+    branches: Vec<Mat4>,
+    trunk_twigs: Vec<Mat4>,
+    all_twigs: Vec<Mat4>,
+    sets: [SetInfo; 3],
+    texels: LevelTexels,
+    bounds: Aabb,
+}
+
+/// Colours of the 'show LOD level' overlay: twig, main branch, tree.
+pub const LOD_COLOURS: [[f32; 3]; 3] = [[0.9, 0.2, 0.15], [0.95, 0.8, 0.1], [0.2, 0.45, 0.95]];
+
+/// The BTF image sets on the GPU and the per-frame billboard buffer.
+pub struct BtfAssets {
+    species: Vec<SpeciesParts>,
+    views: DirectionSet,
+    lights: DirectionSet,
+    _texture: wgpu::Texture,
+    texture_view: wgpu::TextureView,
+    sampler: wgpu::Sampler,
+    view_axes: wgpu::Buffer,
+    layout: wgpu::BindGroupLayout,
+    billboards: wgpu::Buffer,
+    capacity: usize,
+    max_capacity: usize,
+    bind_group: wgpu::BindGroup,
+    pipelines: HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
+    scratch: Vec<(f32, BillboardGpu)>,
+    /// Bytes of the texture array, mipmaps included.
+    pub bytes: u64,
+}
+
+/// Trees the `btf` method draws partly as geometry this frame.
+pub struct BtfFrame {
+    /// Per species: trees at the main-branch level (their trunk is geometry).
+    pub trunk_only: Vec<Vec<u32>>,
+    /// Per species: trees at the twig level (trunk and limbs are geometry).
+    pub trunk_and_limbs: Vec<Vec<u32>>,
+    pub billboards: u32,
+    pub stats: BtfStats,
+}
+
+fn level_index(level: Level) -> usize {
+    match level {
+        Level::Twig => 0,
+        Level::Branch => 1,
+        Level::Tree => 2,
+    }
+}
+
+impl BtfAssets {
+    pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
+        let bad = |m: String| {
+            Error::BadInput(format!(
+                "baked BTF data does not fit the scene: {m}; re-bake with `canopy bake`"
+            ))
+        };
+        let s = &baked.settings;
+        let views = DirectionSet::with_count(s.views as usize).map_err(|e| bad(e.to_string()))?;
+        let lights = DirectionSet::with_count(s.lights as usize).map_err(|e| bad(e.to_string()))?;
+        let res = s.resolution;
+        let per_set = s.views * s.lights + s.views;
+        // Every species needs its three levels.
+        let mut index: HashMap<(u32, usize), usize> = HashMap::new();
+        for (i, set) in baked.btf.iter().enumerate() {
+            if set.views != s.views || set.lights != s.lights || set.resolution != res {
+                return Err(bad(format!(
+                    "image set {i} has other sizes than the file's settings"
+                )));
+            }
+            index.insert((set.species, level_index(set.level)), i);
+        }
+        let mut order = Vec::new();
+        for sp in 0..world.species.len() {
+            for l in 0..3 {
+                let i = index
+                    .get(&(sp as u32, l))
+                    .copied()
+                    .ok_or_else(|| bad(format!("species {sp} level {l} is missing")))?;
+                order.push(i);
+            }
+        }
+        let layers = per_set as u64 * order.len() as u64;
+        let max_layers = u64::from(ctx.device.limits().max_texture_array_layers);
+        if layers > max_layers {
+            return Err(Error::BadInput(format!(
+                "the BTF needs {layers} texture layers but this GPU allows {max_layers}; bake with fewer views or lights"
+            )));
+        }
+        let mips = res.max(1).ilog2() + 1;
+        let texture = ctx.checked("allocating the BTF texture array", || {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("btf images"),
+                size: wgpu::Extent3d {
+                    width: res,
+                    height: res,
+                    depth_or_array_layers: layers.max(1) as u32,
+                },
+                mip_level_count: mips,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            })
+        })?;
+        let image_bytes = (res * res * 4) as usize;
+        let mut bytes = 0u64;
+        let mut species: Vec<SpeciesParts> = Vec::new();
+        for (sp, tree) in world.species.iter().enumerate() {
+            let mut sets = [SetInfo {
+                layer_base: 0,
+                center: Vec3::ZERO,
+                radius: 1.0,
+            }; 3];
+            let mut texel = [0.0f32; 3];
+            for (l, info) in sets.iter_mut().enumerate() {
+                let k = sp * 3 + l;
+                let set = &baked.btf[order[k]];
+                let base = k as u32 * per_set;
+                *info = SetInfo {
+                    layer_base: base,
+                    center: Vec3::from(set.center),
+                    radius: set.radius,
+                };
+                texel[l] = set.texel_size;
+                let images = set
+                    .direct
+                    .chunks_exact(image_bytes)
+                    .chain(set.ambient.chunks_exact(image_bytes));
+                for (i, img) in images.enumerate() {
+                    bytes += upload_layer(ctx, &texture, base + i as u32, res, img, mips);
+                }
+            }
+            species.push(SpeciesParts {
+                branches: tree.tree_branches.clone(),
+                trunk_twigs: tree.tree_twigs.clone(),
+                all_twigs: tree.twigs_in_tree_frame(),
+                sets,
+                texels: LevelTexels {
+                    twig: texel[0],
+                    branch: texel[1],
+                    tree: texel[2],
+                },
+                bounds: tree.tree_bounds,
+            });
+        }
+        let texture_view = texture.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("btf"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let axes: Vec<[f32; 4]> = views
+            .directions()
+            .iter()
+            .flat_map(|&v| {
+                let (r, u) = billboard_axes(v);
+                [r.extend(0.0).to_array(), u.extend(0.0).to_array()]
+            })
+            .collect();
+        let view_axes = wgpu::util::DeviceExt::create_buffer_init(
+            &ctx.device,
+            &wgpu::util::BufferInitDescriptor {
+                label: Some("btf view axes"),
+                contents: bytemuck::cast_slice(&axes),
+                usage: wgpu::BufferUsages::STORAGE,
+            },
+        );
+        let layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("btf"),
+                entries: &[
+                    storage_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
+                    storage_entry(1, wgpu::ShaderStages::FRAGMENT),
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 2,
+                        visibility: wgpu::ShaderStages::FRAGMENT,
+                        ty: wgpu::BindingType::Texture {
+                            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                            view_dimension: wgpu::TextureViewDimension::D2Array,
+                            multisampled: false,
+                        },
+                        count: None,
+                    },
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 3,
+                        visibility: wgpu::ShaderStages::FRAGMENT,
+                        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                        count: None,
+                    },
+                ],
+            });
+        let stride = std::mem::size_of::<BillboardGpu>();
+        let limits = ctx.device.limits();
+        let max_capacity = (limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size)
+            / stride as u64) as usize;
+        let capacity = 1024.min(max_capacity);
+        let billboards = billboard_buffer(ctx, capacity);
+        let bind_group = make_bind_group(
+            ctx,
+            &layout,
+            &billboards,
+            &view_axes,
+            &texture_view,
+            &sampler,
+        );
+        Ok(Self {
+            species,
+            views,
+            lights,
+            _texture: texture,
+            texture_view,
+            sampler,
+            view_axes,
+            layout,
+            billboards,
+            capacity,
+            max_capacity,
+            bind_group,
+            pipelines: HashMap::new(),
+            scratch: Vec::new(),
+            bytes,
+        })
+    }
+
+    /// Chooses levels, builds and sorts the billboards and uploads them.
+    #[allow(clippy::too_many_arguments)]
+    pub fn prepare(
+        &mut self,
+        ctx: &GpuContext,
+        world: &WorldGpu,
+        visible: &[Vec<u32>],
+        camera: &super::Camera,
+        focal_px: f32,
+        to_sun: Vec3,
+        frustum: &Frustum,
+        settings: &BtfSettings,
+    ) -> BtfFrame {
+        let mut out = BtfFrame {
+            trunk_only: vec![Vec::new(); self.species.len()],
+            trunk_and_limbs: vec![Vec::new(); self.species.len()],
+            billboards: 0,
+            stats: BtfStats::default(),
+        };
+        let mut scratch = std::mem::take(&mut self.scratch);
+        scratch.clear();
+        let cam = camera.position;
+        let forward = camera.forward();
+        for (sp, trees) in visible.iter().enumerate() {
+            let Some(parts) = self.species.get(sp) else {
+                continue;
+            };
+            for &t in trees {
+                let data = &world.tree_data[t as usize];
+                let m = Mat4::from_cols_array_2d(&data.model);
+                let scale = m.x_axis.truncate().length();
+                let center = m.transform_point3(parts.bounds.center());
+                let z = (center - cam).length();
+                let level = lod::choose(&parts.texels, scale, focal_px, z, settings.lod_scale);
+                let li = level_index(level);
+                out.stats.trees_per_level[li] += 1;
+                let tint = if settings.show_lod {
+                    let c = LOD_COLOURS[li];
+                    [c[0], c[1], c[2], 1.0]
+                } else {
+                    [data.tint[0], data.tint[1], data.tint[2], 0.0]
+                };
+                let mut emit = |part: Mat4, set: &SetInfo, lvl: usize, stats: &mut BtfStats| {
+                    self.push(
+                        &mut scratch,
+                        m * part,
+                        set,
+                        cam,
+                        forward,
+                        to_sun,
+                        frustum,
+                        settings,
+                        tint,
+                        lvl,
+                        stats,
+                    );
+                };
+                match level {
+                    Level::Tree => emit(Mat4::IDENTITY, &parts.sets[2], 2, &mut out.stats),
+                    Level::Branch => {
+                        out.trunk_only[sp].push(t);
+                        for &b in &parts.branches {
+                            emit(b, &parts.sets[1], 1, &mut out.stats);
+                        }
+                        for &tw in &parts.trunk_twigs {
+                            emit(tw, &parts.sets[0], 0, &mut out.stats);
+                        }
+                    }
+                    Level::Twig => {
+                        out.trunk_and_limbs[sp].push(t);
+                        for &tw in &parts.all_twigs {
+                            emit(tw, &parts.sets[0], 0, &mut out.stats);
+                        }
+                    }
+                }
+            }
+        }
+        // Back to front.
+        scratch.sort_by(|a, b| b.0.total_cmp(&a.0));
+        if scratch.len() > self.max_capacity {
+            out.stats.dropped = (scratch.len() - self.max_capacity) as u32;
+            // Keep the nearest ones: they matter most.
+            scratch.drain(..scratch.len() - self.max_capacity);
+        }
+        if scratch.len() > self.capacity {
+            self.capacity = (scratch.len() * 3 / 2).min(self.max_capacity);
+            self.billboards = billboard_buffer(ctx, self.capacity);
+            self.bind_group = make_bind_group(
+                ctx,
+                &self.layout,
+                &self.billboards,
+                &self.view_axes,
+                &self.texture_view,
+                &self.sampler,
+            );
+        }
+        let data: Vec<BillboardGpu> = scratch.iter().map(|(_, b)| *b).collect();
+        if !data.is_empty() {
+            ctx.queue
+                .write_buffer(&self.billboards, 0, bytemuck::cast_slice(&data));
+        }
+        out.billboards = data.len() as u32;
+        self.scratch = scratch;
+        out
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn push(
+        &self,
+        out: &mut Vec<(f32, BillboardGpu)>,
+        m: Mat4,
+        set: &SetInfo,
+        cam: Vec3,
+        forward: Vec3,
+        to_sun: Vec3,
+        frustum: &Frustum,
+        settings: &BtfSettings,
+        tint: [f32; 4],
+        level: usize,
+        stats: &mut BtfStats,
+    ) {
+        let scale = m.x_axis.truncate().length();
+        if !(scale > 0.0 && scale.is_finite()) {
+            return;
+        }
+        let center = m.transform_point3(set.center);
+        let radius = set.radius * scale;
+        let sphere_box = Aabb {
+            min: center - Vec3::splat(radius),
+            max: center + Vec3::splat(radius),
+        };
+        if !frustum.intersects(&sphere_box) {
+            return;
+        }
+        let rot = Mat3::from_mat4(m) * (1.0 / scale);
+        let to_object = rot.transpose();
+        let v_obj = to_object * (cam - center).normalize_or(Vec3::Y);
+        let l_obj = to_object * to_sun;
+        let mut vb = self.views.blend(v_obj);
+        vb.cull(settings.weight_threshold);
+        let mut lb = self.lights.blend(l_obj);
+        lb.cull(settings.weight_threshold);
+        let lights_used = lb.weight.iter().filter(|&&w| w > 0.0).count() as u64;
+        let views_used = vb.weight.iter().filter(|&&w| w > 0.0).count() as u64;
+        let fetches = views_used * (lights_used + 1);
+        stats.images_sampled += fetches;
+        stats.fetches_saved += 12 - fetches.min(12);
+        stats.billboards[level] += 1;
+        let depth = (center - cam).dot(forward);
+        let base = BillboardGpu {
+            center: center.extend(radius).to_array(),
+            plane_right: [0.0, 0.0, 0.0, -1.0],
+            plane_up: [0.0, 0.0, 0.0, 1.0],
+            obj_right: [0.0; 4],
+            obj_up: [0.0; 4],
+            view_index: [vb.index[0], vb.index[1], vb.index[2], set.layer_base],
+            light_index: [
+                lb.index[0],
+                lb.index[1],
+                lb.index[2],
+                self.lights.len() as u32,
+            ],
+            view_weight: [
+                vb.weight[0],
+                vb.weight[1],
+                vb.weight[2],
+                self.views.len() as f32,
+            ],
+            light_weight: [lb.weight[0], lb.weight[1], lb.weight[2], 0.0],
+            tint,
+        };
+        let with_axes = |obj_r: Vec3, obj_u: Vec3, slot: f32| {
+            let mut b = base;
+            b.plane_right = (rot * obj_r).normalize_or(Vec3::X).extend(slot).to_array();
+            b.plane_up = (rot * obj_u).normalize_or(Vec3::Y).extend(1.0).to_array();
+            b.obj_right = obj_r.extend(0.0).to_array();
+            b.obj_up = obj_u.extend(0.0).to_array();
+            b
+        };
+        match settings.planes {
+            PlaneMode::Single => {
+                let (r, u) = billboard_axes(v_obj);
+                out.push((depth, with_axes(r, u, -1.0)));
+            }
+            PlaneMode::Crossed => {
+                for k in 0..3 {
+                    if vb.weight[k] > 0.0 {
+                        let dir = self.views.directions()[vb.index[k] as usize];
+                        let (r, u) = billboard_axes(dir);
+                        out.push((depth, with_axes(r, u, k as f32)));
+                    }
+                }
+            }
+        }
+    }
+
+    pub fn pipeline(
+        &mut self,
+        device: &wgpu::Device,
+        frame_layout: &wgpu::BindGroupLayout,
+        format: wgpu::TextureFormat,
+    ) -> &wgpu::RenderPipeline {
+        let layout = &self.layout;
+        self.pipelines
+            .entry(format)
+            .or_insert_with(|| build_pipeline(device, frame_layout, layout, format))
+    }
+
+    pub fn bind_group(&self) -> &wgpu::BindGroup {
+        &self.bind_group
+    }
+
+    /// Billboard-frame facts per species and level (centre, radius), for tests and tools.
+    pub fn texel_sizes(&self, species: usize) -> Option<LevelTexels> {
+        self.species.get(species).map(|s| s.texels)
+    }
+}
+
+fn storage_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn billboard_buffer(ctx: &GpuContext, capacity: usize) -> wgpu::Buffer {
+    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("btf billboards"),
+        size: (capacity.max(1) * std::mem::size_of::<BillboardGpu>()) as u64,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+fn make_bind_group(
+    ctx: &GpuContext,
+    layout: &wgpu::BindGroupLayout,
+    billboards: &wgpu::Buffer,
+    view_axes: &wgpu::Buffer,
+    view: &wgpu::TextureView,
+    sampler: &wgpu::Sampler,
+) -> wgpu::BindGroup {
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("btf"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: billboards.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: view_axes.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::TextureView(view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::Sampler(sampler),
+            },
+        ],
+    })
+}
+
+/// Uploads one image and its mip chain (box-filtered in linear light) to `layer`.
+/// Returns the bytes uploaded.
+fn upload_layer(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    layer: u32,
+    res: u32,
+    rgba: &[u8],
+    mips: u32,
+) -> u64 {
+    let Some(mut img) = image::RgbaImage::from_raw(res, res, rgba.to_vec()) else {
+        return 0;
+    };
+    let mut bytes = 0u64;
+    for level in 0..mips {
+        let (w, h) = img.dimensions();
+        ctx.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture,
+                mip_level: level,
+                origin: wgpu::Origin3d {
+                    x: 0,
+                    y: 0,
+                    z: layer,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            img.as_raw(),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(4 * w),
+                rows_per_image: Some(h),
+            },
+            wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+        );
+        bytes += u64::from(4 * w * h);
+        if w > 1 {
+            img = super::target::downsample(&img, 2);
+        }
+    }
+    bytes
+}
+
+fn build_pipeline(
+    device: &wgpu::Device,
+    frame_layout: &wgpu::BindGroupLayout,
+    btf_layout: &wgpu::BindGroupLayout,
+    format: wgpu::TextureFormat,
+) -> wgpu::RenderPipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("btf.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(super::shaders::btf().into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("btf"),
+        bind_group_layouts: &[Some(frame_layout), Some(btf_layout)],
+        immediate_size: 0,
+    });
+    let premultiplied = wgpu::BlendComponent {
+        src_factor: wgpu::BlendFactor::One,
+        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+        operation: wgpu::BlendOperation::Add,
+    };
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("btf billboards"),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_billboard"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: super::DEPTH_FORMAT,
+            depth_write_enabled: Some(false),
+            depth_compare: Some(wgpu::CompareFunction::Greater),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs_billboard"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format,
+                blend: Some(wgpu::BlendState {
+                    color: premultiplied,
+                    alpha: premultiplied,
+                }),
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
