@@ -117,6 +117,9 @@ struct RenderArgs {
     /// btf: colour billboards by level (twig red, main branch yellow, tree blue).
     #[arg(long)]
     show_lod: bool,
+    /// btf: cross-fade band before each level's bound, as a fraction of it (0 = pop).
+    #[arg(long, default_value_t = 0.2, value_parser = parse_unit)]
+    lod_fade: f32,
     /// Prefer the CPU (software) adapter.
     #[arg(long)]
     cpu: bool,
@@ -263,6 +266,14 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     if let (Some(pos), Some(target)) = (args.camera, args.look_at) {
         frame.camera = Camera::look_at(pos, target, frame.camera.fov_y_deg);
     }
+    let eye = frame.camera.position;
+    let ground = world.terrain.height_at(eye.x, eye.z);
+    if eye.y < ground {
+        eprintln!(
+            "warning: the camera is {:.1} m below the terrain (ground at y = {ground:.1} m there)",
+            ground - eye.y
+        );
+    }
     if let Some((az, el)) = args.sun {
         frame.sun.azimuth_deg = az;
         frame.sun.elevation_deg = el;
@@ -285,6 +296,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         weight_threshold: args.weight_threshold,
         planes: args.planes,
         show_lod: args.show_lod,
+        lod_fade: args.lod_fade,
     };
     if args.method == Method::Btf {
         let (baked, _) = bake_with_progress(&ctx, &scene, &world)?;
@@ -353,6 +365,8 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
                 "main_branch": b.trees_per_level[1],
                 "tree": b.trees_per_level[2],
             });
+            json["faded_trees"] = serde_json::json!(b.faded_trees);
+            json["lod_fade"] = serde_json::json!(args.lod_fade);
             json["images_per_billboard"] = serde_json::json!(b.images_per_billboard());
             json["fetches_saved"] = serde_json::json!(b.fetches_saved);
             json["btf_bytes"] = serde_json::json!(renderer.btf_bytes());

@@ -268,3 +268,44 @@ fn the_cache_is_reused_and_a_corrupt_file_is_baked_again() {
     }
     assert_eq!(rebaked, first, "the bake is deterministic");
 }
+
+#[test]
+fn the_cross_fade_removes_the_pop_at_a_level_switch() {
+    let ctx = gpu();
+    let (scene, world, mut renderer) = setup(&ctx);
+    let tree = world.forest.instances[0];
+    let model = &world.species[tree.species as usize];
+    let centre = tree.position + model.tree_bounds.center() * tree.scale;
+    let (w, h) = (128u32, 128u32);
+    let texels = renderer_texels(&renderer, tree.species as usize);
+    let focal = Camera::look_at(Vec3::ZERO, Vec3::Z, 40.0).focal_px(h);
+    let branch_from = canopy::lod::valid_beyond(texels.branch * tree.scale, focal, 1.0);
+    let mut frame = FrameDesc::from_scene(&scene);
+    frame.method = Method::Btf;
+    frame.fog_density = 0.0;
+    let mut pair = |fade: f32, at: f32| {
+        frame.btf.lod_fade = fade;
+        let mut shot = |z: f32| {
+            frame.camera = Camera::look_at(centre + Vec3::new(0.0, z, 0.001), centre, 40.0);
+            renderer.render_image(&ctx, &frame, w, h, 1).unwrap().0
+        };
+        // Just beyond and just inside `at`.
+        let (a, b) = (shot(at * 1.003), shot(at * 0.997));
+        canopy::metrics::flip(&rgb(&a), &rgb(&b))
+            .unwrap()
+            .stats
+            .mean
+    };
+    // Where the twig level takes over (the branch level stops being valid), and the same
+    // camera step away from any switch: what the motion alone changes.
+    let popped = pair(0.0, branch_from);
+    let faded = pair(0.2, branch_from);
+    let motion = pair(0.2, branch_from * 1.4);
+    eprintln!(
+        "mean FLIP across the twig/branch switch: abrupt {popped:.4}, cross-faded {faded:.4}; same step without a switch {motion:.4}"
+    );
+    assert!(
+        faded - motion < 0.3 * (popped - motion),
+        "the cross-fade should hide the switch: {faded} vs {popped} (motion alone {motion})"
+    );
+}

@@ -92,6 +92,7 @@ pub fn controls(
                 .text("LOD scale px"),
         );
         ui.add(egui::Slider::new(&mut b.weight_threshold, 0.0..=0.5).text("weight threshold"));
+        ui.add(egui::Slider::new(&mut b.lod_fade, 0.0..=1.0).text("LOD cross-fade band"));
         ui.horizontal(|ui| {
             ui.selectable_value(&mut b.planes, PlaneMode::Single, "single plane");
             ui.selectable_value(&mut b.planes, PlaneMode::Crossed, "3 crossed planes");
@@ -110,6 +111,9 @@ pub fn controls(
                     "{} / {} / {}",
                     s.trees_per_level[0], s.trees_per_level[1], s.trees_per_level[2]
                 ));
+                ui.end_row();
+                ui.label("trees cross-fading");
+                ui.label(s.faded_trees.to_string());
                 ui.end_row();
                 ui.label("images per billboard");
                 ui.label(format!("{:.2}", s.images_per_billboard()));

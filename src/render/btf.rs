@@ -58,6 +58,9 @@ pub struct BtfSettings {
     pub planes: PlaneMode,
     /// Colour each billboard by its level instead of its images.
     pub show_lod: bool,
+    /// Width of the cross-fade band before a level's bound, as a fraction of the bound
+    /// (0 = switch abruptly).
+    pub lod_fade: f32,
 }
 
 impl Default for BtfSettings {
@@ -67,6 +70,7 @@ impl Default for BtfSettings {
             weight_threshold: 0.0,
             planes: PlaneMode::Single,
             show_lod: false,
+            lod_fade: 0.2,
         }
     }
 }
@@ -76,8 +80,10 @@ impl Default for BtfSettings {
 pub struct BtfStats {
     /// Billboards drawn per level: twig, main branch, tree.
     pub billboards: [u32; 3],
-    /// Trees drawn at each level: twig, main branch, tree.
+    /// Trees drawn at each level: twig, main branch, tree (by the coarser level while fading).
     pub trees_per_level: [u32; 3],
+    /// Trees drawn at two levels at once, cross-fading.
+    pub faded_trees: u32,
     /// Image fetches per fragment summed over billboards (views x (lights + ambient)).
     pub images_sampled: u64,
     /// Fetches skipped by image-weight culling, against 3 x (3 + 1) = 12 per billboard.
@@ -397,46 +403,77 @@ impl BtfAssets {
                 let center = m.transform_point3(parts.bounds.center());
                 let z = (center - cam).length();
                 let level = lod::choose(&parts.texels, scale, focal_px, z, settings.lod_scale);
-                let li = level_index(level);
-                out.stats.trees_per_level[li] += 1;
-                let tint = if settings.show_lod {
-                    let c = LOD_COLOURS[li];
-                    [c[0], c[1], c[2], 1.0]
-                } else {
-                    [data.tint[0], data.tint[1], data.tint[2], 0.0]
+                // Cross-fade: while the chosen level's texel is within the last `lod_fade`
+                // fraction of the bound, the next finer level fades in over it, so that the
+                // switch at the bound itself changes nothing.
+                let px = lod::projected_px(parts.texels.get(level) * scale, focal_px, z);
+                let start = settings.lod_scale * (1.0 - settings.lod_fade.clamp(0.0, 1.0));
+                let finer = match level {
+                    Level::Tree => Some(Level::Branch),
+                    Level::Branch => Some(Level::Twig),
+                    Level::Twig => None,
                 };
-                let mut emit = |part: Mat4, set: &SetInfo, lvl: usize, stats: &mut BtfStats| {
-                    self.push(
-                        &mut scratch,
-                        m * part,
-                        set,
-                        cam,
-                        forward,
-                        to_sun,
-                        frustum,
-                        settings,
-                        tint,
-                        lvl,
-                        stats,
-                    );
+                let fade = match finer {
+                    Some(_) if settings.lod_fade > 0.0 && px > start => {
+                        ((px - start) / (settings.lod_scale - start).max(1e-6)).clamp(0.0, 1.0)
+                    }
+                    _ => 0.0,
                 };
-                match level {
-                    Level::Tree => emit(Mat4::IDENTITY, &parts.sets[2], 2, &mut out.stats),
-                    Level::Branch => {
-                        out.trunk_only[sp].push(t);
-                        for &b in &parts.branches {
-                            emit(b, &parts.sets[1], 1, &mut out.stats);
+                let mut draws = vec![(level, 1.0 - fade)];
+                if let (Some(f), true) = (finer, fade > 0.0) {
+                    draws.push((f, fade));
+                    out.stats.faded_trees += 1;
+                }
+                out.stats.trees_per_level[level_index(level)] += 1;
+                let mut geometry = None;
+                for (level, opacity) in draws {
+                    let li = level_index(level);
+                    let tint = if settings.show_lod {
+                        let c = LOD_COLOURS[li];
+                        [c[0], c[1], c[2], 1.0]
+                    } else {
+                        [data.tint[0], data.tint[1], data.tint[2], 0.0]
+                    };
+                    let mut emit = |part: Mat4, set: &SetInfo, lvl: usize, stats: &mut BtfStats| {
+                        self.push(
+                            &mut scratch,
+                            m * part,
+                            set,
+                            cam,
+                            forward,
+                            to_sun,
+                            frustum,
+                            settings,
+                            tint,
+                            opacity,
+                            lvl,
+                            stats,
+                        );
+                    };
+                    match level {
+                        Level::Tree => emit(Mat4::IDENTITY, &parts.sets[2], 2, &mut out.stats),
+                        Level::Branch => {
+                            geometry = geometry.max(Some(1));
+                            for &b in &parts.branches {
+                                emit(b, &parts.sets[1], 1, &mut out.stats);
+                            }
+                            for &tw in &parts.trunk_twigs {
+                                emit(tw, &parts.sets[0], 0, &mut out.stats);
+                            }
                         }
-                        for &tw in &parts.trunk_twigs {
-                            emit(tw, &parts.sets[0], 0, &mut out.stats);
+                        Level::Twig => {
+                            geometry = Some(2);
+                            for &tw in &parts.all_twigs {
+                                emit(tw, &parts.sets[0], 0, &mut out.stats);
+                            }
                         }
                     }
-                    Level::Twig => {
-                        out.trunk_and_limbs[sp].push(t);
-                        for &tw in &parts.all_twigs {
-                            emit(tw, &parts.sets[0], 0, &mut out.stats);
-                        }
-                    }
+                }
+                // The finest level drawn decides which parts are geometry.
+                match geometry {
+                    Some(1) => out.trunk_only[sp].push(t),
+                    Some(2) => out.trunk_and_limbs[sp].push(t),
+                    _ => {}
                 }
             }
         }
@@ -481,6 +518,7 @@ impl BtfAssets {
         frustum: &Frustum,
         settings: &BtfSettings,
         tint: [f32; 4],
+        opacity: f32,
         level: usize,
         stats: &mut BtfStats,
     ) {
@@ -537,7 +575,10 @@ impl BtfAssets {
         let with_axes = |obj_r: Vec3, obj_u: Vec3, slot: f32| {
             let mut b = base;
             b.plane_right = (rot * obj_r).normalize_or(Vec3::X).extend(slot).to_array();
-            b.plane_up = (rot * obj_u).normalize_or(Vec3::Y).extend(1.0).to_array();
+            b.plane_up = (rot * obj_u)
+                .normalize_or(Vec3::Y)
+                .extend(opacity)
+                .to_array();
             b.obj_right = obj_r.extend(0.0).to_array();
             b.obj_up = obj_u.extend(0.0).to_array();
             b
