@@ -38,6 +38,9 @@ enum Command {
         /// Frames to render before the --screenshot is taken.
         #[arg(long, default_value_t = 3, requires = "screenshot")]
         after_frames: u32,
+        /// Method to start with (btf shows terrain and sky until its bake is ready).
+        #[arg(long, default_value = "btf", value_parser = parse_method)]
+        method: Method,
     },
     /// Render one frame to a PNG, no window needed.
     Render(RenderArgs),
@@ -227,11 +230,13 @@ fn main() -> ExitCode {
             scene,
             screenshot,
             after_frames,
+            method,
         }) => canopy::app::run_with(
             scene.as_deref(),
             canopy::app::ViewOptions {
                 screenshot,
                 after_frames,
+                method,
             },
         )
         .map_err(anyhow::Error::from),

@@ -45,3 +45,52 @@ fn screenshot_button_and_shadow_toggle_work() {
     harness.run();
     assert!(harness.state().actions.screenshot);
 }
+
+#[test]
+fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
+    let scene = Scene::default_scene();
+    let state = State {
+        frame: FrameDesc::from_scene(&scene),
+        actions: PanelActions::default(),
+    };
+    let stats = PanelStats {
+        btf: Some(canopy::render::btf::BtfStats {
+            billboards: [10, 20, 30],
+            trees_per_level: [1, 2, 3],
+            faded_trees: 4,
+            images_sampled: 540,
+            fetches_saved: 180,
+            dropped: 0,
+        }),
+        btf_bytes: 16_500_000,
+        bake_progress: Some((40, 100, "fir tree".into())),
+        ..Default::default()
+    };
+    let mut harness = Harness::new_ui_state(
+        move |ui, s: &mut State| {
+            controls(ui, &mut s.frame, &stats, None);
+        },
+        state,
+    );
+    harness.run();
+    assert!(
+        harness.query_by_label("show LOD level").is_none(),
+        "geometry shows no btf controls"
+    );
+    harness.get_by_label("baking BTF images: fir tree");
+    harness.get_by_label("btf").click();
+    harness.run();
+    assert_eq!(harness.state().frame.method, canopy::render::Method::Btf);
+    harness.get_by_label("10 / 20 / 30");
+    harness.get_by_label("9.00");
+    harness.get_by_label("16.5 MB");
+    harness.get_by_label("show LOD level").click();
+    harness.run();
+    assert!(harness.state().frame.btf.show_lod);
+    harness.get_by_label("3 crossed planes").click();
+    harness.run();
+    assert_eq!(
+        harness.state().frame.btf.planes,
+        canopy::render::btf::PlaneMode::Crossed
+    );
+}

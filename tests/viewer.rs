@@ -24,7 +24,7 @@ fn viewer_renders_and_writes_a_non_blank_screenshot() {
         .arg(common::data("small.toml"))
         .arg("--screenshot")
         .arg(&out)
-        .args(["--after-frames", "3"])
+        .args(["--after-frames", "3", "--method", "geometry"])
         .output()
         .unwrap();
     assert!(

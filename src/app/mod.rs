@@ -23,12 +23,24 @@ use fly::{FlyController, FlyKey};
 use panel::{PanelActions, PanelStats};
 
 /// Options of `canopy view` beyond the scene.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct ViewOptions {
     /// Take a screenshot of the 3D view to this path after `after_frames` frames, then quit
     /// (for scripts and CI).
     pub screenshot: Option<PathBuf>,
     pub after_frames: u32,
+    /// The method the viewer starts with.
+    pub method: Method,
+}
+
+impl Default for ViewOptions {
+    fn default() -> Self {
+        Self {
+            screenshot: None,
+            after_frames: 3,
+            method: Method::Btf,
+        }
+    }
 }
 
 /// Opens the viewer on a scene file, or on the embedded default forest.
@@ -52,11 +64,14 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         ))
     })?;
     event_loop.set_control_flow(ControlFlow::Poll);
+    let mut frame = FrameDesc::from_scene(&scene);
+    frame.method = options.method;
     let mut app = App {
-        frame: FrameDesc::from_scene(&scene),
+        frame,
         scene,
         world,
         bake_job: None,
+        bake_failed: false,
         title,
         options,
         running: None,
@@ -101,6 +116,7 @@ struct App {
     scene: Scene,
     world: World,
     bake_job: Option<BakeJob>,
+    bake_failed: bool,
     title: String,
     options: ViewOptions,
     running: Option<Running>,
@@ -224,7 +240,8 @@ impl App {
     /// The btf method needs a bake: start one in the background, or attach a finished one.
     fn tend_bake(&mut self) {
         let Some(r) = &mut self.running else { return };
-        if self.frame.method == Method::Btf && !r.renderer.has_btf() && self.bake_job.is_none() {
+        // The bake starts with the viewer (from the cache when it can), whatever the method.
+        if !r.renderer.has_btf() && self.bake_job.is_none() && !self.bake_failed {
             let progress = Arc::new(Mutex::new(crate::bake::Progress {
                 done: 0,
                 total: 1,
@@ -280,6 +297,7 @@ impl App {
                     false,
                 ),
                 Err(e) => {
+                    self.bake_failed = true;
                     self.frame.method = Method::Geometry;
                     (format!("bake failed: {e}"), true)
                 }
@@ -304,10 +322,12 @@ impl App {
         if r.config.width == 0 || r.config.height == 0 {
             return; // minimised
         }
-        // Until its bake is ready, the btf method is shown as geometry.
+        // Until its bake is ready, the btf method shows terrain and sky only (and the
+        // bake's progress), which stays responsive even on a software renderer.
         let mut frame = self.frame;
         if frame.method == Method::Btf && !r.renderer.has_btf() {
             frame.method = Method::Geometry;
+            frame.trees = false;
         }
         if r.ctx.is_lost() {
             let e = Error::Gpu("the GPU device was lost; restart canopy".into());

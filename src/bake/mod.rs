@@ -126,19 +126,25 @@ pub fn bake_btf(
             for &v in views.directions() {
                 let (_, up) = billboard_axes(v);
                 let camera = Camera::orthographic(center + v * (2.0 * radius), -v, up, radius);
-                for &l in lights.directions() {
-                    let frame = studio_frame(
-                        camera,
-                        Sun::from_direction(l, Vec3::ONE, 1.0),
-                        0.0,
-                        shadow_map,
-                    );
-                    direct.extend_from_slice(
-                        renderer
-                            .render_image(ctx, &frame, res, res, settings.supersample)?
-                            .0
-                            .as_raw(),
-                    );
+                // The view's direct images (sun only, one per light), then its sky-lit one.
+                let shots = lights
+                    .directions()
+                    .iter()
+                    .map(|&l| (Sun::from_direction(l, Vec3::ONE, 1.0), 0.0))
+                    .chain(std::iter::once((
+                        Sun::from_direction(Vec3::Y, Vec3::ZERO, 0.0),
+                        1.0,
+                    )));
+                for (i, (sun, sky)) in shots.enumerate() {
+                    let frame = studio_frame(camera, sun, sky, shadow_map);
+                    let (img, _) =
+                        renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
+                    let dest = if i < lights.len() {
+                        &mut direct
+                    } else {
+                        &mut ambient
+                    };
+                    dest.extend_from_slice(img.as_raw());
                     done += 1;
                     progress(&Progress {
                         done,
@@ -146,24 +152,6 @@ pub fn bake_btf(
                         what: format!("{} {}", tree.name, level_name(level)),
                     });
                 }
-                let frame = studio_frame(
-                    camera,
-                    Sun::from_direction(Vec3::Y, Vec3::ZERO, 0.0),
-                    1.0,
-                    shadow_map,
-                );
-                ambient.extend_from_slice(
-                    renderer
-                        .render_image(ctx, &frame, res, res, settings.supersample)?
-                        .0
-                        .as_raw(),
-                );
-                done += 1;
-                progress(&Progress {
-                    done,
-                    total,
-                    what: format!("{} {}", tree.name, level_name(level)),
-                });
             }
             btf.push(BtfImageSet {
                 species: s as u32,
@@ -207,6 +195,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         exposure: 1.0,
         stage: Stage::Studio,
         btf: Default::default(),
+        trees: true,
     }
 }
 

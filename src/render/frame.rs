@@ -124,6 +124,8 @@ pub struct FrameDesc {
     pub stage: Stage,
     /// Knobs of the `btf` method.
     pub btf: super::btf::BtfSettings,
+    /// Draw the trees (off: terrain and sky only, e.g. while a bake is running).
+    pub trees: bool,
 }
 
 impl FrameDesc {
@@ -149,6 +151,7 @@ impl FrameDesc {
             exposure: 1.0,
             stage: Stage::World,
             btf: Default::default(),
+            trees: true,
         }
     }
 }

@@ -334,7 +334,11 @@ impl Renderer {
         // Cull: the camera's list, then each cascade's casters. The btf method turns the
         // camera's list into billboards plus the trunks and limbs of the nearer trees.
         let frustum = cam.frustum(aspect);
-        let visible = self.world.cull(&frustum);
+        let visible = if frame.trees {
+            self.world.cull(&frustum)
+        } else {
+            vec![Vec::new(); self.world.species.len()]
+        };
         let mut btf_frame = None;
         let lists = if let (true, Some(b)) = (is_btf, self.btf.as_mut()) {
             let bf = b.prepare(
@@ -354,7 +358,11 @@ impl Renderer {
             let mut lists = vec![visible];
             if shadows_on {
                 for m in &cascades.matrices {
-                    lists.push(self.world.cull(&Frustum::from_ortho(*m)));
+                    lists.push(if frame.trees {
+                        self.world.cull(&Frustum::from_ortho(*m))
+                    } else {
+                        vec![Vec::new(); self.world.species.len()]
+                    });
                 }
             }
             lists
