@@ -56,6 +56,33 @@ fn vs_billboard(@builtin(vertex_index) vi: u32, @builtin(instance_index) instanc
     return out;
 }
 
+// Opacity only, for the ground alpha shadow map: blended as dst * (1 - alpha), so the map
+// holds the transmittance of every tree between the sun and the ground.
+@fragment
+fn fs_opacity(in: BillboardOut) -> @location(0) vec4<f32> {
+    let b = billboards[in.instance];
+    let dpx = dpdx(in.p);
+    let dpy = dpdy(in.p);
+    let lights = b.light_index.w;
+    let views = u32(b.view_weight.w);
+    let base = b.view_index.w;
+    var alpha = 0.0;
+    for (var k = 0; k < 3; k++) {
+        let wv = b.view_weight[k];
+        if wv <= 0.0 {
+            continue;
+        }
+        let v = b.view_index[k];
+        let r = view_axes[2u * v].xyz;
+        let u = view_axes[2u * v + 1u].xyz;
+        let uv = vec2<f32>(dot(in.p, r), -dot(in.p, u)) * 0.5 + 0.5;
+        let gx = vec2<f32>(dot(dpx, r), -dot(dpx, u)) * 0.5;
+        let gy = vec2<f32>(dot(dpy, r), -dot(dpy, u)) * 0.5;
+        alpha += wv * textureSampleGrad(btf_images, btf_sampler, uv, i32(base + views * lights + v), gx, gy).a;
+    }
+    return vec4<f32>(0.0, 0.0, 0.0, alpha * b.plane_up.w);
+}
+
 @fragment
 fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
     let b = billboards[in.instance];

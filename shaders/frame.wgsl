@@ -26,6 +26,10 @@ struct Frame {
     cascade_texel: vec4<f32>,
     // y: PCF radius (texels); z: exposure
     shadow_params: vec4<f32>,
+    // The sun's view of the whole scene, for the ground alpha shadow map.
+    ground_light_view_proj: mat4x4<f32>,
+    // x: 1 when the ground alpha shadow map applies
+    ground_params: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;

@@ -4,6 +4,10 @@
 
 @group(0) @binding(1) var shadow_map: texture_depth_2d_array;
 @group(0) @binding(2) var shadow_sampler: sampler_comparison;
+// Transmittance of the trees seen from the sun (1 = no tree in the way): the alpha shadow
+// map of the image-based methods, whose trees are not in the depth shadow maps.
+@group(0) @binding(3) var ground_alpha: texture_2d<f32>;
+@group(0) @binding(4) var ground_sampler: sampler;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -65,6 +69,17 @@ fn sun_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> f32 {
     return lit / 9.0;
 }
 
+// How much of the sun the trees let through to `world`, from the alpha shadow map.
+fn ground_transmittance(world: vec3<f32>) -> f32 {
+    let lp = frame.ground_light_view_proj * vec4<f32>(world, 1.0);
+    let ndc = lp.xyz / lp.w;
+    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
+        return 1.0;
+    }
+    return textureSampleLevel(ground_alpha, ground_sampler, uv, 0.0).r;
+}
+
 @fragment
 fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     var n = normalize(in.normal);
@@ -84,7 +99,10 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) ve
     // View depth along the camera axis picks the cascade.
     let view_depth = dot(-to_eye, frame.camera_forward.xyz);
     let offset_normal = select(n, sign(ndl) * n, leaf);
-    let vis = sun_visibility(in.world, offset_normal, view_depth);
+    var vis = sun_visibility(in.world, offset_normal, view_depth);
+    if frame.ground_params.x > 0.5 {
+        vis *= ground_transmittance(in.world);
+    }
     let ambient = mix(frame.ground_ambient.rgb, frame.sky_ambient.rgb, n.y * 0.5 + 0.5);
     var c = in.color * (frame.sun_color.rgb * direct * vis + ambient);
     let fog = 1.0 - exp(-dist * frame.camera_pos.w);

@@ -120,6 +120,9 @@ struct RenderArgs {
     /// btf: colour billboards by level (twig red, main branch yellow, tree blue).
     #[arg(long)]
     show_lod: bool,
+    /// btf: tree shadows on the ground (alpha shadow map) and terrain self-shadows: on or off.
+    #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+    ground_shadows: bool,
     /// btf: cross-fade band before each level's bound, as a fraction of it (0 = pop).
     #[arg(long, default_value_t = 0.2, value_parser = parse_unit)]
     lod_fade: f32,
@@ -139,6 +142,14 @@ fn parse_method(s: &str) -> Result<Method, String> {
             names.join(", ")
         )
     })
+}
+
+fn parse_on_off(s: &str) -> Result<bool, String> {
+    match s {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("expected on or off, got {s:?}")),
+    }
 }
 
 fn parse_planes(s: &str) -> Result<PlaneMode, String> {
@@ -268,6 +279,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     let mut frame = FrameDesc::from_scene(&scene);
     frame.method = args.method;
     frame.shadows.map_size = args.shadow_map;
+    frame.ground_shadows = args.ground_shadows;
     if let (Some(pos), Some(target)) = (args.camera, args.look_at) {
         frame.camera = Camera::look_at(pos, target, frame.camera.fov_y_deg);
     }

@@ -98,6 +98,10 @@ pub fn controls(
             ui.selectable_value(&mut b.planes, PlaneMode::Crossed, "3 crossed planes");
         });
         ui.checkbox(&mut b.show_lod, "show LOD level");
+        ui.checkbox(
+            &mut frame.ground_shadows,
+            "ground shadows (alpha map + terrain)",
+        );
         if let Some(s) = &stats.btf {
             egui::Grid::new("btf stats").num_columns(2).show(ui, |ui| {
                 ui.label("billboards twig/branch/tree");

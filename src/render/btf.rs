@@ -160,6 +160,10 @@ pub struct BtfAssets {
     max_capacity: usize,
     bind_group: wgpu::BindGroup,
     pipelines: HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
+    opacity_pipeline: Option<wgpu::RenderPipeline>,
+    sun_billboards: wgpu::Buffer,
+    sun_capacity: usize,
+    sun_bind_group: wgpu::BindGroup,
     scratch: Vec<(f32, BillboardGpu)>,
     /// Bytes of the texture array, mipmaps included.
     pub bytes: u64,
@@ -350,6 +354,16 @@ impl BtfAssets {
             &texture_view,
             &sampler,
         );
+        let sun_capacity = world.forest.instances.len().clamp(1, max_capacity);
+        let sun_billboards = billboard_buffer(ctx, sun_capacity);
+        let sun_bind_group = make_bind_group(
+            ctx,
+            &layout,
+            &sun_billboards,
+            &view_axes,
+            &texture_view,
+            &sampler,
+        );
         Ok(Self {
             species,
             views,
@@ -364,6 +378,10 @@ impl BtfAssets {
             max_capacity,
             bind_group,
             pipelines: HashMap::new(),
+            opacity_pipeline: None,
+            sun_billboards,
+            sun_capacity,
+            sun_bind_group,
             scratch: Vec::new(),
             bytes,
         })
@@ -600,6 +618,69 @@ impl BtfAssets {
         }
     }
 
+    /// Every tree's tree-level billboard as the sun sees it (for the ground alpha shadow
+    /// map). Returns how many were uploaded.
+    pub fn prepare_sun(&mut self, ctx: &GpuContext, world: &WorldGpu, to_sun: Vec3) -> u32 {
+        let mut out = Vec::with_capacity(world.tree_data.len());
+        for (i, data) in world.tree_data.iter().enumerate() {
+            let Some(parts) = self.species.get(world.tree_species[i] as usize) else {
+                continue;
+            };
+            let m = Mat4::from_cols_array_2d(&data.model);
+            let scale = m.x_axis.truncate().length();
+            if !(scale > 0.0 && scale.is_finite()) {
+                continue;
+            }
+            let set = &parts.sets[2];
+            let rot = Mat3::from_mat4(m) * (1.0 / scale);
+            let to_object = rot.transpose();
+            let v_obj = to_object * to_sun;
+            let vb = self.views.blend(v_obj);
+            let (r, u) = billboard_axes(v_obj);
+            out.push(BillboardGpu {
+                center: m
+                    .transform_point3(set.center)
+                    .extend(set.radius * scale)
+                    .to_array(),
+                plane_right: (rot * r).normalize_or(Vec3::X).extend(-1.0).to_array(),
+                plane_up: (rot * u).normalize_or(Vec3::Y).extend(1.0).to_array(),
+                obj_right: r.extend(0.0).to_array(),
+                obj_up: u.extend(0.0).to_array(),
+                view_index: [vb.index[0], vb.index[1], vb.index[2], set.layer_base],
+                light_index: [0, 0, 0, self.lights.len() as u32],
+                view_weight: [
+                    vb.weight[0],
+                    vb.weight[1],
+                    vb.weight[2],
+                    self.views.len() as f32,
+                ],
+                light_weight: [0.0; 4],
+                tint: [1.0, 1.0, 1.0, 0.0],
+            });
+        }
+        out.truncate(self.sun_capacity);
+        if !out.is_empty() {
+            ctx.queue
+                .write_buffer(&self.sun_billboards, 0, bytemuck::cast_slice(&out));
+        }
+        out.len() as u32
+    }
+
+    /// The opacity pipeline of the ground alpha shadow map.
+    pub fn opacity_pipeline(
+        &mut self,
+        device: &wgpu::Device,
+        light_frame_layout: &wgpu::BindGroupLayout,
+    ) -> &wgpu::RenderPipeline {
+        let layout = &self.layout;
+        self.opacity_pipeline
+            .get_or_insert_with(|| build_opacity_pipeline(device, light_frame_layout, layout))
+    }
+
+    pub fn sun_bind_group(&self) -> &wgpu::BindGroup {
+        &self.sun_bind_group
+    }
+
     pub fn pipeline(
         &mut self,
         device: &wgpu::Device,
@@ -721,6 +802,65 @@ fn upload_layer(
         }
     }
     bytes
+}
+
+fn build_opacity_pipeline(
+    device: &wgpu::Device,
+    frame_layout: &wgpu::BindGroupLayout,
+    btf_layout: &wgpu::BindGroupLayout,
+) -> wgpu::RenderPipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("btf.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(super::shaders::btf().into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("btf opacity"),
+        bind_group_layouts: &[Some(frame_layout), Some(btf_layout)],
+        immediate_size: 0,
+    });
+    // dst = dst * (1 - alpha): transmittance multiplies.
+    let transmit = wgpu::BlendComponent {
+        src_factor: wgpu::BlendFactor::Zero,
+        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+        operation: wgpu::BlendOperation::Add,
+    };
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("btf opacity"),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_billboard"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: super::SHADOW_FORMAT,
+            depth_write_enabled: Some(false),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs_opacity"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: super::GROUND_FORMAT,
+                blend: Some(wgpu::BlendState {
+                    color: transmit,
+                    alpha: transmit,
+                }),
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }
 
 fn build_pipeline(

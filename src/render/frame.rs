@@ -126,6 +126,9 @@ pub struct FrameDesc {
     pub btf: super::btf::BtfSettings,
     /// Draw the trees (off: terrain and sky only, e.g. while a bake is running).
     pub trees: bool,
+    /// Image-based methods: soft tree shadows on the ground from an alpha shadow map, and
+    /// the terrain's own shadows from depth maps. (The geometry method always has both.)
+    pub ground_shadows: bool,
 }
 
 impl FrameDesc {
@@ -152,6 +155,7 @@ impl FrameDesc {
             stage: Stage::World,
             btf: Default::default(),
             trees: true,
+            ground_shadows: true,
         }
     }
 }
@@ -175,6 +179,8 @@ pub struct FrameStats {
     pub gpu_ms: Option<f64>,
     /// What the `btf` method did (absent for other methods).
     pub btf: Option<super::btf::BtfStats>,
+    /// The ground alpha shadow map was rebuilt this frame (the sun moved).
+    pub sun_update: bool,
 }
 
 /// The uniform block of `common.wgsl` (`struct Frame`), byte for byte.
@@ -195,6 +201,8 @@ pub struct FrameUniforms {
     pub cascade_splits: [f32; 4],
     pub cascade_texel: [f32; 4],
     pub shadow_params: [f32; 4],
+    pub ground_light_view_proj: [[f32; 4]; 4],
+    pub ground_params: [f32; 4],
 }
 
 impl FrameUniforms {
@@ -244,6 +252,8 @@ impl FrameUniforms {
                 0.0,
             ],
             shadow_params: [0.0, 1.0, frame.exposure, 0.0],
+            ground_light_view_proj: Mat4::IDENTITY.to_cols_array_2d(),
+            ground_params: [0.0; 4],
         }
     }
 

@@ -35,6 +35,12 @@ use crate::{Error, Result};
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 pub const SHADOW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
+/// Format of the ground alpha shadow map (transmittance).
+pub const GROUND_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
+/// Side of the ground alpha shadow map, covering the whole scene (about 0.35 m per texel
+/// on the default square kilometre).
+pub const GROUND_MAP_SIZE: u32 = 4096;
+
 /// Largest shadow-map side accepted.
 pub const MAX_SHADOW_MAP: u32 = 8192;
 
@@ -43,6 +49,87 @@ struct ShadowMaps {
     /// One view per cascade, to render into.
     layer_views: Vec<wgpu::TextureView>,
     frame_bind_group: wgpu::BindGroup,
+}
+
+/// The alpha shadow map of the image-based methods: the trees' transmittance seen from the
+/// sun over the whole scene, rebuilt only when the sun moves.
+struct GroundShadow {
+    view: wgpu::TextureView,
+    depth_view: wgpu::TextureView,
+    sampler: wgpu::Sampler,
+    uniforms: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    terrain_pipeline: wgpu::RenderPipeline,
+    light_view_proj: glam::Mat4,
+    /// The sun direction the map was built for (None: not built).
+    built_for: Option<glam::Vec3>,
+}
+
+impl GroundShadow {
+    fn new(ctx: &GpuContext, layouts: &Layouts, uniform_size: u64) -> Result<Self> {
+        let size = GROUND_MAP_SIZE.min(ctx.device.limits().max_texture_dimension_2d);
+        let extent = wgpu::Extent3d {
+            width: size,
+            height: size,
+            depth_or_array_layers: 1,
+        };
+        let (color, depth) = ctx.checked("allocating the ground shadow map", || {
+            let color = ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("ground alpha shadow map"),
+                size: extent,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: GROUND_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            });
+            let depth = ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("ground alpha shadow depth"),
+                size: extent,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: SHADOW_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            });
+            (color, depth)
+        })?;
+        let uniforms = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("ground shadow uniforms"),
+            size: uniform_size,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("ground shadow"),
+            layout: &layouts.shadow_frame,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: uniforms.as_entire_binding(),
+            }],
+        });
+        let terrain_pipeline = ctx.checked("building the ground shadow pipeline", || {
+            pipelines::ground_terrain_pipeline(&ctx.device, layouts)
+        })?;
+        Ok(Self {
+            view: color.create_view(&Default::default()),
+            depth_view: depth.create_view(&Default::default()),
+            sampler: ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+                label: Some("ground shadow"),
+                mag_filter: wgpu::FilterMode::Linear,
+                min_filter: wgpu::FilterMode::Linear,
+                ..Default::default()
+            }),
+            uniforms,
+            bind_group,
+            terrain_pipeline,
+            light_view_proj: glam::Mat4::IDENTITY,
+            built_for: None,
+        })
+    }
 }
 
 struct DepthTarget {
@@ -72,6 +159,7 @@ pub struct Renderer {
     depth: Option<DepthTarget>,
     timer: Option<GpuTimer>,
     btf: Option<btf::BtfAssets>,
+    ground: GroundShadow,
 }
 
 impl Renderer {
@@ -115,7 +203,9 @@ impl Renderer {
             compare: Some(wgpu::CompareFunction::LessEqual),
             ..Default::default()
         });
+        let ground = GroundShadow::new(ctx, &layouts, uniform_size)?;
         Ok(Self {
+            ground,
             layouts,
             world: world_gpu,
             shadow_pipeline,
@@ -138,6 +228,7 @@ impl Renderer {
         world: &World,
     ) -> Result<()> {
         self.btf = Some(btf::BtfAssets::new(ctx, baked, world)?);
+        self.ground.built_for = None;
         Ok(())
     }
 
@@ -229,6 +320,14 @@ impl Renderer {
                     binding: 2,
                     resource: wgpu::BindingResource::Sampler(&self.shadow_sampler),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&self.ground.view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::Sampler(&self.ground.sampler),
+                },
             ],
         });
         self.shadows = Some(ShadowMaps {
@@ -308,9 +407,12 @@ impl Renderer {
                 "the btf method needs baked BTF images: run `canopy bake` (the viewer bakes on first use)".into(),
             ));
         }
-        // The btf method gets its shadows from visibility cube maps and alpha shadow maps
-        // (not built yet); it draws no sun shadow maps.
-        let shadows_on = frame.shadows.enabled && (sun_up || studio) && !is_btf;
+        // The btf method's trees cast no depth shadows (they are not geometry): its depth
+        // cascades hold the terrain alone (a hill shading a valley), and the trees' shadows
+        // on the ground come from the alpha shadow map.
+        let shadows_on =
+            frame.shadows.enabled && (sun_up || studio) && (!is_btf || frame.ground_shadows);
+        let ground_on = is_btf && frame.ground_shadows && sun_up && frame.trees;
         let cascades = if shadows_on && studio {
             let b = &self.world.forest_bounds;
             Cascades::fit_sphere(
@@ -368,10 +470,81 @@ impl Renderer {
             lists
         };
         let runs = self.world.upload_lists(ctx, &lists);
+        let mut stats_sun_update = false;
 
         let mut uniform_frame = *frame;
         uniform_frame.shadows.enabled = shadows_on;
-        let uniforms = FrameUniforms::new(&uniform_frame, aspect, &cascades);
+        let mut uniforms = FrameUniforms::new(&uniform_frame, aspect, &cascades);
+
+        // The ground alpha shadow map follows the sun, not the camera.
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("frame"),
+            });
+        let to_sun = frame.sun.direction();
+        if ground_on
+            && self.ground.built_for != Some(to_sun)
+            && let Some(b) = self.btf.as_mut()
+        {
+            let b_box = &self.world.scene_bounds;
+            let light = Cascades::fit_sphere(
+                to_sun,
+                b_box.center(),
+                0.5 * b_box.extent().length(),
+                GROUND_MAP_SIZE,
+            );
+            self.ground.light_view_proj = light.matrices[0];
+            let n = b.prepare_sun(ctx, &self.world, to_sun);
+            let light_uniforms = uniforms.for_light(self.ground.light_view_proj);
+            ctx.queue.write_buffer(
+                &self.ground.uniforms,
+                0,
+                bytemuck::bytes_of(&light_uniforms),
+            );
+            let opacity = b
+                .opacity_pipeline(&ctx.device, &self.layouts.shadow_frame)
+                .clone();
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("ground alpha shadow map"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &self.ground.view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::WHITE),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &self.ground.depth_view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.ground.terrain_pipeline);
+            pass.set_bind_group(0, &self.ground.bind_group, &[]);
+            pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
+            draw_world(&mut pass, &self.world, &[], None, true, &[]);
+            if n > 0 {
+                pass.set_pipeline(&opacity);
+                pass.set_bind_group(1, b.sun_bind_group(), &[]);
+                pass.draw(0..6, 0..n);
+            }
+            drop(pass);
+            self.ground.built_for = Some(to_sun);
+            stats_sun_update = true;
+        }
+        if ground_on {
+            uniforms.ground_light_view_proj = self.ground.light_view_proj.to_cols_array_2d();
+            uniforms.ground_params = [1.0, 0.0, 0.0, 0.0];
+        }
         ctx.queue
             .write_buffer(&self.frame_uniforms, 0, bytemuck::bytes_of(&uniforms));
         if shadows_on {
@@ -384,13 +557,9 @@ impl Renderer {
         let mut stats = FrameStats {
             width,
             height,
+            sun_update: stats_sun_update,
             ..Default::default()
         };
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("frame"),
-            });
         let btf_pipeline = match (is_btf, self.btf.as_mut()) {
             (true, Some(b)) => Some(b.pipeline(&ctx.device, &self.layouts.frame, format).clone()),
             _ => None,
@@ -437,10 +606,12 @@ impl Renderer {
             pass.set_pipeline(&self.shadow_pipeline);
             pass.set_bind_group(0, &self.shadow_uniforms[c].1, &[]);
             pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
+            // The btf method's cascades hold the terrain alone.
+            let casters: &[TreeRun] = if is_btf { &[] } else { &runs[c + 1] };
             let (tris, casters, calls) = draw_world(
                 &mut pass,
                 &self.world,
-                &runs[c + 1],
+                casters,
                 None,
                 !studio,
                 &[PartKind::Trunk, PartKind::Limbs, PartKind::Twigs],

@@ -1,0 +1,201 @@
+//! Ground shadows of the image-based methods: the alpha shadow map darkens the terrain under
+//! a tree (and nowhere else), and the terrain's own depth shadows let a ridge shade the
+//! valley behind it at a low sun but not at noon.
+
+mod common;
+
+use canopy::bake;
+use canopy::model::World;
+use canopy::model::forest::Forest;
+use canopy::model::terrain::Terrain;
+use canopy::render::{Camera, FrameDesc, Method, Renderer};
+use canopy::scene::Scene;
+use std::sync::OnceLock;
+
+use glam::Vec3;
+
+use common::*;
+
+/// One fir on flat ground, a coarse bake.
+fn lone_tree() -> Scene {
+    let text = r#"
+[terrain]
+size = 80.0
+resolution = 9
+seed = 1
+relief = 0.0
+
+[[species]]
+name = "fir"
+preset = "fir"
+seed = 3
+
+[forest]
+count = 1
+seed = 5
+min_spacing = 4.0
+mix = [1.0]
+scale_min = 1.0
+scale_max = 1.0
+random_yaw = false
+
+[sun]
+azimuth = 135.0
+elevation = 45.0
+color = [1.0, 0.96, 0.9]
+intensity = 3.0
+
+[sky]
+color = [0.35, 0.5, 0.8]
+ground_color = [0.2, 0.18, 0.12]
+intensity = 0.6
+
+[camera]
+position = [0.0, 60.0, 0.1]
+look_at = [0.0, 0.0, 0.0]
+fov_deg = 40.0
+
+[bake]
+views = 6
+lights = 6
+resolution = 32
+supersample = 2
+"#;
+    Scene::parse(text, "lone_tree").expect("lone tree scene parses")
+}
+
+/// The lone fir's bake, made once per test process.
+fn baked() -> &'static canopy::format::Baked {
+    static BAKED: OnceLock<canopy::format::Baked> = OnceLock::new();
+    BAKED.get_or_init(|| {
+        let ctx = gpu();
+        let scene = lone_tree();
+        let world = World::build(&scene).unwrap();
+        let cache =
+            std::env::temp_dir().join(format!("canopy-ground-{}.canopy", std::process::id()));
+        bake::load_or_bake_at(&cache, &ctx, &scene, &world, &mut |_| {})
+            .unwrap()
+            .0
+    })
+}
+
+#[test]
+fn the_alpha_shadow_map_darkens_the_ground_under_a_tree_and_nowhere_else() {
+    let ctx = gpu();
+    let scene = lone_tree();
+    let world = World::build(&scene).unwrap();
+    let mut renderer = Renderer::new(&ctx, &world).unwrap();
+    renderer.attach_btf(&ctx, baked(), &world).unwrap();
+
+    let tree = world.forest.instances[0];
+    let model = &world.species[0];
+    let crown = tree.position + Vec3::Y * 0.6 * model.tree_bounds.max.y;
+    let to_sun = canopy::scene::sun_direction(scene.sun.azimuth, scene.sun.elevation);
+    let shadow_at = crown - to_sun * (crown.y - tree.position.y) / to_sun.y;
+    let lit_at = tree.position + (tree.position - shadow_at);
+
+    let mut frame = FrameDesc::from_scene(&scene);
+    frame.method = Method::Btf;
+    frame.fog_density = 0.0;
+    frame.camera = Camera::look_at(shadow_at + Vec3::new(0.0, 70.0, 0.01), shadow_at, 40.0);
+    let (w, h) = (160u32, 160u32);
+    let vp = frame.camera.view_projection(1.0);
+    let to_px = |p: Vec3| {
+        let ndc = vp.project_point3(p);
+        (
+            ((ndc.x * 0.5 + 0.5) * w as f32) as i64,
+            ((0.5 - ndc.y * 0.5) * h as f32) as i64,
+        )
+    };
+    let (sx, sy) = to_px(shadow_at);
+    let (lx, ly) = to_px(lit_at);
+    let (with, stats) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
+    assert!(
+        stats.sun_update,
+        "the first frame builds the ground shadow map"
+    );
+    let (_, again) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
+    assert!(
+        !again.sun_update,
+        "the map is rebuilt only when the sun moves"
+    );
+    frame.ground_shadows = false;
+    let (without, _) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
+    let under = mean_luminance(&with, sx, sy, 3);
+    let under_without = mean_luminance(&without, sx, sy, 3);
+    let sunny = mean_luminance(&with, lx, ly, 3);
+    let sunny_without = mean_luminance(&without, lx, ly, 3);
+    eprintln!(
+        "btf ground under the crown {under:.4} (off: {under_without:.4}); sunny side {sunny:.4} ({sunny_without:.4})"
+    );
+    assert!(under < 0.8 * under_without, "{under} vs {under_without}");
+    assert!(
+        (sunny - sunny_without).abs() < 0.05 * sunny_without,
+        "{sunny} vs {sunny_without}"
+    );
+}
+
+/// A north-south ridge 30 m high at x = 0 on a 200 m square, flat elsewhere.
+fn ridge_world() -> World {
+    let res = 65u32;
+    let size = 200.0f32;
+    let mut heights = Vec::with_capacity((res * res) as usize);
+    for _z in 0..res {
+        for x in 0..res {
+            let px = -0.5 * size + size * x as f32 / (res - 1) as f32;
+            heights.push((30.0 - px.abs() * 1.5).max(0.0));
+        }
+    }
+    let scene = lone_tree();
+    let species = World::build(&scene).unwrap().species;
+    World {
+        terrain: Terrain {
+            size,
+            resolution: res,
+            heights,
+        },
+        species,
+        forest: Forest {
+            instances: Vec::new(),
+        },
+    }
+}
+
+#[test]
+fn a_ridge_shades_the_valley_behind_it_at_a_low_sun_but_not_at_noon() {
+    let ctx = gpu();
+    let world = ridge_world();
+    let scene = lone_tree();
+    let mut renderer = Renderer::new(&ctx, &world).unwrap();
+    renderer.attach_btf(&ctx, baked(), &world).unwrap();
+    let mut frame = FrameDesc::from_scene(&scene);
+    frame.fog_density = 0.0;
+    // The valley floor 30 m east of the ridge's foot, seen from above.
+    let valley = Vec3::new(45.0, 0.0, 0.0);
+    frame.camera = Camera::look_at(valley + Vec3::new(0.0, 80.0, 0.01), valley, 30.0);
+    let (w, h) = (96u32, 96u32);
+    let centre = (i64::from(w) / 2, i64::from(h) / 2);
+    let mut valley_light = |azimuth: f32, elevation: f32, method: Method| {
+        frame.sun.azimuth_deg = azimuth;
+        frame.sun.elevation_deg = elevation;
+        frame.method = method;
+        let (img, _) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
+        mean_luminance(&img, centre.0, centre.1, 4)
+    };
+    // Geometry (the ground truth) and the image-based method's terrain shadows agree.
+    for method in [Method::Geometry, Method::Btf] {
+        // Sun low in the west (azimuth 270): the ridge stands between it and the valley.
+        let low_west = valley_light(270.0, 12.0, method);
+        // The same low sun from the east: nothing in the way.
+        let low_east = valley_light(90.0, 12.0, method);
+        let noon = valley_light(270.0, 80.0, method);
+        eprintln!(
+            "{method:?}: valley luminance, low sun behind the ridge {low_west:.4}, low sun in front {low_east:.4}, noon {noon:.4}"
+        );
+        assert!(
+            low_west < 0.6 * low_east,
+            "the ridge should shade the valley: {low_west} vs {low_east}"
+        );
+        assert!(noon > low_east, "at noon the valley is fully lit: {noon}");
+    }
+}
