@@ -30,44 +30,7 @@ fn small_scene_matches_the_reference_render() {
 
 /// One fir on flat ground, sun from the south-east at 45 degrees.
 fn lone_tree_scene() -> Scene {
-    let text = r#"
-[terrain]
-size = 80.0
-resolution = 33
-seed = 1
-relief = 0.0
-
-[[species]]
-name = "fir"
-preset = "fir"
-seed = 3
-
-[forest]
-count = 1
-seed = 5
-min_spacing = 4.0
-mix = [1.0]
-scale_min = 1.0
-scale_max = 1.0
-random_yaw = false
-
-[sun]
-azimuth = 135.0
-elevation = 45.0
-color = [1.0, 0.96, 0.9]
-intensity = 3.0
-
-[sky]
-color = [0.35, 0.5, 0.8]
-ground_color = [0.2, 0.18, 0.12]
-intensity = 0.6
-
-[camera]
-position = [0.0, 60.0, 0.1]
-look_at = [0.0, 0.0, 0.0]
-fov_deg = 40.0
-"#;
-    Scene::parse(text, "lone_tree").expect("lone tree scene parses")
+    Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses")
 }
 
 #[test]

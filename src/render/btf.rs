@@ -809,58 +809,20 @@ fn build_opacity_pipeline(
     frame_layout: &wgpu::BindGroupLayout,
     btf_layout: &wgpu::BindGroupLayout,
 ) -> wgpu::RenderPipeline {
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("btf.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(super::shaders::btf().into()),
-    });
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("btf opacity"),
-        bind_group_layouts: &[Some(frame_layout), Some(btf_layout)],
-        immediate_size: 0,
-    });
     // dst = dst * (1 - alpha): transmittance multiplies.
     let transmit = wgpu::BlendComponent {
         src_factor: wgpu::BlendFactor::Zero,
         dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
         operation: wgpu::BlendOperation::Add,
     };
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("btf opacity"),
-        layout: Some(&layout),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs_billboard"),
-            compilation_options: Default::default(),
-            buffers: &[],
-        },
-        primitive: wgpu::PrimitiveState {
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: super::SHADOW_FORMAT,
-            depth_write_enabled: Some(false),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs_opacity"),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format: super::GROUND_FORMAT,
-                blend: Some(wgpu::BlendState {
-                    color: transmit,
-                    alpha: transmit,
-                }),
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+    billboard_pipeline(
+        device,
+        [frame_layout, btf_layout],
+        "fs_opacity",
+        super::GROUND_FORMAT,
+        transmit,
+        (super::SHADOW_FORMAT, wgpu::CompareFunction::Less),
+    )
 }
 
 fn build_pipeline(
@@ -869,22 +831,44 @@ fn build_pipeline(
     btf_layout: &wgpu::BindGroupLayout,
     format: wgpu::TextureFormat,
 ) -> wgpu::RenderPipeline {
+    // Premultiplied "over": T = M + (1 - M_alpha) T0.
+    let over = wgpu::BlendComponent {
+        src_factor: wgpu::BlendFactor::One,
+        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+        operation: wgpu::BlendOperation::Add,
+    };
+    // Reversed Z in the main view.
+    billboard_pipeline(
+        device,
+        [frame_layout, btf_layout],
+        "fs_billboard",
+        format,
+        over,
+        (super::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
+    )
+}
+
+/// A pipeline drawing the billboards of `btf.wgsl` with `fragment`, blended by `blend`,
+/// depth-tested (never written) against `depth`.
+fn billboard_pipeline(
+    device: &wgpu::Device,
+    layouts: [&wgpu::BindGroupLayout; 2],
+    fragment: &str,
+    format: wgpu::TextureFormat,
+    blend: wgpu::BlendComponent,
+    depth: (wgpu::TextureFormat, wgpu::CompareFunction),
+) -> wgpu::RenderPipeline {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("btf.wgsl"),
         source: wgpu::ShaderSource::Wgsl(super::shaders::btf().into()),
     });
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("btf"),
-        bind_group_layouts: &[Some(frame_layout), Some(btf_layout)],
+        label: Some(fragment),
+        bind_group_layouts: &[Some(layouts[0]), Some(layouts[1])],
         immediate_size: 0,
     });
-    let premultiplied = wgpu::BlendComponent {
-        src_factor: wgpu::BlendFactor::One,
-        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-        operation: wgpu::BlendOperation::Add,
-    };
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("btf billboards"),
+        label: Some(fragment),
         layout: Some(&layout),
         vertex: wgpu::VertexState {
             module: &module,
@@ -897,22 +881,22 @@ fn build_pipeline(
             ..Default::default()
         },
         depth_stencil: Some(wgpu::DepthStencilState {
-            format: super::DEPTH_FORMAT,
+            format: depth.0,
             depth_write_enabled: Some(false),
-            depth_compare: Some(wgpu::CompareFunction::Greater),
+            depth_compare: Some(depth.1),
             stencil: Default::default(),
             bias: Default::default(),
         }),
         multisample: Default::default(),
         fragment: Some(wgpu::FragmentState {
             module: &module,
-            entry_point: Some("fs_billboard"),
+            entry_point: Some(fragment),
             compilation_options: Default::default(),
             targets: &[Some(wgpu::ColorTargetState {
                 format,
                 blend: Some(wgpu::BlendState {
-                    color: premultiplied,
-                    alpha: premultiplied,
+                    color: blend,
+                    alpha: blend,
                 }),
                 write_mask: wgpu::ColorWrites::ALL,
             })],
