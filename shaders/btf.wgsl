@@ -56,6 +56,24 @@ fn vs_billboard(@builtin(vertex_index) vi: u32, @builtin(instance_index) instanc
     return out;
 }
 
+// Where the point `p` of the quad (object frame, in radii) falls in the image of view
+// sample `v`, seen along that view, with the texture-coordinate gradients for filtering.
+struct ViewTexcoords {
+    uv: vec2<f32>,
+    gx: vec2<f32>,
+    gy: vec2<f32>,
+}
+
+fn view_texcoords(v: u32, p: vec3<f32>, dpx: vec3<f32>, dpy: vec3<f32>) -> ViewTexcoords {
+    let r = view_axes[2u * v].xyz;
+    let u = view_axes[2u * v + 1u].xyz;
+    var t: ViewTexcoords;
+    t.uv = vec2<f32>(dot(p, r), -dot(p, u)) * 0.5 + 0.5;
+    t.gx = vec2<f32>(dot(dpx, r), -dot(dpx, u)) * 0.5;
+    t.gy = vec2<f32>(dot(dpy, r), -dot(dpy, u)) * 0.5;
+    return t;
+}
+
 // Opacity only, for the ground alpha shadow map: blended as dst * (1 - alpha), so the map
 // holds the transmittance of every tree between the sun and the ground.
 @fragment
@@ -73,12 +91,8 @@ fn fs_opacity(in: BillboardOut) -> @location(0) vec4<f32> {
             continue;
         }
         let v = b.view_index[k];
-        let r = view_axes[2u * v].xyz;
-        let u = view_axes[2u * v + 1u].xyz;
-        let uv = vec2<f32>(dot(in.p, r), -dot(in.p, u)) * 0.5 + 0.5;
-        let gx = vec2<f32>(dot(dpx, r), -dot(dpx, u)) * 0.5;
-        let gy = vec2<f32>(dot(dpy, r), -dot(dpy, u)) * 0.5;
-        alpha += wv * textureSampleGrad(btf_images, btf_sampler, uv, i32(base + views * lights + v), gx, gy).a;
+        let t = view_texcoords(v, in.p, dpx, dpy);
+        alpha += wv * textureSampleGrad(btf_images, btf_sampler, t.uv, i32(base + views * lights + v), t.gx, t.gy).a;
     }
     return vec4<f32>(0.0, 0.0, 0.0, alpha * b.plane_up.w);
 }
@@ -101,12 +115,8 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
             continue;
         }
         let v = b.view_index[k];
-        let r = view_axes[2u * v].xyz;
-        let u = view_axes[2u * v + 1u].xyz;
-        let uv = vec2<f32>(dot(in.p, r), -dot(in.p, u)) * 0.5 + 0.5;
-        let gx = vec2<f32>(dot(dpx, r), -dot(dpx, u)) * 0.5;
-        let gy = vec2<f32>(dot(dpy, r), -dot(dpy, u)) * 0.5;
-        let amb = textureSampleGrad(btf_images, btf_sampler, uv, i32(base + views * lights + v), gx, gy);
+        let t = view_texcoords(v, in.p, dpx, dpy);
+        let amb = textureSampleGrad(btf_images, btf_sampler, t.uv, i32(base + views * lights + v), t.gx, t.gy);
         var c = amb.rgb * frame.sky_ambient.rgb;
         for (var j = 0; j < 3; j++) {
             let wl = b.light_weight[j];
@@ -114,7 +124,7 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
                 continue;
             }
             let layer = base + v * lights + b.light_index[j];
-            let d = textureSampleGrad(btf_images, btf_sampler, uv, i32(layer), gx, gy);
+            let d = textureSampleGrad(btf_images, btf_sampler, t.uv, i32(layer), t.gx, t.gy);
             c += wl * d.rgb * frame.sun_color.rgb;
         }
         color += wv * c;

@@ -44,28 +44,13 @@ fn the_alpha_shadow_map_darkens_the_ground_under_a_tree_and_nowhere_else() {
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     renderer.attach_btf(&ctx, baked(), &world).unwrap();
 
-    let tree = world.forest.instances[0];
-    let model = &world.species[0];
-    let crown = tree.position + Vec3::Y * 0.6 * model.tree_bounds.max.y;
-    let to_sun = canopy::scene::sun_direction(scene.sun.azimuth, scene.sun.elevation);
-    let shadow_at = crown - to_sun * (crown.y - tree.position.y) / to_sun.y;
-    let lit_at = tree.position + (tree.position - shadow_at);
-
-    let mut frame = FrameDesc::from_scene(&scene);
-    frame.method = Method::Btf;
-    frame.fog_density = 0.0;
-    frame.camera = Camera::look_at(shadow_at + Vec3::new(0.0, 70.0, 0.01), shadow_at, 40.0);
     let (w, h) = (160u32, 160u32);
-    let vp = frame.camera.view_projection(1.0);
-    let to_px = |p: Vec3| {
-        let ndc = vp.project_point3(p);
-        (
-            ((ndc.x * 0.5 + 0.5) * w as f32) as i64,
-            ((0.5 - ndc.y * 0.5) * h as f32) as i64,
-        )
-    };
-    let (sx, sy) = to_px(shadow_at);
-    let (lx, ly) = to_px(lit_at);
+    let CrownShadow {
+        mut frame,
+        shadow_px: (sx, sy),
+        lit_px: (lx, ly),
+    } = crown_shadow(&scene, &world, w, h);
+    frame.method = Method::Btf;
     let (with, stats) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
     assert!(
         stats.sun_update,

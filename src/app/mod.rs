@@ -93,6 +93,18 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
     }
 }
 
+/// The frame actually drawn (and saved by a screenshot): until its bake is ready, the btf
+/// method shows terrain and sky only (and the bake's progress), which stays responsive even
+/// on a software renderer.
+fn shown_frame(frame: &FrameDesc, has_btf: bool) -> FrameDesc {
+    let mut shown = *frame;
+    if shown.method == Method::Btf && !has_btf {
+        shown.method = Method::Geometry;
+        shown.trees = false;
+    }
+    shown
+}
+
 struct Running {
     window: Arc<Window>,
     surface: wgpu::Surface<'static>,
@@ -223,10 +235,7 @@ impl App {
     fn screenshot(&mut self, path: &Path) {
         let Some(r) = &mut self.running else { return };
         let (w, h) = (r.config.width, r.config.height);
-        let mut frame = self.frame;
-        if frame.method == Method::Btf && !r.renderer.has_btf() {
-            frame.method = Method::Geometry;
-        }
+        let frame = shown_frame(&self.frame, r.renderer.has_btf());
         let result = r
             .renderer
             .render_image(&r.ctx, &frame, w, h, 1)
@@ -322,13 +331,7 @@ impl App {
         if r.config.width == 0 || r.config.height == 0 {
             return; // minimised
         }
-        // Until its bake is ready, the btf method shows terrain and sky only (and the
-        // bake's progress), which stays responsive even on a software renderer.
-        let mut frame = self.frame;
-        if frame.method == Method::Btf && !r.renderer.has_btf() {
-            frame.method = Method::Geometry;
-            frame.trees = false;
-        }
+        let frame = shown_frame(&self.frame, r.renderer.has_btf());
         if r.ctx.is_lost() {
             let e = Error::Gpu("the GPU device was lost; restart canopy".into());
             self.fail(event_loop, e);

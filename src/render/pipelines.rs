@@ -103,60 +103,51 @@ impl Layouts {
     }
 }
 
-/// The shadow pipeline (independent of the colour format).
+/// The shadow pipeline (independent of the colour format): depth only, biased.
 pub fn shadow_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu::RenderPipeline {
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("shadow.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(shaders::shadow().into()),
-    });
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("shadow"),
-        bind_group_layouts: &[
-            Some(&layouts.shadow_frame),
-            Some(&layouts.trees),
-            Some(&layouts.parts),
-        ],
-        immediate_size: 0,
-    });
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("shadow"),
-        layout: Some(&layout),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs_shadow"),
-            compilation_options: Default::default(),
-            buffers: &[Some(vertex_layout())],
-        },
-        primitive: wgpu::PrimitiveState {
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: SHADOW_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::LessEqual),
-            stencil: Default::default(),
-            bias: wgpu::DepthBiasState {
-                constant: 2,
-                slope_scale: 1.5,
-                clamp: 0.0,
-            },
-        }),
-        multisample: Default::default(),
-        fragment: None,
-        multiview_mask: None,
-        cache: None,
-    })
+    let bias = wgpu::DepthBiasState {
+        constant: 2,
+        slope_scale: 1.5,
+        clamp: 0.0,
+    };
+    light_view_pipeline(
+        device,
+        layouts,
+        "shadow",
+        wgpu::CompareFunction::LessEqual,
+        bias,
+        None,
+    )
 }
 
 /// The terrain into the ground alpha shadow map: white, with depth.
 pub fn ground_terrain_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu::RenderPipeline {
+    light_view_pipeline(
+        device,
+        layouts,
+        "ground terrain",
+        wgpu::CompareFunction::Less,
+        Default::default(),
+        Some(("fs_white", super::GROUND_FORMAT)),
+    )
+}
+
+/// A pipeline drawing meshes from the sun with `shadow.wgsl`'s vertex stage, nothing culled:
+/// depth only, or with a fragment entry point writing one colour target.
+fn light_view_pipeline(
+    device: &wgpu::Device,
+    layouts: &Layouts,
+    label: &str,
+    compare: wgpu::CompareFunction,
+    bias: wgpu::DepthBiasState,
+    fragment: Option<(&str, wgpu::TextureFormat)>,
+) -> wgpu::RenderPipeline {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("shadow.wgsl"),
         source: wgpu::ShaderSource::Wgsl(shaders::shadow().into()),
     });
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("ground terrain"),
+        label: Some(label),
         bind_group_layouts: &[
             Some(&layouts.shadow_frame),
             Some(&layouts.trees),
@@ -164,8 +155,15 @@ pub fn ground_terrain_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu
         ],
         immediate_size: 0,
     });
+    let targets = fragment.map(|(_, format)| {
+        [Some(wgpu::ColorTargetState {
+            format,
+            blend: None,
+            write_mask: wgpu::ColorWrites::ALL,
+        })]
+    });
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("ground terrain"),
+        label: Some(label),
         layout: Some(&layout),
         vertex: wgpu::VertexState {
             module: &module,
@@ -180,21 +178,19 @@ pub fn ground_terrain_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu
         depth_stencil: Some(wgpu::DepthStencilState {
             format: SHADOW_FORMAT,
             depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
+            depth_compare: Some(compare),
             stencil: Default::default(),
-            bias: Default::default(),
+            bias,
         }),
         multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs_white"),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format: super::GROUND_FORMAT,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
+        fragment: fragment
+            .zip(targets.as_ref())
+            .map(|((entry, _), targets)| wgpu::FragmentState {
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                targets,
+            }),
         multiview_mask: None,
         cache: None,
     })

@@ -6,8 +6,9 @@
 use std::path::{Path, PathBuf};
 
 use canopy::model::World;
-use canopy::render::{AdapterPreference, FrameDesc, GpuContext, Renderer};
+use canopy::render::{AdapterPreference, Camera, FrameDesc, GpuContext, Renderer};
 use canopy::scene::Scene;
+use glam::Vec3;
 use image::RgbaImage;
 
 pub fn gpu() -> GpuContext {
@@ -86,4 +87,39 @@ pub fn mean_luminance(img: &RgbaImage, cx: i64, cy: i64, half: i64) -> f32 {
     }
     assert!(n > 0, "window outside the image");
     sum / n as f32
+}
+
+/// Where the first tree's crown shadow falls on flat ground, and the frame that looks
+/// straight down on it from high above: the pixels under the crown's shadow and the pixels
+/// mirrored to the tree's sunny side, for a `w` x `h` image.
+pub struct CrownShadow {
+    pub frame: FrameDesc,
+    pub shadow_px: (i64, i64),
+    pub lit_px: (i64, i64),
+}
+
+pub fn crown_shadow(scene: &Scene, world: &World, w: u32, h: u32) -> CrownShadow {
+    let tree = world.forest.instances[0];
+    let model = &world.species[tree.species as usize];
+    // The crown's centre, and where the sun projects it onto the flat ground.
+    let crown = tree.position + Vec3::Y * 0.6 * (model.tree_bounds.max.y * tree.scale);
+    let to_sun = canopy::scene::sun_direction(scene.sun.azimuth, scene.sun.elevation);
+    let shadow_at = crown - to_sun * (crown.y - tree.position.y) / to_sun.y;
+    let lit_at = tree.position + (tree.position - shadow_at);
+    let mut frame = FrameDesc::from_scene(scene);
+    frame.fog_density = 0.0;
+    frame.camera = Camera::look_at(shadow_at + Vec3::new(0.0, 70.0, 0.01), shadow_at, 40.0);
+    let vp = frame.camera.view_projection(w as f32 / h as f32);
+    let to_px = |p: Vec3| {
+        let ndc = vp.project_point3(p);
+        (
+            ((ndc.x * 0.5 + 0.5) * w as f32) as i64,
+            ((0.5 - ndc.y * 0.5) * h as f32) as i64,
+        )
+    };
+    CrownShadow {
+        frame,
+        shadow_px: to_px(shadow_at),
+        lit_px: to_px(lit_at),
+    }
 }
