@@ -21,8 +21,27 @@ struct Billboard {
     view_weight: vec4<f32>,
     // xyz: light weights (0 = culled)
     light_weight: vec4<f32>,
-    // rgb: colour tint of the tree (or the LOD overlay colour); a: 1 to replace by the tint
+    // rgb: colour tint of the tree (or the LOD overlay colour); a: 0 images, 1 the tint
+    // alone, 2 the VCM sun factor in grey
     tint: vec4<f32>,
+    // Visibility cube maps (Meyer 2001, 5.2): xyz: the billboard centre in its object's
+    // box coordinates (0..1 from the box's min to its max corner); w: the coarser levels'
+    // sun factor at the billboard's centre
+    vcm_box_origin: vec4<f32>,
+    // xyz: box coordinates per unit of `p`; w: the coarser levels' sky factor
+    vcm_box_scale: vec4<f32>,
+    // sun visibility at the 8 box corners (corner k: bit 0 = max x, bit 1 = max y,
+    // bit 2 = max z), then sky visibility at the same corners
+    vcm_direct: array<vec4<f32>, 2>,
+    vcm_sky: array<vec4<f32>, 2>,
+}
+
+// Trilinear interpolation of 8 corner values at box coordinates u.
+fn trilinear(lo: vec4<f32>, hi: vec4<f32>, u_in: vec3<f32>) -> f32 {
+    let u = clamp(u_in, vec3<f32>(0.0), vec3<f32>(1.0));
+    let z0 = mix(mix(lo.x, lo.y, u.x), mix(lo.z, lo.w, u.x), u.y);
+    let z1 = mix(mix(hi.x, hi.y, u.x), mix(hi.z, hi.w, u.x), u.y);
+    return mix(z0, z1, u.z);
 }
 
 @group(1) @binding(0) var<storage, read> billboards: array<Billboard>;
@@ -107,6 +126,11 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
     let lights = b.light_index.w;
     let views = u32(b.view_weight.w);
     let base = b.view_index.w;
+    // The VCM factors at this point of the billboard: its own level's per pixel, the
+    // coarser levels' from its centre.
+    let u = b.vcm_box_origin.xyz + in.p * b.vcm_box_scale.xyz;
+    let sun_factor = trilinear(b.vcm_direct[0], b.vcm_direct[1], u) * b.vcm_box_origin.w;
+    let sky_factor = trilinear(b.vcm_sky[0], b.vcm_sky[1], u) * b.vcm_box_scale.w;
     var color = vec3<f32>(0.0);
     var alpha = 0.0;
     for (var k = 0; k < 3; k++) {
@@ -117,7 +141,8 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
         let v = b.view_index[k];
         let t = view_texcoords(v, in.p, dpx, dpy);
         let amb = textureSampleGrad(btf_images, btf_sampler, t.uv, i32(base + views * lights + v), t.gx, t.gy);
-        var c = amb.rgb * frame.sky_ambient.rgb;
+        var c = amb.rgb * frame.sky_ambient.rgb * sky_factor;
+        var direct = vec3<f32>(0.0);
         for (var j = 0; j < 3; j++) {
             let wl = b.light_weight[j];
             if wl <= 0.0 {
@@ -125,12 +150,15 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
             }
             let layer = base + v * lights + b.light_index[j];
             let d = textureSampleGrad(btf_images, btf_sampler, t.uv, i32(layer), t.gx, t.gy);
-            c += wl * d.rgb * frame.sun_color.rgb;
+            direct += wl * d.rgb;
         }
+        c += direct * frame.sun_color.rgb * sun_factor;
         color += wv * c;
         alpha += wv * amb.a;
     }
-    if b.tint.a > 0.5 {
+    if b.tint.a > 1.5 {
+        color = vec3<f32>(sun_factor) * alpha;
+    } else if b.tint.a > 0.5 {
         color = b.tint.rgb * alpha;
     } else {
         color *= b.tint.rgb;

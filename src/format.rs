@@ -1,7 +1,7 @@
 //! The `.canopy` file: everything one bake produces (BTF image sets, visibility cube maps),
 //! in one versioned, checksummed file that the viewer caches and validates on load.
 //!
-//! # Byte layout (format version 1)
+//! # Byte layout (format version 2)
 //!
 //! All integers are little-endian, `f32` is IEEE 754 binary32 (little-endian bits). Offsets
 //! are in bytes. There is no padding anywhere.
@@ -11,7 +11,7 @@
 //!   off  size  field
 //!    0     8   magic           "CANOPY\r\n" (43 41 4E 4F 50 59 0D 0A); the CR LF pair catches
 //!                              a file whose line endings were converted in transfer
-//!    8     4   version         u32, 1
+//!    8     4   version         u32, 2
 //!   12     4   section_count   u32 N, at most MAX_SECTIONS (4096)
 //!   16     8   file_size       u64, total length of the file in bytes, header included
 //!   24     8   scene_hash      u64, hash of the scene text + bake settings (from the caller)
@@ -50,14 +50,18 @@
 //!   48+D   8   ambient_len     u64, must equal views*resolution²*4
 //!   56+D   A   ambient         RGBA8 premultiplied, one image per view
 //!
-//! VCM SET RECORD (kind 2; 52 bytes + opacity data)
-//!    0     4   owner           u32
-//!    4     1   level           u8, 0 = twig, 1 = branch, 2 = tree
-//!    5     3   reserved        must be 0
-//!    8     4   resolution      u32, 8..=128
-//!   12    32   mean_opacity    8 x f32, finite, in [0, 1], one per corner
-//!   44     8   opacity_len     u64, must equal 8*6*resolution²
-//!   52     O   opacity         u8 per texel: 8 corners x 6 cube faces x resolution²
+//! VCM SET RECORD (kind 2; 56 bytes + opacity data)
+//!    0     4   species         u32
+//!    4     4   owner           u32, the object within its level: the tree instance; the
+//!                              main branch of the species' tree; the twig of its reference
+//!                              main branch, numbered on past them through the trunk's twigs
+//!    8     1   level           u8, 0 = twig, 1 = branch, 2 = tree
+//!    9     3   reserved        must be 0
+//!   12     4   resolution      u32, 8..=128
+//!   16    32   mean_opacity    8 x f32, finite, in [0, 1], one per corner
+//!   48     8   opacity_len     u64, must equal 8*6*resolution²
+//!   56     O   opacity         u8 per texel: 8 corners x 6 cube faces x resolution², each
+//!                              face res rows of res texels (see `crate::vcm` for the layout)
 //! ```
 //!
 //! A set's own views, lights and resolution are checked against the allowed values but need
@@ -93,7 +97,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// The first 8 bytes of every `.canopy` file.
 pub const MAGIC: [u8; 8] = *b"CANOPY\r\n";
 /// The format version this code writes and the only one it reads.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Most sections a file may have.
 pub const MAX_SECTIONS: u32 = 4096;
 /// Largest payload of one section (1 GiB).
@@ -120,7 +124,7 @@ const SECTION_PREFIX_BYTES: u64 = 4;
 /// Bytes of a BTF record besides its image data.
 const BTF_RECORD_FIXED_BYTES: u64 = 56;
 /// Bytes of a VCM record besides its opacity data.
-const VCM_RECORD_FIXED_BYTES: u64 = 52;
+const VCM_RECORD_FIXED_BYTES: u64 = 56;
 
 const SETTINGS_DIRECTIONS: &str = "6, 18, 66 or 258";
 const SETTINGS_RESOLUTIONS: &str = "32, 64 or 128";
@@ -297,6 +301,8 @@ pub struct BtfImageSet {
 /// The visibility cube maps at the 8 bounding-box corners of one object.
 #[derive(Clone, Debug, PartialEq)]
 pub struct VcmSet {
+    pub species: u32,
+    /// The object within its level (see the record layout above).
     pub owner: u32,
     pub level: Level,
     pub resolution: u32,
@@ -681,6 +687,7 @@ fn write_section_payload<W: Write>(
         }
         SectionKind::Vcm => {
             for s in &baked.vcm[range] {
+                w.write_all(&s.species.to_le_bytes())?;
                 w.write_all(&s.owner.to_le_bytes())?;
                 w.write_all(&[s.level as u8, 0, 0, 0])?;
                 w.write_all(&s.resolution.to_le_bytes())?;
@@ -1293,6 +1300,7 @@ fn decode_vcm<R: Read>(
     let count = s.record_count(VCM_RECORD_FIXED_BYTES)?;
     for index in 0..count {
         let mut set = VcmSet {
+            species: s.u32("species")?,
             owner: s.u32("owner")?,
             level: s.level()?,
             resolution: s.u32("resolution")?,
@@ -1435,6 +1443,7 @@ mod tests {
 
     fn vcm_set(owner: u32, level: Level, resolution: u32) -> VcmSet {
         VcmSet {
+            species: 0,
             owner,
             level,
             resolution,
@@ -1532,7 +1541,7 @@ mod tests {
         assert_eq!(u64_at(&bytes, 16), bytes.len() as u64);
         assert_eq!(
             bytes.len() as u64,
-            60 + 2 * 16 + 2 * 4 + 2 * 56 + 2 * 52 + baked.btf_bytes() + baked.vcm_bytes()
+            60 + 2 * 16 + 2 * 4 + 2 * 56 + 2 * 56 + baked.btf_bytes() + baked.vcm_bytes()
         );
         assert_eq!(to_bytes(&baked), bytes, "encoding is deterministic");
         let (back, peak) = peak_during(|| from_bytes(&bytes).unwrap());
@@ -1752,7 +1761,7 @@ mod tests {
 
     #[test]
     fn wrong_version_is_unsupported() {
-        for version in [0u32, 2, u32::MAX] {
+        for version in [0u32, 1, 3, u32::MAX] {
             let mut bytes = to_bytes(&small());
             bytes[8..12].copy_from_slice(&version.to_le_bytes());
             reseal_header(&mut bytes);
@@ -1884,7 +1893,7 @@ mod tests {
 
         // A level byte that names no level, checksums recomputed.
         let mut bytes = to_bytes(&small());
-        let at = payload_start(&bytes, 0) + 4 + 4;
+        let at = payload_start(&bytes, 0) + 4 + 8; // record count, species, owner
         bytes[at] = 3;
         reseal(&mut bytes);
         assert!(matches!(

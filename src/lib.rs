@@ -14,5 +14,6 @@ pub mod model;
 pub mod render;
 pub mod scene;
 pub mod sphere;
+pub mod vcm;
 
 pub use error::{Error, Result};

@@ -123,6 +123,12 @@ struct RenderArgs {
     /// btf: tree shadows on the ground (alpha shadow map) and terrain self-shadows: on or off.
     #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
     ground_shadows: bool,
+    /// btf: shade billboards by the visibility cube maps (trees shading each other): on or off.
+    #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+    vcm: bool,
+    /// btf: draw the VCM sun factor alone, in grey (white = fully lit).
+    #[arg(long)]
+    show_shadow: bool,
     /// btf: cross-fade band before each level's bound, as a fraction of it (0 = pop).
     #[arg(long, default_value_t = 0.2, value_parser = parse_unit)]
     lod_fade: f32,
@@ -314,6 +320,8 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         planes: args.planes,
         show_lod: args.show_lod,
         lod_fade: args.lod_fade,
+        vcm: args.vcm,
+        show_shadow: args.show_shadow,
     };
     if args.method == Method::Btf {
         let (baked, _) = bake_with_progress(&ctx, &scene, &world)?;
@@ -340,6 +348,15 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         image = Some(img);
         stats = Some(s);
         progress.inc(1);
+    }
+    // The cost of one sun move on the warm renderer: the sun turns by half a degree for
+    // one more frame (not saved). Only the btf method has sun-dependent state to rebuild.
+    let mut sun_update_ms = None;
+    if args.method == Method::Btf {
+        let mut moved = frame;
+        moved.sun.azimuth_deg += 0.5;
+        let (_, s) = renderer.render_image(&ctx, &moved, w, h, args.supersample)?;
+        sun_update_ms = s.sun_update_ms;
     }
     progress.finish_and_clear();
     let (Some(image), Some(stats)) = (image, stats) else {
@@ -387,6 +404,11 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
             json["images_per_billboard"] = serde_json::json!(b.images_per_billboard());
             json["fetches_saved"] = serde_json::json!(b.fetches_saved);
             json["btf_bytes"] = serde_json::json!(renderer.btf_bytes());
+            json["vcm"] = serde_json::json!(b.vcm);
+            json["vcm_bytes"] = serde_json::json!(renderer.vcm_bytes());
+            json["vcm_resolution"] = serde_json::json!(renderer.vcm_resolution());
+            json["sun_update_ms"] = serde_json::json!(sun_update_ms);
+            json["ground_shadows"] = serde_json::json!(args.ground_shadows);
             json["lod_scale"] = serde_json::json!(args.lod_scale);
             json["weight_threshold"] = serde_json::json!(args.weight_threshold);
             json["planes"] = serde_json::json!(args.planes.name());
@@ -415,7 +437,7 @@ fn bake_with_progress(
     let bar = indicatif::ProgressBar::new(0);
     bar.set_style(
         indicatif::ProgressStyle::with_template(
-            "baking {msg:24} [{bar:30}] {pos}/{len} images ({eta} left)",
+            "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)",
         )
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
@@ -446,16 +468,15 @@ fn bake(
     let path = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| canopy::bake::cache::cache_path(&scene));
-    let bar =
-        indicatif::ProgressBar::new(canopy::bake::image_count(&settings, world.species.len()));
+    let bar = indicatif::ProgressBar::new(canopy::bake::step_count(&settings, &world));
     bar.set_style(
         indicatif::ProgressStyle::with_template(
-            "baking {msg:24} [{bar:30}] {pos}/{len} images ({eta} left)",
+            "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)",
         )
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     let t0 = Instant::now();
-    let baked = canopy::bake::bake_btf(
+    let (baked, times) = canopy::bake::bake(
         &ctx,
         &world,
         &settings,
@@ -495,7 +516,12 @@ fn bake(
                 "out": path.display().to_string(),
                 "file_bytes": size,
                 "btf_bytes": baked.btf_bytes(),
+                "vcm_bytes": baked.vcm_bytes(),
+                "vcm_sets": baked.vcm.len(),
+                "vcm_resolution": settings.vcm_resolution,
                 "seconds": seconds,
+                "btf_seconds": times.btf_seconds,
+                "vcm_seconds": times.vcm_seconds,
                 "views": settings.views,
                 "lights": settings.lights,
                 "resolution": settings.resolution,
@@ -512,6 +538,14 @@ fn bake(
             settings.views,
             settings.resolution,
             settings.resolution
+        );
+        println!(
+            "  btf {:.1} s; {} visibility cube map sets (8 corners x 6 faces x {}² each), {} bytes, {:.1} s",
+            times.btf_seconds,
+            baked.vcm.len(),
+            settings.vcm_resolution,
+            baked.vcm_bytes(),
+            times.vcm_seconds
         );
         for s in &sets {
             println!(

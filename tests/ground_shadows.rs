@@ -109,7 +109,12 @@ fn a_ridge_shades_the_valley_behind_it_at_a_low_sun_but_not_at_noon() {
     let world = ridge_world();
     let scene = lone_tree();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
-    renderer.attach_btf(&ctx, baked(), &world).unwrap();
+    // The lone fir's species data, without its tree's cube maps: this world has no trees.
+    let mut species_only = baked().clone();
+    species_only
+        .vcm
+        .retain(|s| s.level != canopy::format::Level::Tree);
+    renderer.attach_btf(&ctx, &species_only, &world).unwrap();
     let mut frame = FrameDesc::from_scene(&scene);
     frame.fog_density = 0.0;
     // The valley floor 30 m east of the ridge's foot, seen from above.

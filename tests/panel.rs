@@ -61,8 +61,12 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
             images_sampled: 540,
             fetches_saved: 180,
             dropped: 0,
+            vcm: true,
         }),
         btf_bytes: 16_500_000,
+        vcm_bytes: 53_182_464,
+        vcm_resolution: Some(32),
+        sun_update_ms: Some(12.34),
         bake_progress: Some((40, 100, "fir tree".into())),
         ..Default::default()
     };
@@ -84,9 +88,20 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
     harness.get_by_label("10 / 20 / 30");
     harness.get_by_label("9.00");
     harness.get_by_label("16.5 MB");
+    harness.get_by_label("32² x 6 faces x 8 corners, 53.2 MB");
+    harness.get_by_label("12.3 ms");
     harness.get_by_label("show LOD level").click();
     harness.run();
     assert!(harness.state().frame.btf.show_lod);
+    assert!(harness.state().frame.btf.vcm);
+    harness.get_by_label("show VCM shadow factor").click();
+    harness.run();
+    assert!(harness.state().frame.btf.show_shadow);
+    harness
+        .get_by_label("VCM shading (trees shade each other)")
+        .click();
+    harness.run();
+    assert!(!harness.state().frame.btf.vcm);
     harness.get_by_label("3 crossed planes").click();
     harness.run();
     assert_eq!(

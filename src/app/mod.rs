@@ -313,6 +313,8 @@ impl App {
             });
         }
         self.stats.btf_bytes = r.renderer.btf_bytes();
+        self.stats.vcm_bytes = r.renderer.vcm_bytes();
+        self.stats.vcm_resolution = r.renderer.vcm_resolution();
     }
 
     fn redraw(&mut self, event_loop: &ActiveEventLoop) {
@@ -376,6 +378,9 @@ impl App {
                 self.stats.shadow_triangles = s.shadow_triangles;
                 self.stats.draw_calls = s.draw_calls;
                 self.stats.btf = s.btf;
+                if s.sun_update_ms.is_some() {
+                    self.stats.sun_update_ms = s.sun_update_ms;
+                }
             }
             Err(e) => {
                 self.message = Some((e.to_string(), true));

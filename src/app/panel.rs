@@ -20,6 +20,12 @@ pub struct PanelStats {
     pub btf: Option<crate::render::btf::BtfStats>,
     /// Bytes of BTF images on the GPU.
     pub btf_bytes: u64,
+    /// Bytes of visibility cube maps in main memory.
+    pub vcm_bytes: u64,
+    /// Face resolution of the visibility cube maps, when loaded.
+    pub vcm_resolution: Option<u32>,
+    /// What the last sun move cost (VCM reads + ground shadow map), ms.
+    pub sun_update_ms: Option<f64>,
     /// A bake running in the background: done, total, what.
     pub bake_progress: Option<(u64, u64, String)>,
 }
@@ -98,6 +104,10 @@ pub fn controls(
             ui.selectable_value(&mut b.planes, PlaneMode::Crossed, "3 crossed planes");
         });
         ui.checkbox(&mut b.show_lod, "show LOD level");
+        ui.checkbox(&mut b.vcm, "VCM shading (trees shade each other)");
+        ui.add_enabled_ui(b.vcm, |ui| {
+            ui.checkbox(&mut b.show_shadow, "show VCM shadow factor");
+        });
         ui.checkbox(
             &mut frame.ground_shadows,
             "ground shadows (alpha map + terrain)",
@@ -128,12 +138,38 @@ pub fn controls(
                 ui.label("BTF memory");
                 ui.label(format!("{:.1} MB", stats.btf_bytes as f64 / 1e6));
                 ui.end_row();
+                ui.label("VCM");
+                ui.label(match stats.vcm_resolution {
+                    Some(r) => format!(
+                        "{r}² x 6 faces x 8 corners, {:.1} MB",
+                        stats.vcm_bytes as f64 / 1e6
+                    ),
+                    None => "not baked".to_string(),
+                });
+                ui.end_row();
+                ui.label("sun update");
+                ui.label(match stats.sun_update_ms {
+                    Some(ms) => format!("{ms:.1} ms"),
+                    None => "n/a".to_string(),
+                });
+                ui.end_row();
             });
         }
     }
     ui.separator();
 
     ui.label("Sun (Ctrl + left drag in the view)");
+    // Time of day: the sun rises in the east at 6 h, culminates in the south at noon (60°
+    // up) and sets in the west at 18 h. Read back from the azimuth, so it follows drags.
+    let mut hour = (6.0 + (frame.sun.azimuth_deg - 90.0) / 15.0).clamp(6.0, 18.0);
+    if ui
+        .add(egui::Slider::new(&mut hour, 6.0..=18.0).text("time of day h"))
+        .changed()
+    {
+        let (az, el) = sun_at_hour(hour);
+        frame.sun.azimuth_deg = az;
+        frame.sun.elevation_deg = el;
+    }
     ui.add(egui::Slider::new(&mut frame.sun.azimuth_deg, 0.0..=360.0).text("azimuth °"));
     ui.add(egui::Slider::new(&mut frame.sun.elevation_deg, -10.0..=90.0).text("elevation °"));
     ui.add(egui::Slider::new(&mut frame.sun.intensity, 0.0..=10.0).text("sun intensity"));
@@ -177,6 +213,15 @@ pub fn controls(
     actions
 }
 
+/// Sun azimuth and elevation (degrees) at `hour` on the time-of-day slider: east at 6 h,
+/// south and 60° up at noon, west at 18 h.
+pub fn sun_at_hour(hour: f32) -> (f32, f32) {
+    let h = hour.clamp(6.0, 18.0);
+    let az = 90.0 + (h - 6.0) * 15.0;
+    let el = 60.0 * ((h - 6.0) / 12.0 * std::f32::consts::PI).sin();
+    (az, el.max(0.5))
+}
+
 fn format_count(n: u64) -> String {
     match n {
         0..1_000 => n.to_string(),
@@ -194,5 +239,14 @@ mod tests {
         assert_eq!(format_count(999), "999");
         assert_eq!(format_count(12_345), "12.3 k");
         assert_eq!(format_count(120_000_000), "120.00 M");
+    }
+
+    #[test]
+    fn the_day_goes_from_east_over_south_to_west() {
+        assert_eq!(sun_at_hour(6.0), (90.0, 0.5));
+        let (az, el) = sun_at_hour(12.0);
+        assert!((az - 180.0).abs() < 1e-4 && (el - 60.0).abs() < 1e-4);
+        assert_eq!(sun_at_hour(18.0).0, 270.0);
+        assert!(sun_at_hour(9.0).1 > sun_at_hour(7.0).1);
     }
 }

@@ -2,9 +2,11 @@
 //! sampled view direction, lit by each sampled light direction (sun only, self-shadowed) and
 //! by the sky alone, with the same render core as the ground truth, offscreen and
 //! supersampled so that alpha is coverage. Views and lights are in the object's own frame,
-//! so one bake serves every rotated, scaled instance.
+//! so one bake serves every rotated, scaled instance. Then the visibility cube maps of every
+//! object of every level (`vcm`), drawn from the BTF images' alpha.
 
 pub mod cache;
+pub mod vcm;
 
 use glam::{Mat4, Vec3};
 
@@ -94,6 +96,54 @@ pub struct Progress {
 pub fn image_count(settings: &BakeSettings, species: usize) -> u64 {
     let per_level = u64::from(settings.views) * (u64::from(settings.lights) + 1);
     per_level * LEVELS.len() as u64 * species as u64
+}
+
+/// Steps of a whole bake of `world` (what [`Progress::total`] counts): one per BTF image and
+/// one per object whose 8 cube maps are baked.
+pub fn step_count(settings: &BakeSettings, world: &World) -> u64 {
+    image_count(settings, world.species.len()) + vcm::object_count(world)
+}
+
+/// How long each part of a bake took.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BakeTimes {
+    pub btf_seconds: f64,
+    pub vcm_seconds: f64,
+}
+
+/// The whole bake of `world`: the BTF image sets, then the visibility cube maps.
+pub fn bake(
+    ctx: &GpuContext,
+    world: &World,
+    settings: &BakeSettings,
+    scene_hash: u64,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<(Baked, BakeTimes)> {
+    let total = step_count(settings, world);
+    let t0 = std::time::Instant::now();
+    let mut baked = bake_btf(ctx, world, settings, scene_hash, &mut |p| {
+        progress(&Progress { total, ..p.clone() })
+    })?;
+    let btf_seconds = t0.elapsed().as_secs_f64();
+    let images = image_count(settings, world.species.len());
+    let t1 = std::time::Instant::now();
+    baked.vcm = vcm::bake_vcm(
+        world,
+        &baked.btf,
+        settings.vcm_resolution,
+        &mut |done, what| {
+            progress(&Progress {
+                done: images + done,
+                total,
+                what: what.to_owned(),
+            })
+        },
+    )?;
+    let times = BakeTimes {
+        btf_seconds,
+        vcm_seconds: t1.elapsed().as_secs_f64(),
+    };
+    Ok((baked, times))
 }
 
 /// Bakes the BTF image sets of every species and level of `world`.
@@ -243,7 +293,7 @@ pub fn load_or_bake_at(
         None => {}
     }
     let settings = cache::settings_of(scene);
-    let baked = bake_btf(ctx, world, &settings, cache::scene_hash(scene), progress)?;
+    let (baked, _) = bake(ctx, world, &settings, cache::scene_hash(scene), progress)?;
     // A cache that cannot be written costs a re-bake next time, not this run.
     if let Some(dir) = path.parent() {
         let _ = std::fs::create_dir_all(dir);

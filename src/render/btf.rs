@@ -11,6 +11,7 @@ use glam::{Mat3, Mat4, Vec3};
 
 use super::GpuContext;
 use super::camera::Frustum;
+use super::shading::{LevelBounds, Shade, VcmShading};
 use super::world_gpu::WorldGpu;
 use crate::bake::billboard_axes;
 use crate::format::{Baked, Level};
@@ -61,6 +62,10 @@ pub struct BtfSettings {
     /// Width of the cross-fade band before a level's bound, as a fraction of the bound
     /// (0 = switch abruptly).
     pub lod_fade: f32,
+    /// Shade the billboards with the visibility cube maps (when the bake has them).
+    pub vcm: bool,
+    /// Draw each billboard's VCM sun factor (b·c·d) in grey instead of its images.
+    pub show_shadow: bool,
 }
 
 impl Default for BtfSettings {
@@ -71,6 +76,8 @@ impl Default for BtfSettings {
             planes: PlaneMode::Single,
             show_lod: false,
             lod_fade: 0.2,
+            vcm: true,
+            show_shadow: false,
         }
     }
 }
@@ -90,6 +97,8 @@ pub struct BtfStats {
     pub fetches_saved: u64,
     /// Billboards left out because the instance buffer would pass the GPU's limit.
     pub dropped: u32,
+    /// The billboards were shaded by visibility cube maps.
+    pub vcm: bool,
 }
 
 impl BtfStats {
@@ -121,7 +130,53 @@ pub struct BillboardGpu {
     pub light_index: [u32; 4],
     pub view_weight: [f32; 4],
     pub light_weight: [f32; 4],
+    /// rgb: tint; a: 0 images, 1 the tint alone (LOD colours), 2 the VCM sun factor.
     pub tint: [f32; 4],
+    /// xyz: box coordinates of the billboard centre in its object's VCM box; w: the coarser
+    /// levels' sun factor.
+    pub vcm_box_origin: [f32; 4],
+    /// xyz: box coordinates per unit of `p` (radii); w: the coarser levels' sky factor.
+    pub vcm_box_scale: [f32; 4],
+    /// Sun visibility at the object's 8 box corners.
+    pub vcm_direct: [[f32; 4]; 2],
+    /// Sky visibility at the 8 corners.
+    pub vcm_sky: [[f32; 4]; 2],
+}
+
+/// A billboard with every field zero and no VCM shading (all factors 1).
+const NO_SHADE: BillboardGpu = BillboardGpu {
+    center: [0.0; 4],
+    plane_right: [0.0; 4],
+    plane_up: [0.0; 4],
+    obj_right: [0.0; 4],
+    obj_up: [0.0; 4],
+    view_index: [0; 4],
+    light_index: [0; 4],
+    view_weight: [0.0; 4],
+    light_weight: [0.0; 4],
+    tint: [0.0; 4],
+    vcm_box_origin: [0.5, 0.5, 0.5, 1.0],
+    vcm_box_scale: [0.0, 0.0, 0.0, 1.0],
+    vcm_direct: [[1.0; 4]; 2],
+    vcm_sky: [[1.0; 4]; 2],
+};
+
+impl BillboardGpu {
+    /// Fills the VCM fields from `shade`, for an object of `bounds` whose billboard frame is
+    /// `set`.
+    fn shade(mut self, shade: &Shade, set: &SetInfo) -> Self {
+        let points = crate::vcm::sample_box(&set.bounds);
+        let ext = (points.max - points.min).max(Vec3::splat(1e-6));
+        let origin = (set.center - points.min) / ext;
+        let scale = Vec3::splat(set.radius) / ext;
+        self.vcm_box_origin = origin.extend(shade.parent_direct).to_array();
+        self.vcm_box_scale = scale.extend(shade.parent_sky).to_array();
+        let d = shade.direct;
+        let k = shade.sky;
+        self.vcm_direct = [[d[0], d[1], d[2], d[3]], [d[4], d[5], d[6], d[7]]];
+        self.vcm_sky = [[k[0], k[1], k[2], k[3]], [k[4], k[5], k[6], k[7]]];
+        self
+    }
 }
 
 /// Where one image set sits in the texture array, and its billboard frame.
@@ -130,16 +185,20 @@ struct SetInfo {
     layer_base: u32,
     center: Vec3,
     radius: f32,
+    /// The object's bounds in its own frame (its VCM box).
+    bounds: Aabb,
 }
 
 /// Per species: the part transforms that finer levels expand a tree into.
 struct SpeciesParts {
     branches: Vec<Mat4>,
+    /// Twigs of the reference main branch, in the branch frame.
+    branch_twigs: Vec<Mat4>,
     trunk_twigs: Vec<Mat4>,
-    all_twigs: Vec<Mat4>,
     sets: [SetInfo; 3],
     texels: LevelTexels,
     bounds: Aabb,
+    levels: LevelBounds,
 }
 
 /// Colours of the 'show LOD level' overlay: twig, main branch, tree.
@@ -167,6 +226,8 @@ pub struct BtfAssets {
     scratch: Vec<(f32, BillboardGpu)>,
     /// Bytes of the texture array, mipmaps included.
     pub bytes: u64,
+    /// The visibility cube maps, when the bake has them.
+    vcm: Option<VcmShading>,
 }
 
 /// Trees the `btf` method draws partly as geometry this frame.
@@ -247,10 +308,12 @@ impl BtfAssets {
         let mut bytes = 0u64;
         let mut species: Vec<SpeciesParts> = Vec::new();
         for (sp, tree) in world.species.iter().enumerate() {
+            let level_bounds = [tree.twig_bounds, tree.branch_bounds, tree.tree_bounds];
             let mut sets = [SetInfo {
                 layer_base: 0,
                 center: Vec3::ZERO,
                 radius: 1.0,
+                bounds: tree.tree_bounds,
             }; 3];
             let mut texel = [0.0f32; 3];
             for (l, info) in sets.iter_mut().enumerate() {
@@ -261,6 +324,7 @@ impl BtfAssets {
                     layer_base: base,
                     center: Vec3::from(set.center),
                     radius: set.radius,
+                    bounds: level_bounds[l],
                 };
                 texel[l] = set.texel_size;
                 let images = set
@@ -273,8 +337,14 @@ impl BtfAssets {
             }
             species.push(SpeciesParts {
                 branches: tree.tree_branches.clone(),
+                branch_twigs: tree.branch_twigs.clone(),
                 trunk_twigs: tree.tree_twigs.clone(),
-                all_twigs: tree.twigs_in_tree_frame(),
+                levels: LevelBounds {
+                    twig: tree.twig_bounds,
+                    branch: tree.branch_bounds,
+                    tree: tree.tree_bounds,
+                    centers: [sets[0].center, sets[1].center, sets[2].center],
+                },
                 sets,
                 texels: LevelTexels {
                     twig: texel[0],
@@ -384,7 +454,23 @@ impl BtfAssets {
             sun_bind_group,
             scratch: Vec::new(),
             bytes,
+            vcm: VcmShading::new(baked, world)?,
         })
+    }
+
+    /// Reads every tree's cube maps in the sun's direction if it moved; true if it did.
+    pub fn update_sun(&mut self, to_sun: Vec3) -> bool {
+        self.vcm.as_mut().is_some_and(|v| v.set_sun(to_sun))
+    }
+
+    /// Bytes of visibility cube maps held in main memory.
+    pub fn vcm_bytes(&self) -> u64 {
+        self.vcm.as_ref().map_or(0, |v| v.bytes)
+    }
+
+    /// Face resolution of the visibility cube maps (None without them).
+    pub fn vcm_resolution(&self) -> Option<u32> {
+        self.vcm.as_ref().map(|v| v.resolution())
     }
 
     /// Chooses levels, builds and sorts the billboards and uploads them.
@@ -408,6 +494,8 @@ impl BtfAssets {
         };
         let mut scratch = std::mem::take(&mut self.scratch);
         scratch.clear();
+        let vcm = self.vcm.as_ref().filter(|_| settings.vcm);
+        out.stats.vcm = vcm.is_some();
         let cam = camera.position;
         let forward = camera.forward();
         for (sp, trees) in visible.iter().enumerate() {
@@ -449,10 +537,16 @@ impl BtfAssets {
                     let tint = if settings.show_lod {
                         let c = LOD_COLOURS[li];
                         [c[0], c[1], c[2], 1.0]
+                    } else if settings.show_shadow {
+                        [1.0, 1.0, 1.0, 2.0]
                     } else {
                         [data.tint[0], data.tint[1], data.tint[2], 0.0]
                     };
-                    let mut emit = |part: Mat4, set: &SetInfo, lvl: usize, stats: &mut BtfStats| {
+                    let mut emit = |part: Mat4,
+                                    set: &SetInfo,
+                                    lvl: usize,
+                                    shade: Shade,
+                                    stats: &mut BtfStats| {
                         self.push(
                             &mut scratch,
                             m * part,
@@ -465,24 +559,62 @@ impl BtfAssets {
                             tint,
                             opacity,
                             lvl,
+                            &shade,
                             stats,
                         );
                     };
+                    let shading = vcm.map(|v| v.for_tree(t as usize, sp, &m, &parts.levels));
+                    let trunk_twig = |k: usize, tw: &Mat4| {
+                        shading.as_ref().map_or(Shade::NONE, |s| {
+                            s.trunk_twig(parts.branch_twigs.len() + k, tw)
+                        })
+                    };
                     match level {
-                        Level::Tree => emit(Mat4::IDENTITY, &parts.sets[2], 2, &mut out.stats),
+                        Level::Tree => {
+                            let shade = shading.as_ref().map_or(Shade::NONE, |s| s.tree());
+                            emit(Mat4::IDENTITY, &parts.sets[2], 2, shade, &mut out.stats)
+                        }
                         Level::Branch => {
                             geometry = geometry.max(Some(1));
-                            for &b in &parts.branches {
-                                emit(b, &parts.sets[1], 1, &mut out.stats);
+                            for (i, b) in parts.branches.iter().enumerate() {
+                                let shade =
+                                    shading.as_ref().map_or(Shade::NONE, |s| s.branch(i, b));
+                                emit(*b, &parts.sets[1], 1, shade, &mut out.stats);
                             }
-                            for &tw in &parts.trunk_twigs {
-                                emit(tw, &parts.sets[0], 0, &mut out.stats);
+                            for (k, tw) in parts.trunk_twigs.iter().enumerate() {
+                                emit(*tw, &parts.sets[0], 0, trunk_twig(k, tw), &mut out.stats);
                             }
                         }
                         Level::Twig => {
                             geometry = Some(2);
-                            for &tw in &parts.all_twigs {
-                                emit(tw, &parts.sets[0], 0, &mut out.stats);
+                            for (i, b) in parts.branches.iter().enumerate() {
+                                match &shading {
+                                    Some(s) => {
+                                        s.branch_twigs(i, b, &parts.branch_twigs, |j, shade| {
+                                            emit(
+                                                *b * parts.branch_twigs[j],
+                                                &parts.sets[0],
+                                                0,
+                                                shade,
+                                                &mut out.stats,
+                                            )
+                                        })
+                                    }
+                                    None => {
+                                        for tw in &parts.branch_twigs {
+                                            emit(
+                                                *b * *tw,
+                                                &parts.sets[0],
+                                                0,
+                                                Shade::NONE,
+                                                &mut out.stats,
+                                            );
+                                        }
+                                    }
+                                }
+                            }
+                            for (k, tw) in parts.trunk_twigs.iter().enumerate() {
+                                emit(*tw, &parts.sets[0], 0, trunk_twig(k, tw), &mut out.stats);
                             }
                         }
                     }
@@ -538,6 +670,7 @@ impl BtfAssets {
         tint: [f32; 4],
         opacity: f32,
         level: usize,
+        shade: &Shade,
         stats: &mut BtfStats,
     ) {
         let scale = m.x_axis.truncate().length();
@@ -589,7 +722,9 @@ impl BtfAssets {
             ],
             light_weight: [lb.weight[0], lb.weight[1], lb.weight[2], 0.0],
             tint,
-        };
+            ..NO_SHADE
+        }
+        .shade(shade, set);
         let with_axes = |obj_r: Vec3, obj_u: Vec3, slot: f32| {
             let mut b = base;
             b.plane_right = (rot * obj_r).normalize_or(Vec3::X).extend(slot).to_array();
@@ -656,6 +791,7 @@ impl BtfAssets {
                 ],
                 light_weight: [0.0; 4],
                 tint: [1.0, 1.0, 1.0, 0.0],
+                ..NO_SHADE
             });
         }
         out.truncate(self.sun_capacity);

@@ -179,8 +179,12 @@ pub struct FrameStats {
     pub gpu_ms: Option<f64>,
     /// What the `btf` method did (absent for other methods).
     pub btf: Option<super::btf::BtfStats>,
-    /// The ground alpha shadow map was rebuilt this frame (the sun moved).
+    /// Sun-dependent state was rebuilt this frame (the sun moved): the trees' VCM reads
+    /// and the ground alpha shadow map.
     pub sun_update: bool,
+    /// What that cost (ms): the VCM reads on the CPU plus the ground map pass, waited for
+    /// on the GPU when the frame is measured.
+    pub sun_update_ms: Option<f64>,
 }
 
 /// The uniform block of `common.wgsl` (`struct Frame`), byte for byte.

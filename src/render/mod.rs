@@ -9,6 +9,7 @@ pub mod context;
 pub mod frame;
 mod pipelines;
 pub mod shaders;
+pub mod shading;
 pub mod shadow;
 pub mod target;
 pub mod timing;
@@ -246,6 +247,16 @@ impl Renderer {
         self.btf.as_ref().map_or(0, |b| b.bytes)
     }
 
+    /// Bytes of visibility cube maps held in main memory (0 without them).
+    pub fn vcm_bytes(&self) -> u64 {
+        self.btf.as_ref().map_or(0, |b| b.vcm_bytes())
+    }
+
+    /// Face resolution of the visibility cube maps, when loaded.
+    pub fn vcm_resolution(&self) -> Option<u32> {
+        self.btf.as_ref().and_then(|b| b.vcm_resolution())
+    }
+
     /// Triangles of one tree of each species, by species name.
     pub fn triangles_per_species(&self) -> Vec<(String, u64)> {
         self.world
@@ -442,7 +453,19 @@ impl Renderer {
             vec![Vec::new(); self.world.species.len()]
         };
         let mut btf_frame = None;
+        let to_sun = frame.sun.direction();
+        // Work that follows the sun, not the camera: the VCM reads (here) and the ground
+        // alpha shadow map (below).
+        let mut sun_update_ms = 0.0;
+        let mut sun_moved = false;
         let lists = if let (true, Some(b)) = (is_btf, self.btf.as_mut()) {
+            if frame.btf.vcm && frame.trees {
+                let t0 = std::time::Instant::now();
+                if b.update_sun(to_sun) {
+                    sun_moved = true;
+                    sun_update_ms += t0.elapsed().as_secs_f64() * 1e3;
+                }
+            }
             let bf = b.prepare(
                 ctx,
                 &self.world,
@@ -470,23 +493,23 @@ impl Renderer {
             lists
         };
         let runs = self.world.upload_lists(ctx, &lists);
-        let mut stats_sun_update = false;
 
         let mut uniform_frame = *frame;
         uniform_frame.shadows.enabled = shadows_on;
         let mut uniforms = FrameUniforms::new(&uniform_frame, aspect, &cascades);
 
-        // The ground alpha shadow map follows the sun, not the camera.
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("frame"),
-            });
-        let to_sun = frame.sun.direction();
+        // The ground alpha shadow map follows the sun, not the camera. It is submitted on
+        // its own so that its cost can be timed (blocking, when measuring).
         if ground_on
             && self.ground.built_for != Some(to_sun)
             && let Some(b) = self.btf.as_mut()
         {
+            let t0 = std::time::Instant::now();
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("ground alpha shadow map"),
+                });
             let b_box = &self.world.scene_bounds;
             let light = Cascades::fit_sphere(
                 to_sun,
@@ -538,9 +561,19 @@ impl Renderer {
                 pass.draw(0..6, 0..n);
             }
             drop(pass);
+            ctx.queue.submit([encoder.finish()]);
+            if measure_gpu {
+                let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+            }
             self.ground.built_for = Some(to_sun);
-            stats_sun_update = true;
+            sun_moved = true;
+            sun_update_ms += t0.elapsed().as_secs_f64() * 1e3;
         }
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("frame"),
+            });
         if ground_on {
             uniforms.ground_light_view_proj = self.ground.light_view_proj.to_cols_array_2d();
             uniforms.ground_params = [1.0, 0.0, 0.0, 0.0];
@@ -557,7 +590,8 @@ impl Renderer {
         let mut stats = FrameStats {
             width,
             height,
-            sun_update: stats_sun_update,
+            sun_update: sun_moved,
+            sun_update_ms: sun_moved.then_some(sun_update_ms),
             ..Default::default()
         };
         let btf_pipeline = match (is_btf, self.btf.as_mut()) {

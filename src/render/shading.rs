@@ -1,0 +1,450 @@
+//! VCM shading at render time (Meyer 2001, §5.2 and Algorithm 6.1's `Calcul_Ombre`). When
+//! the sun moves, every tree instance's 8 cube maps are read once in the sun's direction.
+//! The finer levels' cube maps are species data, read per drawn tree in the sun's direction
+//! in their own parent's frame (a main branch's in the tree frame, a twig's in its main
+//! branch's frame), since each instance turns the species' tree differently.
+//!
+//! A billboard gets its own level's 8 corner factors, interpolated trilinearly per pixel in
+//! the shader, and the product of the levels above it evaluated once at its centre: a twig
+//! billboard b(p)·c(centre)·d(centre), a main-branch billboard c(p)·d(centre), a tree
+//! billboard d(p). (The thesis interpolated all of them at the 4 billboard vertices; inside
+//! one billboard the coarser levels vary little, its own level most.) The same products of
+//! the cube maps' mean visibility (1 − mean opacity) weight the sky term.
+
+use glam::{Mat3, Mat4, Vec3};
+
+use crate::format::{Baked, Level};
+use crate::model::World;
+use crate::model::mesh::Aabb;
+use crate::vcm::{self, CORNERS, FACES};
+use crate::{Error, Result};
+
+/// One object's 8 cube maps and the sky visibility at its corners.
+struct ObjectVcm {
+    opacity: Vec<u8>,
+    sky: [f32; CORNERS],
+}
+
+impl ObjectVcm {
+    /// Sun visibility (1 − opacity) at the 8 corners for `to_sun` in the cube maps' frame.
+    fn direct(&self, res: u32, to_sun: Vec3) -> [f32; CORNERS] {
+        let n = FACES * (res * res) as usize;
+        std::array::from_fn(|k| {
+            self.opacity
+                .get(k * n..(k + 1) * n)
+                .map_or(1.0, |m| 1.0 - vcm::sample(m, res, to_sun))
+        })
+    }
+}
+
+/// The factors one billboard is shaded with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shade {
+    /// Sun visibility of the billboard's own object at its 8 box corners.
+    pub direct: [f32; CORNERS],
+    /// Sky visibility of the same corners.
+    pub sky: [f32; CORNERS],
+    /// Product of the coarser levels' sun visibility at the billboard's centre.
+    pub parent_direct: f32,
+    /// Product of the coarser levels' sky visibility at the billboard's centre.
+    pub parent_sky: f32,
+}
+
+impl Shade {
+    /// No shading: every factor 1.
+    pub const NONE: Shade = Shade {
+        direct: [1.0; CORNERS],
+        sky: [1.0; CORNERS],
+        parent_direct: 1.0,
+        parent_sky: 1.0,
+    };
+
+    /// The sun factor at box coordinates `u` of the billboard's own object.
+    pub fn direct_at(&self, u: Vec3) -> f32 {
+        vcm::trilinear(&self.direct, u) * self.parent_direct
+    }
+}
+
+/// A level's factors at one point: (sun, sky).
+type Factors = ([f32; CORNERS], [f32; CORNERS]);
+
+fn at(f: &Factors, bounds: &Aabb, p: Vec3) -> (f32, f32) {
+    let u = vcm::box_coords(&vcm::sample_box(bounds), p);
+    (vcm::trilinear(&f.0, u), vcm::trilinear(&f.1, u))
+}
+
+/// Every VCM of a scene, ready to be read in the sun's direction.
+pub struct VcmShading {
+    res: u32,
+    /// Per species: main branches, then twigs (the reference branch's, then the trunk's).
+    branches: Vec<Vec<ObjectVcm>>,
+    twigs: Vec<Vec<ObjectVcm>>,
+    trees: Vec<ObjectVcm>,
+    /// Per tree instance: sun visibility at its corners, for `sun`.
+    tree_direct: Vec<[f32; CORNERS]>,
+    sun: Option<Vec3>,
+    /// Bytes of cube-map data held (in main memory, as in the thesis; never on the GPU).
+    pub bytes: u64,
+}
+
+impl VcmShading {
+    /// The cube maps of `baked`, checked against `world`: every tree instance, main branch
+    /// and twig needs its set. None when the bake holds no cube maps at all.
+    pub fn new(baked: &Baked, world: &World) -> Result<Option<Self>> {
+        if baked.vcm.is_empty() {
+            return Ok(None);
+        }
+        let res = baked.settings.vcm_resolution;
+        let bad = |m: String| {
+            Error::BadInput(format!(
+                "baked visibility cube maps do not fit the scene: {m}; re-bake with `canopy bake`"
+            ))
+        };
+        let mut branches: Vec<Vec<Option<ObjectVcm>>> = world
+            .species
+            .iter()
+            .map(|t| (0..t.tree_branches.len()).map(|_| None).collect())
+            .collect();
+        let mut twigs: Vec<Vec<Option<ObjectVcm>>> = world
+            .species
+            .iter()
+            .map(|t| {
+                (0..t.branch_twigs.len() + t.tree_twigs.len())
+                    .map(|_| None)
+                    .collect()
+            })
+            .collect();
+        let mut trees: Vec<Option<ObjectVcm>> =
+            (0..world.forest.instances.len()).map(|_| None).collect();
+        let mut bytes = 0u64;
+        for set in &baked.vcm {
+            if set.resolution != res {
+                return Err(bad(format!(
+                    "a set has resolution {} but the file says {res}",
+                    set.resolution
+                )));
+            }
+            let sp = set.species as usize;
+            let o = set.owner as usize;
+            let slot = match set.level {
+                Level::Tree => trees
+                    .get_mut(o)
+                    .filter(|_| world.forest.instances[o].species == set.species),
+                Level::Branch => branches.get_mut(sp).and_then(|v| v.get_mut(o)),
+                Level::Twig => twigs.get_mut(sp).and_then(|v| v.get_mut(o)),
+            };
+            let Some(slot) = slot else {
+                return Err(bad(format!(
+                    "no {} {o} of species {sp} in this scene",
+                    crate::bake::level_name(set.level)
+                )));
+            };
+            if slot.is_some() {
+                return Err(bad(format!(
+                    "the {} {o} of species {sp} has two sets",
+                    crate::bake::level_name(set.level)
+                )));
+            }
+            bytes += set.opacity.len() as u64;
+            *slot = Some(ObjectVcm {
+                opacity: set.opacity.clone(),
+                sky: set.mean_opacity.map(|m| 1.0 - m),
+            });
+        }
+        let missing = |what: &str| bad(format!("the {what} has no cube maps"));
+        let take_all = |v: Vec<Option<ObjectVcm>>, what: &str| {
+            v.into_iter()
+                .map(|o| o.ok_or_else(|| missing(what)))
+                .collect::<Result<Vec<_>>>()
+        };
+        let trees = take_all(trees, "tree")?;
+        let branches = branches
+            .into_iter()
+            .map(|v| take_all(v, "main branch"))
+            .collect::<Result<Vec<_>>>()?;
+        let twigs = twigs
+            .into_iter()
+            .map(|v| take_all(v, "twig"))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Some(Self {
+            res,
+            tree_direct: vec![[1.0; CORNERS]; trees.len()],
+            branches,
+            twigs,
+            trees,
+            sun: None,
+            bytes,
+        }))
+    }
+
+    pub fn resolution(&self) -> u32 {
+        self.res
+    }
+
+    /// Reads every tree instance's cube maps in the direction `to_sun` (world) if the sun
+    /// moved. Returns whether it did.
+    pub fn set_sun(&mut self, to_sun: Vec3) -> bool {
+        if self.sun == Some(to_sun) {
+            return false;
+        }
+        let res = self.res;
+        for (d, t) in self.tree_direct.iter_mut().zip(&self.trees) {
+            *d = t.direct(res, to_sun);
+        }
+        self.sun = Some(to_sun);
+        true
+    }
+
+    /// Tree instance `t`'s factors for the current sun.
+    fn tree(&self, t: usize) -> Factors {
+        match (self.tree_direct.get(t), self.trees.get(t)) {
+            (Some(d), Some(o)) => (*d, o.sky),
+            _ => ([1.0; CORNERS], [1.0; CORNERS]),
+        }
+    }
+
+    /// The shading of every billboard of one tree instance, at each level.
+    pub fn for_tree<'a>(
+        &'a self,
+        t: usize,
+        species: usize,
+        model: &'a Mat4,
+        bounds: &'a LevelBounds,
+    ) -> TreeShading<'a> {
+        let scale = model.x_axis.truncate().length().max(1e-12);
+        let rot = Mat3::from_mat4(*model) * (1.0 / scale);
+        let sun = self.sun.unwrap_or(Vec3::Y);
+        TreeShading {
+            vcm: self,
+            species,
+            tree: self.tree(t),
+            sun_tree: (rot.transpose() * sun).normalize_or(Vec3::Y),
+            bounds,
+        }
+    }
+}
+
+/// Bounds of each level's object in its own frame, and the billboard centres.
+#[derive(Clone, Copy, Debug)]
+pub struct LevelBounds {
+    pub twig: Aabb,
+    pub branch: Aabb,
+    pub tree: Aabb,
+    /// Billboard centres (object frame): twig, main branch, tree.
+    pub centers: [Vec3; 3],
+}
+
+/// The shading of one tree instance's billboards.
+pub struct TreeShading<'a> {
+    vcm: &'a VcmShading,
+    species: usize,
+    tree: Factors,
+    sun_tree: Vec3,
+    bounds: &'a LevelBounds,
+}
+
+impl TreeShading<'_> {
+    /// The tree billboard: d per pixel.
+    pub fn tree(&self) -> Shade {
+        Shade {
+            direct: self.tree.0,
+            sky: self.tree.1,
+            parent_direct: 1.0,
+            parent_sky: 1.0,
+        }
+    }
+
+    fn branch_factors(&self, i: usize) -> Factors {
+        self.vcm
+            .branches
+            .get(self.species)
+            .and_then(|v| v.get(i))
+            .map_or(([1.0; CORNERS], [1.0; CORNERS]), |o| {
+                (o.direct(self.vcm.res, self.sun_tree), o.sky)
+            })
+    }
+
+    fn twig_factors(&self, j: usize, sun: Vec3) -> Factors {
+        self.vcm
+            .twigs
+            .get(self.species)
+            .and_then(|v| v.get(j))
+            .map_or(([1.0; CORNERS], [1.0; CORNERS]), |o| {
+                (o.direct(self.vcm.res, sun), o.sky)
+            })
+    }
+
+    /// Main branch `i` (placed by `branch` in the tree frame): c per pixel, d at its centre.
+    pub fn branch(&self, i: usize, branch: &Mat4) -> Shade {
+        let c = self.branch_factors(i);
+        let centre = branch.transform_point3(self.bounds.centers[1]);
+        let (d, d_sky) = at(&self.tree, &self.bounds.tree, centre);
+        Shade {
+            direct: c.0,
+            sky: c.1,
+            parent_direct: d,
+            parent_sky: d_sky,
+        }
+    }
+
+    /// The trunk's twig `k` (placed by `twig` in the tree frame; twig VCM `index`): b per
+    /// pixel, d at its centre.
+    pub fn trunk_twig(&self, index: usize, twig: &Mat4) -> Shade {
+        let b = self.twig_factors(index, self.sun_tree);
+        let centre = twig.transform_point3(self.bounds.centers[0]);
+        let (d, d_sky) = at(&self.tree, &self.bounds.tree, centre);
+        Shade {
+            direct: b.0,
+            sky: b.1,
+            parent_direct: d,
+            parent_sky: d_sky,
+        }
+    }
+
+    /// The twigs of main branch `i`: calls `emit(j, shade)` for each twig `j` of `twigs`
+    /// (their transforms in the branch frame): b per pixel, c·d at its centre.
+    pub fn branch_twigs(
+        &self,
+        i: usize,
+        branch: &Mat4,
+        twigs: &[Mat4],
+        mut emit: impl FnMut(usize, Shade),
+    ) {
+        let c = self.branch_factors(i);
+        let scale = branch.x_axis.truncate().length().max(1e-12);
+        let rot = Mat3::from_mat4(*branch) * (1.0 / scale);
+        let sun_branch = (rot.transpose() * self.sun_tree).normalize_or(Vec3::Y);
+        for (j, t) in twigs.iter().enumerate() {
+            let b = self.twig_factors(j, sun_branch);
+            let in_branch = t.transform_point3(self.bounds.centers[0]);
+            let (cc, c_sky) = at(&c, &self.bounds.branch, in_branch);
+            let (d, d_sky) = at(
+                &self.tree,
+                &self.bounds.tree,
+                branch.transform_point3(in_branch),
+            );
+            emit(
+                j,
+                Shade {
+                    direct: b.0,
+                    sky: b.1,
+                    parent_direct: cc * d,
+                    parent_sky: c_sky * d_sky,
+                },
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_object_behind_a_wall_reads_dark_towards_it_only() {
+        let res = 8;
+        let mut raster = vcm::CubeRaster::new(res);
+        raster.draw(
+            Vec3::ZERO,
+            &vcm::PlainQuad {
+                center: Vec3::new(0.0, 0.0, 2.0),
+                right: Vec3::X * 50.0,
+                up: Vec3::Y * 50.0,
+                alpha: 1.0,
+            },
+        );
+        let mut one = Vec::new();
+        raster.finish(&mut one, false);
+        let opacity: Vec<u8> = (0..CORNERS).flat_map(|_| one.iter().copied()).collect();
+        let o = ObjectVcm {
+            opacity,
+            sky: [0.5; CORNERS],
+        };
+        assert_eq!(o.direct(res, Vec3::Z), [0.0; CORNERS]);
+        assert_eq!(o.direct(res, -Vec3::Z), [1.0; CORNERS]);
+    }
+
+    fn lone_world() -> World {
+        let mut scene =
+            crate::scene::Scene::parse(crate::scene::SMALL_TEST_SCENE_TOML, "small.toml").unwrap();
+        scene.forest.count = 1;
+        World::build(&scene).unwrap()
+    }
+
+    fn set(species: u32, owner: u32, level: Level) -> crate::format::VcmSet {
+        crate::format::VcmSet {
+            species,
+            owner,
+            level,
+            resolution: 8,
+            opacity: vec![0; CORNERS * FACES * 64],
+            mean_opacity: [0.0; CORNERS],
+        }
+    }
+
+    fn baked(vcm: Vec<crate::format::VcmSet>) -> Baked {
+        Baked {
+            scene_hash: 0,
+            settings: crate::format::BakeSettings {
+                views: 6,
+                lights: 6,
+                resolution: 32,
+                supersample: 1,
+                vcm_resolution: 8,
+            },
+            btf: Vec::new(),
+            vcm,
+        }
+    }
+
+    /// Every set the world needs, for species `sp`'s tree at instance 0.
+    fn complete(world: &World) -> Vec<crate::format::VcmSet> {
+        let sp = world.forest.instances[0].species;
+        let mut v = vec![set(sp, 0, Level::Tree)];
+        for (s, t) in world.species.iter().enumerate() {
+            let s = s as u32;
+            v.extend((0..t.tree_branches.len() as u32).map(|i| set(s, i, Level::Branch)));
+            let twigs = (t.branch_twigs.len() + t.tree_twigs.len()) as u32;
+            v.extend((0..twigs).map(|i| set(s, i, Level::Twig)));
+        }
+        v
+    }
+
+    #[test]
+    fn cube_maps_that_do_not_fit_the_scene_are_refused() {
+        let world = lone_world();
+        let good = complete(&world);
+        assert!(
+            VcmShading::new(&baked(good.clone()), &world)
+                .unwrap()
+                .is_some()
+        );
+        assert!(
+            VcmShading::new(&baked(Vec::new()), &world)
+                .unwrap()
+                .is_none()
+        );
+        let mut extra = good.clone();
+        extra.push(set(0, 7, Level::Tree));
+        let mut missing = good.clone();
+        missing.remove(0);
+        let mut twice = good.clone();
+        twice.push(good[1].clone());
+        for (v, want) in [
+            (extra, "tree 7"),
+            (missing, "no cube maps"),
+            (twice, "two sets"),
+        ] {
+            let e = VcmShading::new(&baked(v), &world)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(e.contains(want) && e.contains("re-bake"), "{e}");
+        }
+    }
+
+    #[test]
+    fn no_shading_is_one_everywhere() {
+        assert_eq!(Shade::NONE.direct_at(Vec3::splat(0.3)), 1.0);
+    }
+}
