@@ -26,9 +26,11 @@ struct Frame {
     cascade_texel: vec4<f32>,
     // y: PCF radius (texels); z: exposure
     shadow_params: vec4<f32>,
-    // The sun's view of the whole scene, for the ground alpha shadow map.
+    // The sun's view of the whole scene, for the ground shadow maps.
     ground_light_view_proj: mat4x4<f32>,
-    // x: 1 when the ground alpha shadow map applies
+    // x: 1 when the ground alpha shadow map applies; y: 1 when the terrain's depth from
+    // the same pass replaces the cascades; z: world size of one of its texels; w: the
+    // fraction of the textures' side in use (less while the sun is being dragged)
     ground_params: vec4<f32>,
 }
 

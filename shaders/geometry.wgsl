@@ -8,6 +8,9 @@
 // map of the image-based methods, whose trees are not in the depth shadow maps.
 @group(0) @binding(3) var ground_alpha: texture_2d<f32>;
 @group(0) @binding(4) var ground_sampler: sampler;
+// The terrain's depth seen from the sun, drawn with the alpha map over the whole scene: the
+// image-based methods' terrain shadows, in place of the cascades.
+@group(0) @binding(5) var ground_depth: texture_depth_2d;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -40,10 +43,50 @@ fn cascade_for(view_depth: f32) -> u32 {
     return 2u;
 }
 
-// Fraction of the sun that reaches `world` (1 = lit), 3x3 PCF on the cascade's map.
+// Where `world` falls in the ground shadow maps: texture coordinates (already scaled to
+// the part in use) and depth; uv < 0 when outside.
+fn ground_coords(world: vec3<f32>) -> vec3<f32> {
+    let lp = frame.ground_light_view_proj * vec4<f32>(world, 1.0);
+    let ndc = lp.xyz / lp.w;
+    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
+        return vec3<f32>(-1.0, -1.0, ndc.z);
+    }
+    // Keep the filter footprint inside the part of the textures in use.
+    let size = f32(textureDimensions(ground_depth).x);
+    let scale = frame.ground_params.w;
+    let t = clamp(uv * scale, vec2<f32>(0.5 / size), vec2<f32>(scale - 0.5 / size));
+    return vec3<f32>(t, ndc.z);
+}
+
+// Fraction of the sun the terrain lets reach `world`, 3x3 PCF on the ground depth map.
+fn terrain_visibility(world: vec3<f32>, normal: vec3<f32>) -> f32 {
+    // Offset along the normal and towards the sun by about a texel, against acne.
+    let texel_world = frame.ground_params.z;
+    let p = world + (normal * 1.5 + frame.sun_dir.xyz) * texel_world;
+    let c = ground_coords(p);
+    if c.x < 0.0 || c.z > 1.0 {
+        return 1.0;
+    }
+    let texel = 1.0 / f32(textureDimensions(ground_depth).x);
+    var lit = 0.0;
+    for (var y = -1; y <= 1; y++) {
+        for (var x = -1; x <= 1; x++) {
+            let o = vec2<f32>(f32(x), f32(y)) * texel;
+            lit += textureSampleCompareLevel(ground_depth, shadow_sampler, c.xy + o, c.z);
+        }
+    }
+    return lit / 9.0;
+}
+
+// Fraction of the sun that reaches `world` (1 = lit), 3x3 PCF on the cascade's map (or on
+// the ground depth map, for the image-based methods).
 fn sun_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> f32 {
     if frame.sun_dir.w < 0.5 {
         return 1.0;
+    }
+    if frame.ground_params.y > 0.5 {
+        return terrain_visibility(world, normal);
     }
     if view_depth >= frame.cascade_splits.z {
         return 1.0;
@@ -71,13 +114,11 @@ fn sun_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> f32 {
 
 // How much of the sun the trees let through to `world`, from the alpha shadow map.
 fn ground_transmittance(world: vec3<f32>) -> f32 {
-    let lp = frame.ground_light_view_proj * vec4<f32>(world, 1.0);
-    let ndc = lp.xyz / lp.w;
-    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
-    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
+    let c = ground_coords(world);
+    if c.x < 0.0 {
         return 1.0;
     }
-    return textureSampleLevel(ground_alpha, ground_sampler, uv, 0.0).r;
+    return textureSampleLevel(ground_alpha, ground_sampler, c.xy, 0.0).r;
 }
 
 @fragment

@@ -126,6 +126,10 @@ struct RenderArgs {
     /// btf: shade billboards by the visibility cube maps (trees shading each other): on or off.
     #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
     vcm: bool,
+    /// btf: weight the sky light by the cube maps' mean visibility too: on or off (off: the
+    /// cube maps shade the sun light only).
+    #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+    vcm_sky: bool,
     /// btf: draw the VCM sun factor alone, in grey (white = fully lit).
     #[arg(long)]
     show_shadow: bool,
@@ -322,6 +326,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         lod_fade: args.lod_fade,
         vcm: args.vcm,
         show_shadow: args.show_shadow,
+        vcm_sky: args.vcm_sky,
     };
     if args.method == Method::Btf {
         let (baked, _) = bake_with_progress(&ctx, &scene, &world)?;
@@ -350,13 +355,29 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         progress.inc(1);
     }
     // The cost of one sun move on the warm renderer: the sun turns by half a degree for
-    // one more frame (not saved). Only the btf method has sun-dependent state to rebuild.
+    // one more frame (not saved), then by another half degree as if dragged (the ground
+    // shadow maps at their preview size). Only the btf method has sun-dependent state.
     let mut sun_update_ms = None;
+    let mut sun_update_drag_ms = None;
+    let mut ground_map_sizes = None;
+    let mut sun_update_gpu = (None, None);
     if args.method == Method::Btf {
         let mut moved = frame;
         moved.sun.azimuth_deg += 0.5;
-        let (_, s) = renderer.render_image(&ctx, &moved, w, h, args.supersample)?;
-        sun_update_ms = s.sun_update_ms;
+        let (_, full) = renderer.render_image(&ctx, &moved, w, h, args.supersample)?;
+        let full_gpu = renderer
+            .last_sun_update_gpu_ms()
+            .filter(|_| full.sun_update);
+        moved.sun.azimuth_deg += 0.5;
+        moved.sun_held = true;
+        let (_, held) = renderer.render_image(&ctx, &moved, w, h, args.supersample)?;
+        let held_gpu = renderer
+            .last_sun_update_gpu_ms()
+            .filter(|_| held.sun_update);
+        sun_update_ms = full.sun_update_ms;
+        sun_update_drag_ms = held.sun_update_ms;
+        sun_update_gpu = (full_gpu, held_gpu);
+        ground_map_sizes = full.ground_map_size.zip(held.ground_map_size);
     }
     progress.finish_and_clear();
     let (Some(image), Some(stats)) = (image, stats) else {
@@ -405,9 +426,15 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
             json["fetches_saved"] = serde_json::json!(b.fetches_saved);
             json["btf_bytes"] = serde_json::json!(renderer.btf_bytes());
             json["vcm"] = serde_json::json!(b.vcm);
+            json["vcm_sky"] = serde_json::json!(b.vcm && args.vcm_sky);
             json["vcm_bytes"] = serde_json::json!(renderer.vcm_bytes());
             json["vcm_resolution"] = serde_json::json!(renderer.vcm_resolution());
             json["sun_update_ms"] = serde_json::json!(sun_update_ms);
+            json["sun_update_drag_ms"] = serde_json::json!(sun_update_drag_ms);
+            json["sun_update_gpu_ms"] = serde_json::json!(sun_update_gpu.0);
+            json["sun_update_drag_gpu_ms"] = serde_json::json!(sun_update_gpu.1);
+            json["ground_map_size"] = serde_json::json!(ground_map_sizes.map(|s| s.0));
+            json["ground_map_drag_size"] = serde_json::json!(ground_map_sizes.map(|s| s.1));
             json["ground_shadows"] = serde_json::json!(args.ground_shadows);
             json["lod_scale"] = serde_json::json!(args.lod_scale);
             json["weight_threshold"] = serde_json::json!(args.weight_threshold);

@@ -67,6 +67,7 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
         vcm_bytes: 53_182_464,
         vcm_resolution: Some(32),
         sun_update_ms: Some(12.34),
+        sun_update_gpu_ms: Some(45.67),
         bake_progress: Some((40, 100, "fir tree".into())),
         ..Default::default()
     };
@@ -89,7 +90,7 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
     harness.get_by_label("9.00");
     harness.get_by_label("16.5 MB");
     harness.get_by_label("32² x 6 faces x 8 corners, 53.2 MB");
-    harness.get_by_label("12.3 ms");
+    harness.get_by_label("12.3 ms CPU + 45.7 ms GPU");
     harness.get_by_label("show LOD level").click();
     harness.run();
     assert!(harness.state().frame.btf.show_lod);
@@ -97,6 +98,10 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
     harness.get_by_label("show VCM shadow factor").click();
     harness.run();
     assert!(harness.state().frame.btf.show_shadow);
+    assert!(harness.state().frame.btf.vcm_sky);
+    harness.get_by_label("VCM sky occlusion").click();
+    harness.run();
+    assert!(!harness.state().frame.btf.vcm_sky);
     harness
         .get_by_label("VCM shading (trees shade each other)")
         .click();
@@ -108,4 +113,39 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
         harness.state().frame.btf.planes,
         canopy::render::btf::PlaneMode::Crossed
     );
+}
+
+#[test]
+fn dragging_a_sun_slider_holds_the_sun_until_it_is_let_go() {
+    let scene = Scene::default_scene();
+    let state = State {
+        frame: FrameDesc::from_scene(&scene),
+        actions: PanelActions::default(),
+    };
+    let stats = PanelStats::default();
+    let mut harness = Harness::new_ui_state(
+        move |ui, s: &mut State| {
+            s.actions = controls(ui, &mut s.frame, &stats, None);
+        },
+        state,
+    );
+    harness.run();
+    let start = harness.state().frame.sun;
+    let slider = harness
+        .get_by_role_and_label(egui::accesskit::Role::Slider, "time of day h")
+        .rect();
+    let at = slider.center();
+    harness.drag_at(at);
+    harness.run();
+    harness.hover_at(at + egui::vec2(30.0, 0.0));
+    harness.run();
+    assert!(
+        harness.state().actions.sun_held,
+        "a drag in progress holds the sun"
+    );
+    assert_ne!(harness.state().frame.sun, start, "the drag moved the sun");
+    harness.drop_at(at + egui::vec2(30.0, 0.0));
+    harness.run();
+    harness.run();
+    assert!(!harness.state().actions.sun_held, "let go");
 }

@@ -83,6 +83,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         last_frame: Instant::now(),
         frames: 0,
         fatal: None,
+        sun_slider_held: false,
     };
     event_loop
         .run_app(&mut app)
@@ -141,6 +142,8 @@ struct App {
     last_frame: Instant,
     frames: u64,
     fatal: Option<Error>,
+    /// A sun slider was being dragged in the last frame's panel.
+    sun_slider_held: bool,
 }
 
 impl App {
@@ -235,7 +238,9 @@ impl App {
     fn screenshot(&mut self, path: &Path) {
         let Some(r) = &mut self.running else { return };
         let (w, h) = (r.config.width, r.config.height);
-        let frame = shown_frame(&self.frame, r.renderer.has_btf());
+        // Full-resolution ground shadows, even in the middle of a sun drag.
+        let mut frame = shown_frame(&self.frame, r.renderer.has_btf());
+        frame.sun_held = false;
         let result = r
             .renderer
             .render_image(&r.ctx, &frame, w, h, 1)
@@ -333,6 +338,8 @@ impl App {
         if r.config.width == 0 || r.config.height == 0 {
             return; // minimised
         }
+        // Held by a Ctrl-drag in the view, or by a sun slider in the last frame's panel.
+        self.frame.sun_held = self.fly.is_dragging_sun() || self.sun_slider_held;
         let frame = shown_frame(&self.frame, r.renderer.has_btf());
         if r.ctx.is_lost() {
             let e = Error::Gpu("the GPU device was lost; restart canopy".into());
@@ -387,6 +394,7 @@ impl App {
             }
         }
         self.stats.gpu_frame_ms = r.renderer.last_gpu_ms();
+        self.stats.sun_update_gpu_ms = r.renderer.last_sun_update_gpu_ms();
         self.stats.cpu_frame_ms = 0.9 * self.stats.cpu_frame_ms + 0.1 * f64::from(dt) * 1e3;
         self.stats.camera_speed = self.fly.speed;
 
@@ -463,6 +471,7 @@ impl App {
         r.window.pre_present_notify();
         r.ctx.queue.present(surface_texture);
         self.frames += 1;
+        self.sun_slider_held = actions.sun_held;
 
         if actions.screenshot {
             let path = crate::imageio::timestamped_path(Path::new("screenshots"));

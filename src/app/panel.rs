@@ -24,8 +24,11 @@ pub struct PanelStats {
     pub vcm_bytes: u64,
     /// Face resolution of the visibility cube maps, when loaded.
     pub vcm_resolution: Option<u32>,
-    /// What the last sun move cost (VCM reads + ground shadow map), ms.
+    /// What the last sun move cost on the CPU (VCM reads, submitting the ground shadow
+    /// maps), ms.
     pub sun_update_ms: Option<f64>,
+    /// The GPU time of the last ground shadow maps' pass, ms (timestamp queries).
+    pub sun_update_gpu_ms: Option<f64>,
     /// A bake running in the background: done, total, what.
     pub bake_progress: Option<(u64, u64, String)>,
 }
@@ -35,6 +38,8 @@ pub struct PanelStats {
 pub struct PanelActions {
     pub screenshot: bool,
     pub screenshot_as: bool,
+    /// A sun slider is being dragged (the ground shadow maps may be previewed).
+    pub sun_held: bool,
 }
 
 /// Draws the panel's contents into `ui`, editing `frame` in place.
@@ -106,6 +111,7 @@ pub fn controls(
         ui.checkbox(&mut b.show_lod, "show LOD level");
         ui.checkbox(&mut b.vcm, "VCM shading (trees shade each other)");
         ui.add_enabled_ui(b.vcm, |ui| {
+            ui.checkbox(&mut b.vcm_sky, "VCM sky occlusion");
             ui.checkbox(&mut b.show_shadow, "show VCM shadow factor");
         });
         ui.checkbox(
@@ -148,9 +154,10 @@ pub fn controls(
                 });
                 ui.end_row();
                 ui.label("sun update");
-                ui.label(match stats.sun_update_ms {
-                    Some(ms) => format!("{ms:.1} ms"),
-                    None => "n/a".to_string(),
+                ui.label(match (stats.sun_update_ms, stats.sun_update_gpu_ms) {
+                    (Some(cpu), Some(gpu)) => format!("{cpu:.1} ms CPU + {gpu:.1} ms GPU"),
+                    (Some(cpu), None) => format!("{cpu:.1} ms CPU"),
+                    (None, _) => "n/a".to_string(),
                 });
                 ui.end_row();
             });
@@ -162,16 +169,17 @@ pub fn controls(
     // Time of day: the sun rises in the east at 6 h, culminates in the south at noon (60°
     // up) and sets in the west at 18 h. Read back from the azimuth, so it follows drags.
     let mut hour = (6.0 + (frame.sun.azimuth_deg - 90.0) / 15.0).clamp(6.0, 18.0);
-    if ui
-        .add(egui::Slider::new(&mut hour, 6.0..=18.0).text("time of day h"))
-        .changed()
-    {
+    let day = ui.add(egui::Slider::new(&mut hour, 6.0..=18.0).text("time of day h"));
+    if day.changed() {
         let (az, el) = sun_at_hour(hour);
         frame.sun.azimuth_deg = az;
         frame.sun.elevation_deg = el;
     }
-    ui.add(egui::Slider::new(&mut frame.sun.azimuth_deg, 0.0..=360.0).text("azimuth °"));
-    ui.add(egui::Slider::new(&mut frame.sun.elevation_deg, -10.0..=90.0).text("elevation °"));
+    let azimuth =
+        ui.add(egui::Slider::new(&mut frame.sun.azimuth_deg, 0.0..=360.0).text("azimuth °"));
+    let elevation =
+        ui.add(egui::Slider::new(&mut frame.sun.elevation_deg, -10.0..=90.0).text("elevation °"));
+    actions.sun_held = day.dragged() || azimuth.dragged() || elevation.dragged();
     ui.add(egui::Slider::new(&mut frame.sun.intensity, 0.0..=10.0).text("sun intensity"));
     ui.add(egui::Slider::new(&mut frame.sky.intensity, 0.0..=4.0).text("sky intensity"));
     ui.separator();

@@ -247,6 +247,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         btf: Default::default(),
         trees: true,
         ground_shadows: false,
+        sun_held: false,
     }
 }
 

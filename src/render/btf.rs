@@ -66,6 +66,9 @@ pub struct BtfSettings {
     pub vcm: bool,
     /// Draw each billboard's VCM sun factor (b·c·d) in grey instead of its images.
     pub show_shadow: bool,
+    /// Weight the sky term by the cube maps' mean visibility (off: the cube maps shade the
+    /// sun term only, as if the sky were never hidden).
+    pub vcm_sky: bool,
 }
 
 impl Default for BtfSettings {
@@ -78,6 +81,7 @@ impl Default for BtfSettings {
             lod_fade: 0.2,
             vcm: true,
             show_shadow: false,
+            vcm_sky: true,
         }
     }
 }
@@ -547,6 +551,11 @@ impl BtfAssets {
                                     lvl: usize,
                                     shade: Shade,
                                     stats: &mut BtfStats| {
+                        let shade = if settings.vcm_sky {
+                            shade
+                        } else {
+                            shade.without_sky()
+                        };
                         self.push(
                             &mut scratch,
                             m * part,

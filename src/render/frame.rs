@@ -127,8 +127,13 @@ pub struct FrameDesc {
     /// Draw the trees (off: terrain and sky only, e.g. while a bake is running).
     pub trees: bool,
     /// Image-based methods: soft tree shadows on the ground from an alpha shadow map, and
-    /// the terrain's own shadows from depth maps. (The geometry method always has both.)
+    /// the terrain's own shadows from a depth map of the terrain, both seen from the sun
+    /// and rebuilt only when it moves. (The geometry method always has both.)
     pub ground_shadows: bool,
+    /// The user is moving the sun right now (a drag in progress): the ground shadow maps
+    /// are rebuilt at a reduced resolution while it lasts, and at full resolution on the
+    /// first frame after it ends.
+    pub sun_held: bool,
 }
 
 impl FrameDesc {
@@ -156,6 +161,7 @@ impl FrameDesc {
             btf: Default::default(),
             trees: true,
             ground_shadows: true,
+            sun_held: false,
         }
     }
 }
@@ -185,6 +191,8 @@ pub struct FrameStats {
     /// What that cost (ms): the VCM reads on the CPU plus the ground map pass, waited for
     /// on the GPU when the frame is measured.
     pub sun_update_ms: Option<f64>,
+    /// Side (texels) of the ground shadow maps the frame was shaded with, when it had them.
+    pub ground_map_size: Option<u32>,
 }
 
 /// The uniform block of `common.wgsl` (`struct Frame`), byte for byte.

@@ -38,9 +38,13 @@ pub const SHADOW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float
 
 /// Format of the ground alpha shadow map (transmittance).
 pub const GROUND_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
-/// Side of the ground alpha shadow map, covering the whole scene (about 0.35 m per texel
-/// on the default square kilometre).
+/// Side of the ground shadow maps (alpha and terrain depth), covering the whole scene
+/// (about 0.35 m per texel on the default square kilometre).
 pub const GROUND_MAP_SIZE: u32 = 4096;
+/// Side of the ground shadow maps while the user holds the sun (`FrameDesc::sun_held`):
+/// a sixteenth of the texels, so that dragging the sun does not stall a software
+/// renderer; the full map follows on the first frame after the sun is let go.
+pub const GROUND_PREVIEW_SIZE: u32 = 1024;
 
 /// Largest shadow-map side accepted.
 pub const MAX_SHADOW_MAP: u32 = 8192;
@@ -52,8 +56,11 @@ struct ShadowMaps {
     frame_bind_group: wgpu::BindGroup,
 }
 
-/// The alpha shadow map of the image-based methods: the trees' transmittance seen from the
-/// sun over the whole scene, rebuilt only when the sun moves.
+/// The ground shadow maps of the image-based methods, both seen from the sun over the whole
+/// scene and rebuilt only when the sun moves: the trees' transmittance (the alpha shadow
+/// map; the terrain is drawn white into it, so it hides the trees behind it but casts
+/// nothing) and the terrain's depth (its own shadows: a hill shading a valley). They are
+/// drawn in one pass, into the top-left `size` x `size` texels of the textures.
 struct GroundShadow {
     view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
@@ -62,8 +69,20 @@ struct GroundShadow {
     bind_group: wgpu::BindGroup,
     terrain_pipeline: wgpu::RenderPipeline,
     light_view_proj: glam::Mat4,
-    /// The sun direction the map was built for (None: not built).
-    built_for: Option<glam::Vec3>,
+    /// Side of the textures.
+    capacity: u32,
+    /// What the maps hold now (None: nothing yet).
+    built: Option<GroundKey>,
+}
+
+/// What a ground map was built for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct GroundKey {
+    to_sun: glam::Vec3,
+    /// The trees are in it (not while only terrain and sky are shown).
+    trees: bool,
+    /// Side of the part of the textures in use.
+    size: u32,
 }
 
 impl GroundShadow {
@@ -74,7 +93,7 @@ impl GroundShadow {
             height: size,
             depth_or_array_layers: 1,
         };
-        let (color, depth) = ctx.checked("allocating the ground shadow map", || {
+        let (color, depth) = ctx.checked("allocating the ground shadow maps", || {
             let color = ctx.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("ground alpha shadow map"),
                 size: extent,
@@ -87,13 +106,14 @@ impl GroundShadow {
                 view_formats: &[],
             });
             let depth = ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("ground alpha shadow depth"),
+                label: Some("ground terrain depth map"),
                 size: extent,
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
                 format: SHADOW_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
                 view_formats: &[],
             });
             (color, depth)
@@ -128,8 +148,41 @@ impl GroundShadow {
             bind_group,
             terrain_pipeline,
             light_view_proj: glam::Mat4::IDENTITY,
-            built_for: None,
+            capacity: size,
+            built: None,
         })
+    }
+
+    /// The key of the maps `frame` needs, and whether the ones held must be rebuilt for
+    /// it: the sun moved, the trees came or went, or the sun was let go after a preview.
+    fn wanted(&self, to_sun: glam::Vec3, trees: bool, held: bool) -> (GroundKey, bool) {
+        let size = if held {
+            GROUND_PREVIEW_SIZE.min(self.capacity)
+        } else {
+            self.capacity
+        };
+        let want = GroundKey {
+            to_sun,
+            trees,
+            size,
+        };
+        let rebuild = match self.built {
+            None => true,
+            Some(k) => k.to_sun != to_sun || k.trees != trees || (!held && k.size != size),
+        };
+        (want, rebuild)
+    }
+
+    /// The `ground_params` uniform: alpha map on, terrain depth on, world size of one
+    /// texel, and the fraction of the textures in use.
+    fn params(&self, terrain_depth: bool, scene_radius: f32) -> [f32; 4] {
+        let size = self.built.map_or(self.capacity, |k| k.size);
+        [
+            1.0,
+            if terrain_depth { 1.0 } else { 0.0 },
+            2.0 * scene_radius / size.max(1) as f32,
+            size as f32 / self.capacity.max(1) as f32,
+        ]
     }
 }
 
@@ -159,6 +212,8 @@ pub struct Renderer {
     shadows: Option<ShadowMaps>,
     depth: Option<DepthTarget>,
     timer: Option<GpuTimer>,
+    /// Timestamps around the ground shadow maps' pass, the GPU side of a sun move.
+    ground_timer: Option<GpuTimer>,
     btf: Option<btf::BtfAssets>,
     ground: GroundShadow,
 }
@@ -217,6 +272,7 @@ impl Renderer {
             shadows: None,
             depth: None,
             timer: GpuTimer::new(ctx),
+            ground_timer: GpuTimer::new(ctx),
             btf: None,
         })
     }
@@ -229,7 +285,7 @@ impl Renderer {
         world: &World,
     ) -> Result<()> {
         self.btf = Some(btf::BtfAssets::new(ctx, baked, world)?);
-        self.ground.built_for = None;
+        self.ground.built = None;
         Ok(())
     }
 
@@ -274,6 +330,12 @@ impl Renderer {
     /// The newest GPU frame time measured without blocking (the viewer's readout).
     pub fn last_gpu_ms(&self) -> Option<f64> {
         self.timer.as_ref().and_then(|t| t.last_ms)
+    }
+
+    /// GPU time of the newest ground shadow maps' pass (the GPU side of a sun move), from
+    /// timestamp queries, when the adapter has them.
+    pub fn last_sun_update_gpu_ms(&self) -> Option<f64> {
+        self.ground_timer.as_ref().and_then(|t| t.last_ms)
     }
 
     fn ensure_shadow_maps(&mut self, ctx: &GpuContext, size: u32) -> Result<()> {
@@ -338,6 +400,10 @@ impl Renderer {
                 wgpu::BindGroupEntry {
                     binding: 4,
                     resource: wgpu::BindingResource::Sampler(&self.ground.sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: wgpu::BindingResource::TextureView(&self.ground.depth_view),
                 },
             ],
         });
@@ -418,12 +484,13 @@ impl Renderer {
                 "the btf method needs baked BTF images: run `canopy bake` (the viewer bakes on first use)".into(),
             ));
         }
-        // The btf method's trees cast no depth shadows (they are not geometry): its depth
-        // cascades hold the terrain alone (a hill shading a valley), and the trees' shadows
-        // on the ground come from the alpha shadow map.
-        let shadows_on =
-            frame.shadows.enabled && (sun_up || studio) && (!is_btf || frame.ground_shadows);
-        let ground_on = is_btf && frame.ground_shadows && sun_up && frame.trees;
+        // The geometry method's depth cascades follow the camera and are drawn every frame.
+        // The btf method has none: its trees are not geometry, so their shadows on the
+        // ground come from the alpha shadow map, and the terrain's own shadows from the
+        // terrain depth drawn with it, both rebuilt only when the sun moves.
+        let shadows_on = frame.shadows.enabled && (sun_up || studio) && !is_btf;
+        let ground_on = is_btf && frame.ground_shadows && sun_up && !studio;
+        let terrain_depth_on = ground_on && frame.shadows.enabled;
         let cascades = if shadows_on && studio {
             let b = &self.world.forest_bounds;
             Cascades::fit_sphere(
@@ -498,76 +565,19 @@ impl Renderer {
         uniform_frame.shadows.enabled = shadows_on;
         let mut uniforms = FrameUniforms::new(&uniform_frame, aspect, &cascades);
 
-        // The ground alpha shadow map follows the sun, not the camera. It is submitted on
-        // its own so that its cost can be timed (blocking, when measuring).
-        if ground_on
-            && self.ground.built_for != Some(to_sun)
-            && let Some(b) = self.btf.as_mut()
-        {
-            let t0 = std::time::Instant::now();
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("ground alpha shadow map"),
-                });
-            let b_box = &self.world.scene_bounds;
-            let light = Cascades::fit_sphere(
-                to_sun,
-                b_box.center(),
-                0.5 * b_box.extent().length(),
-                GROUND_MAP_SIZE,
-            );
-            self.ground.light_view_proj = light.matrices[0];
-            let n = b.prepare_sun(ctx, &self.world, to_sun);
-            let light_uniforms = uniforms.for_light(self.ground.light_view_proj);
-            ctx.queue.write_buffer(
-                &self.ground.uniforms,
-                0,
-                bytemuck::bytes_of(&light_uniforms),
-            );
-            let opacity = b
-                .opacity_pipeline(&ctx.device, &self.layouts.shadow_frame)
-                .clone();
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("ground alpha shadow map"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.ground.view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::WHITE),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &self.ground.depth_view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Discard,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&self.ground.terrain_pipeline);
-            pass.set_bind_group(0, &self.ground.bind_group, &[]);
-            pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
-            draw_world(&mut pass, &self.world, &[], None, true, &[]);
-            if n > 0 {
-                pass.set_pipeline(&opacity);
-                pass.set_bind_group(1, b.sun_bind_group(), &[]);
-                pass.draw(0..6, 0..n);
+        // The ground shadow maps follow the sun, not the camera. They are submitted on their
+        // own so that their cost can be timed (blocking, when measuring).
+        if ground_on {
+            let (want, rebuild) = self.ground.wanted(to_sun, frame.trees, frame.sun_held);
+            if rebuild {
+                let t0 = std::time::Instant::now();
+                self.build_ground(ctx, &uniforms, want);
+                if measure_gpu {
+                    let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+                }
+                sun_moved = true;
+                sun_update_ms += t0.elapsed().as_secs_f64() * 1e3;
             }
-            drop(pass);
-            ctx.queue.submit([encoder.finish()]);
-            if measure_gpu {
-                let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
-            }
-            self.ground.built_for = Some(to_sun);
-            sun_moved = true;
-            sun_update_ms += t0.elapsed().as_secs_f64() * 1e3;
         }
         let mut encoder = ctx
             .device
@@ -576,7 +586,11 @@ impl Renderer {
             });
         if ground_on {
             uniforms.ground_light_view_proj = self.ground.light_view_proj.to_cols_array_2d();
-            uniforms.ground_params = [1.0, 0.0, 0.0, 0.0];
+            let radius = 0.5 * self.world.scene_bounds.extent().length();
+            uniforms.ground_params = self.ground.params(terrain_depth_on, radius);
+            if terrain_depth_on {
+                uniforms.sun_dir[3] = 1.0;
+            }
         }
         ctx.queue
             .write_buffer(&self.frame_uniforms, 0, bytemuck::bytes_of(&uniforms));
@@ -592,6 +606,11 @@ impl Renderer {
             height,
             sun_update: sun_moved,
             sun_update_ms: sun_moved.then_some(sun_update_ms),
+            ground_map_size: if ground_on {
+                self.ground.built.map(|k| k.size)
+            } else {
+                None
+            },
             ..Default::default()
         };
         let btf_pipeline = match (is_btf, self.btf.as_mut()) {
@@ -640,12 +659,10 @@ impl Renderer {
             pass.set_pipeline(&self.shadow_pipeline);
             pass.set_bind_group(0, &self.shadow_uniforms[c].1, &[]);
             pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
-            // The btf method's cascades hold the terrain alone.
-            let casters: &[TreeRun] = if is_btf { &[] } else { &runs[c + 1] };
             let (tris, casters, calls) = draw_world(
                 &mut pass,
                 &self.world,
-                casters,
+                &runs[c + 1],
                 None,
                 !studio,
                 &[PartKind::Trunk, PartKind::Limbs, PartKind::Twigs],
@@ -746,10 +763,99 @@ impl Renderer {
             t.after_submit();
             stats.gpu_ms = t.collect(ctx, measure_gpu).filter(|_| measure_gpu);
         }
+        if let Some(t) = &mut self.ground_timer {
+            t.collect(ctx, measure_gpu);
+        }
         if let Some(e) = ctx.take_error() {
             return Err(Error::Gpu(e));
         }
         Ok(stats)
+    }
+
+    /// Draws the ground shadow maps for `key` from the sun: the terrain (white, with depth),
+    /// then, with the trees, every tree's tree-level billboard as the sun sees it,
+    /// multiplying the transmittance. Submits the pass.
+    fn build_ground(&mut self, ctx: &GpuContext, uniforms: &FrameUniforms, key: GroundKey) {
+        let b_box = &self.world.scene_bounds;
+        let light = Cascades::fit_sphere(
+            key.to_sun,
+            b_box.center(),
+            0.5 * b_box.extent().length(),
+            key.size,
+        );
+        self.ground.light_view_proj = light.matrices[0];
+        let light_uniforms = uniforms.for_light(self.ground.light_view_proj);
+        ctx.queue.write_buffer(
+            &self.ground.uniforms,
+            0,
+            bytemuck::bytes_of(&light_uniforms),
+        );
+        let billboards = match self.btf.as_mut() {
+            Some(b) if key.trees => {
+                let n = b.prepare_sun(ctx, &self.world, key.to_sun);
+                let pipeline = b
+                    .opacity_pipeline(&ctx.device, &self.layouts.shadow_frame)
+                    .clone();
+                Some((n, pipeline))
+            }
+            _ => None,
+        };
+        let queries = self.ground_timer.as_mut().and_then(|t| t.begin()).cloned();
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("ground shadow maps"),
+            });
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("ground shadow maps"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &self.ground.view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::WHITE),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.ground.depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: queries.as_ref().map(|q| wgpu::RenderPassTimestampWrites {
+                query_set: q,
+                beginning_of_pass_write_index: Some(0),
+                end_of_pass_write_index: Some(1),
+            }),
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        let side = key.size as f32;
+        pass.set_viewport(0.0, 0.0, side, side, 0.0, 1.0);
+        pass.set_scissor_rect(0, 0, key.size, key.size);
+        pass.set_pipeline(&self.ground.terrain_pipeline);
+        pass.set_bind_group(0, &self.ground.bind_group, &[]);
+        pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
+        draw_world(&mut pass, &self.world, &[], None, true, &[]);
+        if let (Some((n, pipeline)), Some(b)) = (&billboards, &self.btf)
+            && *n > 0
+        {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(1, b.sun_bind_group(), &[]);
+            pass.draw(0..6, 0..*n);
+        }
+        drop(pass);
+        if let Some(t) = &self.ground_timer {
+            t.resolve(&mut encoder);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        if let Some(t) = &mut self.ground_timer {
+            t.after_submit();
+        }
+        self.ground.built = Some(key);
     }
 
     /// Renders one frame offscreen and reads it back; with `supersample` > 1, renders that

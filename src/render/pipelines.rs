@@ -77,6 +77,16 @@ impl Layouts {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 5,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Depth,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
             ],
         });
         let shadow_frame = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -120,7 +130,8 @@ pub fn shadow_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu::Render
     )
 }
 
-/// The terrain into the ground alpha shadow map: white, with depth.
+/// The terrain into the ground shadow maps: white in the alpha map, and its depth kept as
+/// the terrain's own shadow map.
 pub fn ground_terrain_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu::RenderPipeline {
     light_view_pipeline(
         device,

@@ -59,6 +59,15 @@ impl Shade {
         parent_sky: 1.0,
     };
 
+    /// The same sun factors with the sky left unhidden.
+    pub fn without_sky(self) -> Shade {
+        Shade {
+            sky: [1.0; CORNERS],
+            parent_sky: 1.0,
+            ..self
+        }
+    }
+
     /// The sun factor at box coordinates `u` of the billboard's own object.
     pub fn direct_at(&self, u: Vec3) -> f32 {
         vcm::trilinear(&self.direct, u) * self.parent_direct
