@@ -237,6 +237,10 @@ impl Horizon {
     }
 }
 
+/// Transmittance below which a texel is stored as fully opaque (opacity byte 255, since
+/// bytes are rounded); drawing more in front or behind cannot change it, so it is skipped.
+const SATURATED: f32 = 0.5 / 255.0;
+
 /// A cube map being drawn: transmittance per texel, starting fully visible.
 pub struct CubeRaster {
     res: u32,
@@ -300,6 +304,10 @@ impl CubeRaster {
                 let row = base + j * res;
                 for i in i0..=i1 {
                     let k = row + i;
+                    if self.transmittance[k] < SATURATED {
+                        // Already stored as fully opaque; nothing behind can change that.
+                        continue;
+                    }
                     let d = self.dirs[k];
                     let denom = d.dot(n);
                     if denom == 0.0 {
@@ -498,6 +506,39 @@ mod tests {
         // The quad covers 2x2 m at 3 m: atan(1/3) = 18.4 degrees each side.
         assert!(r.opacity_at(Vec3::new(0.25, 0.0, 1.0)) > 0.0);
         assert_eq!(r.opacity_at(Vec3::new(0.45, 0.0, 1.0)), 0.0);
+    }
+
+    #[test]
+    fn the_drawing_order_does_not_change_the_bytes_even_past_opaque_texels() {
+        // Near an opaque wall first (its texels are then skipped), or far translucent quads
+        // first: the stored bytes are the same.
+        let near = wall(Vec3::new(0.0, 0.0, 2.0), Vec3::X * 1.5, Vec3::Y * 1.5);
+        let far: Vec<PlainQuad> = (0..4)
+            .map(|k| PlainQuad {
+                center: Vec3::new(-1.0 + k as f32, 0.5, 5.0 + k as f32),
+                right: Vec3::X * 3.0,
+                up: Vec3::Y * 1.2,
+                alpha: 0.3 + 0.1 * k as f32,
+            })
+            .collect();
+        let mut near_first = CubeRaster::new(RES);
+        near_first.draw(Vec3::ZERO, &near);
+        for q in &far {
+            near_first.draw(Vec3::ZERO, q);
+        }
+        let mut far_first = CubeRaster::new(RES);
+        for q in far.iter().rev() {
+            far_first.draw(Vec3::ZERO, q);
+        }
+        far_first.draw(Vec3::ZERO, &near);
+        let (a, mean_a) = finish(&near_first);
+        let (b, mean_b) = finish(&far_first);
+        assert_eq!(a, b);
+        assert!((mean_a - mean_b).abs() < 1e-3, "{mean_a} vs {mean_b}");
+        assert_eq!(near_first.opacity_at(Vec3::Z), 1.0);
+        // Beside the wall, the far quads alone.
+        let beside = near_first.opacity_at(Vec3::new(-0.78, 0.1, 1.0));
+        assert!(beside > 0.0 && beside < 1.0, "{beside}");
     }
 
     #[test]

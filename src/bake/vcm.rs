@@ -378,6 +378,16 @@ pub fn bake_vcm(
                     let (m, r) = placed[i];
                     near.clear();
                     grid.near(inst.position, TREE_RANGE + r + max_radius, near);
+                    // Nearest first: in a dense stand they make the texels towards the
+                    // horizon opaque, and the farther trees drawn there are then skipped.
+                    near.sort_by(|&a, &b| {
+                        let d = |j: u32| {
+                            instances[j as usize]
+                                .position
+                                .distance_squared(inst.position)
+                        };
+                        d(a).total_cmp(&d(b))
+                    });
                     let occluders: Vec<(&AlphaSet, Mat4)> = near
                         .iter()
                         .filter(|&&j| j as usize != i)
