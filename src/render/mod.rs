@@ -69,6 +69,8 @@ struct GroundShadow {
     bind_group: wgpu::BindGroup,
     terrain_pipeline: wgpu::RenderPipeline,
     light_view_proj: glam::Mat4,
+    /// World size (m) of one texel of the maps as last built.
+    texel_world: f32,
     /// Side of the textures.
     capacity: u32,
     /// What the maps hold now (None: nothing yet).
@@ -148,6 +150,7 @@ impl GroundShadow {
             bind_group,
             terrain_pipeline,
             light_view_proj: glam::Mat4::IDENTITY,
+            texel_world: 0.0,
             capacity: size,
             built: None,
         })
@@ -175,12 +178,12 @@ impl GroundShadow {
 
     /// The `ground_params` uniform: alpha map on, terrain depth on, world size of one
     /// texel, and the fraction of the textures in use.
-    fn params(&self, terrain_depth: bool, scene_radius: f32) -> [f32; 4] {
+    fn params(&self, terrain_depth: bool) -> [f32; 4] {
         let size = self.built.map_or(self.capacity, |k| k.size);
         [
             1.0,
             if terrain_depth { 1.0 } else { 0.0 },
-            2.0 * scene_radius / size.max(1) as f32,
+            self.texel_world,
             size as f32 / self.capacity.max(1) as f32,
         ]
     }
@@ -586,8 +589,7 @@ impl Renderer {
             });
         if ground_on {
             uniforms.ground_light_view_proj = self.ground.light_view_proj.to_cols_array_2d();
-            let radius = 0.5 * self.world.scene_bounds.extent().length();
-            uniforms.ground_params = self.ground.params(terrain_depth_on, radius);
+            uniforms.ground_params = self.ground.params(terrain_depth_on);
             if terrain_depth_on {
                 uniforms.sun_dir[3] = 1.0;
             }
@@ -784,6 +786,7 @@ impl Renderer {
             key.size,
         );
         self.ground.light_view_proj = light.matrices[0];
+        self.ground.texel_world = light.texel_world[0];
         let light_uniforms = uniforms.for_light(self.ground.light_view_proj);
         ctx.queue.write_buffer(
             &self.ground.uniforms,
