@@ -1,0 +1,64 @@
+//! The render core's images, kept as references before the core was split by method
+//! (issue 9): `geometry` and `btf` on the BTF test stand at a near, a mid and a far view,
+//! 320x180. A refactor that changes what a frame looks like fails here; a deliberate change
+//! of the images re-writes the references with `UPDATE_SNAPSHOTS=1` and says why in its
+//! commit.
+
+mod common;
+
+use canopy::bake;
+use canopy::model::World;
+use canopy::render::{Camera, FrameDesc, Method, Renderer};
+use canopy::scene::Scene;
+use glam::Vec3;
+
+use common::*;
+
+/// lavapipe renders the same frame to the same bytes, so a structural change measures 0;
+/// the bound leaves room for float reassociation in a moved computation and nothing more.
+const MAX_MEAN_FLIP: f32 = 0.002;
+
+const SIZE: (u32, u32) = (320, 180);
+
+/// (name, camera, look-at): near (inside the stand, twig and branch levels), mid (the
+/// stand from 90 m, branch and tree levels), far (the whole stand from 300 m, tree level).
+const VIEWS: [(&str, [f32; 3], [f32; 3]); 3] = [
+    ("near", [-14.0, 9.0, -16.0], [4.0, 7.0, 4.0]),
+    ("mid", [40.0, 30.0, -80.0], [0.0, 8.0, 0.0]),
+    ("far", [-120.0, 90.0, -260.0], [0.0, 6.0, 0.0]),
+];
+
+fn scene() -> Scene {
+    Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses")
+}
+
+#[test]
+fn geometry_and_btf_match_their_references_at_three_distances() {
+    let ctx = gpu();
+    let scene = scene();
+    let world = World::build(&scene).unwrap();
+    let cache = std::env::temp_dir()
+        .join(format!("canopy-images-test-{}", std::process::id()))
+        .join("stand.canopy");
+    let (baked, _) = bake::load_or_bake_at(&cache, &ctx, &scene, &world, &mut |_| {}).unwrap();
+    let mut renderer = Renderer::new(&ctx, &world).unwrap();
+    renderer.attach_btf(&ctx, &baked, &world).unwrap();
+    let mut worst = 0.0f32;
+    for (name, eye, at) in VIEWS {
+        for method in [Method::Geometry, Method::Btf] {
+            let mut frame = FrameDesc::from_scene(&scene);
+            frame.camera = Camera::look_at(Vec3::from(eye), Vec3::from(at), 50.0);
+            frame.method = method;
+            let (img, stats) = renderer
+                .render_image(&ctx, &frame, SIZE.0, SIZE.1, 1)
+                .unwrap();
+            if method == Method::Btf {
+                eprintln!("{name}: btf levels {:?}", stats.btf.unwrap().trees_per_level);
+            }
+            let mean = check_snapshot(&format!("stand_{name}_{}", method.name()), &img, MAX_MEAN_FLIP);
+            eprintln!("{name} {}: mean FLIP {mean:.5} against the reference", method.name());
+            worst = worst.max(mean);
+        }
+    }
+    eprintln!("largest mean FLIP against the references: {worst:.5}");
+}
