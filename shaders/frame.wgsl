@@ -1,37 +1,67 @@
-// The per-frame uniforms every pass sees. Prepended to each pass's file.
-
-const CASCADES: u32 = 3u;
+// The per-frame uniforms every pass sees, and the small helpers every pass shares.
+// Prepended to each pass's file (WGSL has no include). Every flag and count has a field of
+// its own; `FrameUniforms` in src/render/frame.rs mirrors this block byte for byte, and
+// tests/gpu_layout.rs checks the two against each other.
 
 struct Frame {
     view_proj: mat4x4<f32>,
     inv_view_proj: mat4x4<f32>,
+    // The geometry method's shadow cascades, seen from the sun.
     light_view_proj: array<mat4x4<f32>, 3>,
-    // xyz: camera position; w: fog density (1/m)
-    camera_pos: vec4<f32>,
-    // xyz: unit view direction (picks the shadow cascade by view depth)
-    camera_forward: vec4<f32>,
-    // xyz: unit vector towards the sun; w: 1 when shadows are on
-    sun_dir: vec4<f32>,
-    // rgb: sun colour x intensity (0 when the sun is below the horizon)
-    sun_color: vec4<f32>,
-    // rgb: sky ambient from above / from below (colour x intensity)
-    sky_ambient: vec4<f32>,
-    ground_ambient: vec4<f32>,
-    // background colours (not scaled by intensity)
-    sky_zenith: vec4<f32>,
-    sky_horizon: vec4<f32>,
-    // xyz: far distance of each cascade (view depth, m); w: 1 / shadow-map size
-    cascade_splits: vec4<f32>,
-    // xyz: world size of one shadow-map texel in each cascade
-    cascade_texel: vec4<f32>,
-    // y: PCF radius (texels); z: exposure
-    shadow_params: vec4<f32>,
+    camera_pos: vec3<f32>,
+    // Fog density (1/m): far things fade towards the horizon colour.
+    fog_density: f32,
+    // Unit view direction (picks the shadow cascade by view depth).
+    camera_forward: vec3<f32>,
+    // Every pass's colour is scaled by it.
+    exposure: f32,
+    // Unit vector towards the sun.
+    sun_dir: vec3<f32>,
+    // 1 when sun shadows apply (the cascades, or the ground depth map), else 0.
+    shadows_on: u32,
+    // Sun colour x intensity (0 when the sun is below the horizon).
+    sun_color: vec3<f32>,
+    // PCF radius of the cascades, in texels.
+    pcf_radius: f32,
+    // Sky ambient from above / from below (colour x intensity).
+    sky_ambient: vec3<f32>,
+    _pad0: f32,
+    ground_ambient: vec3<f32>,
+    _pad1: f32,
+    // Background colours (not scaled by intensity).
+    sky_zenith: vec3<f32>,
+    _pad2: f32,
+    sky_horizon: vec3<f32>,
+    _pad3: f32,
+    // Far distance of each cascade (view depth, m).
+    cascade_splits: vec3<f32>,
+    // 1 / the side of a cascade's map (one texel in uv).
+    cascade_texel_uv: f32,
+    // World size of one texel in each cascade.
+    cascade_texel_world: vec3<f32>,
+    _pad4: f32,
     // The sun's view of the whole scene, for the ground shadow maps.
     ground_light_view_proj: mat4x4<f32>,
-    // x: 1 when the ground alpha shadow map applies; y: 1 when the terrain's depth from
-    // the same pass replaces the cascades; z: world size of one of its texels; w: the
-    // fraction of the textures' side in use (less while the sun is being dragged)
-    ground_params: vec4<f32>,
+    // 1 when the ground alpha shadow map applies.
+    ground_alpha_on: u32,
+    // 1 when the terrain's depth from the same pass replaces the cascades.
+    terrain_depth_on: u32,
+    // World size of one texel of the ground maps.
+    ground_texel_world: f32,
+    // Fraction of the ground textures' side in use (less while the sun is being dragged).
+    ground_uv_scale: f32,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
+
+// Texture coordinates of a point at `ndc` (x right, y up) in a map seen by the same view.
+fn ndc_to_uv(ndc: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+}
+
+// The tail of every colour pass: fog towards the horizon colour with distance (`coverage`
+// scales the horizon colour for premultiplied, partly covered fragments), then exposure.
+fn fog_and_exposure(c: vec3<f32>, coverage: f32, dist: f32) -> vec3<f32> {
+    let fog = 1.0 - exp(-dist * frame.fog_density);
+    return mix(c, frame.sky_horizon * coverage, fog) * frame.exposure;
+}

@@ -10,7 +10,8 @@
 @group(0) @binding(4) var ground_sampler: sampler;
 // The terrain's depth seen from the sun, drawn with the alpha map over the whole scene: the
 // image-based methods' terrain shadows, in place of the cascades.
-@group(0) @binding(5) var ground_depth: texture_depth_2d;
+// (One layer, so that one PCF function serves it and the cascades.)
+@group(0) @binding(5) var ground_depth: texture_depth_2d_array;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -48,68 +49,64 @@ fn cascade_for(view_depth: f32) -> u32 {
 fn ground_coords(world: vec3<f32>) -> vec3<f32> {
     let lp = frame.ground_light_view_proj * vec4<f32>(world, 1.0);
     let ndc = lp.xyz / lp.w;
-    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    let uv = ndc_to_uv(ndc.xy);
     if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
         return vec3<f32>(-1.0, -1.0, ndc.z);
     }
     // Keep the filter footprint inside the part of the textures in use.
     let size = f32(textureDimensions(ground_depth).x);
-    let scale = frame.ground_params.w;
+    let scale = frame.ground_uv_scale;
     let t = clamp(uv * scale, vec2<f32>(0.5 / size), vec2<f32>(scale - 0.5 / size));
     return vec3<f32>(t, ndc.z);
 }
 
-// Fraction of the sun the terrain lets reach `world`, 3x3 PCF on the ground depth map.
-fn terrain_visibility(world: vec3<f32>, normal: vec3<f32>) -> f32 {
-    // Offset along the normal and towards the sun by about a texel, against acne.
-    let texel_world = frame.ground_params.z;
-    let p = world + (normal * 1.5 + frame.sun_dir.xyz) * texel_world;
-    let c = ground_coords(p);
-    if c.x < 0.0 || c.z > 1.0 {
-        return 1.0;
-    }
-    let texel = 1.0 / f32(textureDimensions(ground_depth).x);
+// Fraction of a 3x3 block of depth comparisons around `uv` (`step` apart, in uv) that
+// see the sun: percentage-closer filtering.
+fn pcf3x3(map: texture_depth_2d_array, layer: i32, uv: vec2<f32>, depth: f32, step: f32) -> f32 {
     var lit = 0.0;
     for (var y = -1; y <= 1; y++) {
         for (var x = -1; x <= 1; x++) {
-            let o = vec2<f32>(f32(x), f32(y)) * texel;
-            lit += textureSampleCompareLevel(ground_depth, shadow_sampler, c.xy + o, c.z);
+            let o = vec2<f32>(f32(x), f32(y)) * step;
+            lit += textureSampleCompareLevel(map, shadow_sampler, uv + o, layer, depth);
         }
     }
     return lit / 9.0;
 }
 
+// Fraction of the sun the terrain lets reach `world`, 3x3 PCF on the ground depth map.
+fn terrain_visibility(world: vec3<f32>, normal: vec3<f32>) -> f32 {
+    // Offset along the normal and towards the sun by about a texel, against acne.
+    let p = world + (normal * 1.5 + frame.sun_dir) * frame.ground_texel_world;
+    let c = ground_coords(p);
+    if c.x < 0.0 || c.z > 1.0 {
+        return 1.0;
+    }
+    let texel = 1.0 / f32(textureDimensions(ground_depth).x);
+    return pcf3x3(ground_depth, 0, c.xy, c.z, texel);
+}
+
 // Fraction of the sun that reaches `world` (1 = lit), 3x3 PCF on the cascade's map (or on
 // the ground depth map, for the image-based methods).
 fn sun_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> f32 {
-    if frame.sun_dir.w < 0.5 {
+    if frame.shadows_on == 0u {
         return 1.0;
     }
-    if frame.ground_params.y > 0.5 {
+    if frame.terrain_depth_on != 0u {
         return terrain_visibility(world, normal);
     }
     if view_depth >= frame.cascade_splits.z {
         return 1.0;
     }
     let c = cascade_for(view_depth);
-    let texel = frame.cascade_splits.w;
     // Offset along the normal by about a texel of this cascade, against acne.
-    let p = world + normal * frame.cascade_texel[c] * 1.5;
+    let p = world + normal * frame.cascade_texel_world[c] * 1.5;
     let lp = frame.light_view_proj[c] * vec4<f32>(p, 1.0);
     let ndc = lp.xyz / lp.w;
-    let uv = vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5);
+    let uv = ndc_to_uv(ndc.xy);
     if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) || ndc.z > 1.0 {
         return 1.0;
     }
-    var lit = 0.0;
-    let r = frame.shadow_params.y;
-    for (var y = -1; y <= 1; y++) {
-        for (var x = -1; x <= 1; x++) {
-            let o = vec2<f32>(f32(x), f32(y)) * texel * r;
-            lit += textureSampleCompareLevel(shadow_map, shadow_sampler, uv + o, i32(c), ndc.z);
-        }
-    }
-    return lit / 9.0;
+    return pcf3x3(shadow_map, i32(c), uv, ndc.z, frame.cascade_texel_uv * frame.pcf_radius);
 }
 
 // How much of the sun the trees let through to `world`, from the alpha shadow map.
@@ -128,9 +125,9 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) ve
     if leaf && !front {
         n = -n;
     }
-    let to_eye = frame.camera_pos.xyz - in.world;
+    let to_eye = frame.camera_pos - in.world;
     let dist = length(to_eye);
-    let l = frame.sun_dir.xyz;
+    let l = frame.sun_dir;
     let ndl = dot(n, l);
     // Leaves let some light through: a leaf lit from behind still glows a little.
     var direct = max(ndl, 0.0);
@@ -138,15 +135,13 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) ve
         direct = max(ndl, 0.0) + 0.3 * max(-ndl, 0.0);
     }
     // View depth along the camera axis picks the cascade.
-    let view_depth = dot(-to_eye, frame.camera_forward.xyz);
+    let view_depth = dot(-to_eye, frame.camera_forward);
     let offset_normal = select(n, sign(ndl) * n, leaf);
     var vis = sun_visibility(in.world, offset_normal, view_depth);
-    if frame.ground_params.x > 0.5 {
+    if frame.ground_alpha_on != 0u {
         vis *= ground_transmittance(in.world);
     }
-    let ambient = mix(frame.ground_ambient.rgb, frame.sky_ambient.rgb, n.y * 0.5 + 0.5);
-    var c = in.color * (frame.sun_color.rgb * direct * vis + ambient);
-    let fog = 1.0 - exp(-dist * frame.camera_pos.w);
-    c = mix(c, frame.sky_horizon.rgb, fog);
-    return vec4<f32>(c * frame.shadow_params.z, 1.0);
+    let ambient = mix(frame.ground_ambient, frame.sky_ambient, n.y * 0.5 + 0.5);
+    let c = in.color * (frame.sun_color * direct * vis + ambient);
+    return vec4<f32>(fog_and_exposure(c, 1.0, dist), 1.0);
 }

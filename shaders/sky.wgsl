@@ -19,14 +19,14 @@ fn vs_sky(@builtin(vertex_index) i: u32) -> SkyOut {
 @fragment
 fn fs_sky(in: SkyOut) -> @location(0) vec4<f32> {
     let p = frame.inv_view_proj * vec4<f32>(in.ndc, 0.5, 1.0);
-    let dir = normalize(p.xyz / p.w - frame.camera_pos.xyz);
+    let dir = normalize(p.xyz / p.w - frame.camera_pos);
     let up = clamp(dir.y, 0.0, 1.0);
-    var c = mix(frame.sky_horizon.rgb, frame.sky_zenith.rgb, sqrt(up));
+    var c = mix(frame.sky_horizon, frame.sky_zenith, sqrt(up));
     if dir.y < 0.0 {
-        c = mix(frame.sky_horizon.rgb, frame.ground_ambient.rgb, clamp(-dir.y * 4.0, 0.0, 1.0));
+        c = mix(frame.sky_horizon, frame.ground_ambient, clamp(-dir.y * 4.0, 0.0, 1.0));
     }
-    let cos_sun = dot(dir, frame.sun_dir.xyz);
-    let sun = frame.sun_color.rgb / max(max(frame.sun_color.r, frame.sun_color.g), max(frame.sun_color.b, 1e-3));
+    let cos_sun = dot(dir, frame.sun_dir);
+    let sun = frame.sun_color / max(max(frame.sun_color.r, frame.sun_color.g), max(frame.sun_color.b, 1e-3));
     c += sun * (smoothstep(0.99995, 0.99998, cos_sun) * 4.0 + pow(max(cos_sun, 0.0), 200.0) * 0.25);
-    return vec4<f32>(c * frame.shadow_params.z, 1.0);
+    return vec4<f32>(c * frame.exposure, 1.0);
 }

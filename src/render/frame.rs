@@ -195,26 +195,54 @@ pub struct FrameStats {
     pub ground_map_size: Option<u32>,
 }
 
-/// The uniform block of `common.wgsl` (`struct Frame`), byte for byte.
+/// The uniform block of `frame.wgsl` (`struct Frame`), byte for byte: each `[f32; 3]` is a
+/// WGSL `vec3<f32>` and the scalar after it fills its 16-byte slot (checked against the WGSL
+/// by tests/gpu_layout.rs).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct FrameUniforms {
     pub view_proj: [[f32; 4]; 4],
     pub inv_view_proj: [[f32; 4]; 4],
+    /// The geometry method's shadow cascades.
     pub light_view_proj: [[[f32; 4]; 4]; 3],
-    pub camera_pos: [f32; 4],
-    pub camera_forward: [f32; 4],
-    pub sun_dir: [f32; 4],
-    pub sun_color: [f32; 4],
-    pub sky_ambient: [f32; 4],
-    pub ground_ambient: [f32; 4],
-    pub sky_zenith: [f32; 4],
-    pub sky_horizon: [f32; 4],
-    pub cascade_splits: [f32; 4],
-    pub cascade_texel: [f32; 4],
-    pub shadow_params: [f32; 4],
+    pub camera_pos: [f32; 3],
+    /// Fog density per metre.
+    pub fog_density: f32,
+    pub camera_forward: [f32; 3],
+    pub exposure: f32,
+    /// Unit vector towards the sun.
+    pub sun_dir: [f32; 3],
+    /// 1 when sun shadows apply (cascades, or the ground depth map).
+    pub shadows_on: u32,
+    /// Sun colour x intensity (0 below the horizon, except in the studio).
+    pub sun_color: [f32; 3],
+    /// PCF radius of the cascades, in texels.
+    pub pcf_radius: f32,
+    pub sky_ambient: [f32; 3],
+    pub _pad0: f32,
+    pub ground_ambient: [f32; 3],
+    pub _pad1: f32,
+    pub sky_zenith: [f32; 3],
+    pub _pad2: f32,
+    pub sky_horizon: [f32; 3],
+    pub _pad3: f32,
+    /// Far view depth of each cascade (m).
+    pub cascade_splits: [f32; 3],
+    /// One texel of a cascade's map in uv (1 / its side).
+    pub cascade_texel_uv: f32,
+    /// World size of one texel in each cascade.
+    pub cascade_texel_world: [f32; 3],
+    pub _pad4: f32,
+    /// The sun's view of the whole scene, for the ground shadow maps.
     pub ground_light_view_proj: [[f32; 4]; 4],
-    pub ground_params: [f32; 4],
+    /// 1 when the ground alpha shadow map applies.
+    pub ground_alpha_on: u32,
+    /// 1 when the terrain's depth from the ground pass replaces the cascades.
+    pub terrain_depth_on: u32,
+    /// World size of one texel of the ground maps.
+    pub ground_texel_world: f32,
+    /// Fraction of the ground textures' side in use.
+    pub ground_uv_scale: f32,
 }
 
 impl FrameUniforms {
@@ -235,37 +263,31 @@ impl FrameUniforms {
             view_proj: vp.to_cols_array_2d(),
             inv_view_proj: vp.inverse().to_cols_array_2d(),
             light_view_proj: cascades.matrices.map(|m| m.to_cols_array_2d()),
-            camera_pos: frame
-                .camera
-                .position
-                .extend(frame.fog_density.max(0.0))
-                .to_array(),
-            camera_forward: frame.camera.forward().extend(0.0).to_array(),
-            sun_dir: frame
-                .sun
-                .direction()
-                .extend(if shadows_on { 1.0 } else { 0.0 })
-                .to_array(),
-            sun_color: sun.extend(0.0).to_array(),
-            sky_ambient: sky.extend(0.0).to_array(),
-            ground_ambient: ground.extend(0.0).to_array(),
-            sky_zenith: frame.sky.color.extend(1.0).to_array(),
-            sky_horizon: horizon.extend(1.0).to_array(),
-            cascade_splits: [
-                cascades.splits[0],
-                cascades.splits[1],
-                cascades.splits[2],
-                1.0 / frame.shadows.map_size.max(1) as f32,
-            ],
-            cascade_texel: [
-                cascades.texel_world[0],
-                cascades.texel_world[1],
-                cascades.texel_world[2],
-                0.0,
-            ],
-            shadow_params: [0.0, 1.0, frame.exposure, 0.0],
+            camera_pos: frame.camera.position.to_array(),
+            fog_density: frame.fog_density.max(0.0),
+            camera_forward: frame.camera.forward().to_array(),
+            exposure: frame.exposure,
+            sun_dir: frame.sun.direction().to_array(),
+            shadows_on: u32::from(shadows_on),
+            sun_color: sun.to_array(),
+            pcf_radius: 1.0,
+            sky_ambient: sky.to_array(),
+            _pad0: 0.0,
+            ground_ambient: ground.to_array(),
+            _pad1: 0.0,
+            sky_zenith: frame.sky.color.to_array(),
+            _pad2: 0.0,
+            sky_horizon: horizon.to_array(),
+            _pad3: 0.0,
+            cascade_splits: cascades.splits,
+            cascade_texel_uv: 1.0 / frame.shadows.map_size.max(1) as f32,
+            cascade_texel_world: cascades.texel_world,
+            _pad4: 0.0,
             ground_light_view_proj: Mat4::IDENTITY.to_cols_array_2d(),
-            ground_params: [0.0; 4],
+            ground_alpha_on: 0,
+            terrain_depth_on: 0,
+            ground_texel_world: 0.0,
+            ground_uv_scale: 0.0,
         }
     }
 

@@ -82,7 +82,7 @@ impl Layouts {
                     visibility: wgpu::ShaderStages::FRAGMENT,
                     ty: wgpu::BindingType::Texture {
                         sample_type: wgpu::TextureSampleType::Depth,
-                        view_dimension: wgpu::TextureViewDimension::D2,
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
                         multisampled: false,
                     },
                     count: None,
@@ -144,7 +144,7 @@ pub fn ground_terrain_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu
 }
 
 /// A pipeline drawing meshes from the sun with `shadow.wgsl`'s vertex stage, nothing culled:
-/// depth only, or with a fragment entry point writing one colour target.
+/// depth only, or with a fragment entry point of `ground_map.wgsl` writing one colour target.
 fn light_view_pipeline(
     device: &wgpu::Device,
     layouts: &Layouts,
@@ -165,6 +165,12 @@ fn light_view_pipeline(
             Some(&layouts.parts),
         ],
         immediate_size: 0,
+    });
+    let fragment_module = fragment.map(|_| {
+        device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("ground_map.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::ground_map().into()),
+        })
     });
     let targets = fragment.map(|(_, format)| {
         [Some(wgpu::ColorTargetState {
@@ -196,8 +202,9 @@ fn light_view_pipeline(
         multisample: Default::default(),
         fragment: fragment
             .zip(targets.as_ref())
-            .map(|((entry, _), targets)| wgpu::FragmentState {
-                module: &module,
+            .zip(fragment_module.as_ref())
+            .map(|(((entry, _), targets), module)| wgpu::FragmentState {
+                module,
                 entry_point: Some(entry),
                 compilation_options: Default::default(),
                 targets,

@@ -1,14 +1,17 @@
 //! WGSL sources. Each pass has its own file in `shaders/`; the shared parts (`frame.wgsl`:
-//! the frame uniforms; `instancing.wgsl`: the instanced hierarchy and vertex format) are
+//! the frame uniforms and the helpers every pass uses; `instancing.wgsl`: the instanced
+//! hierarchy and vertex format; `billboard.wgsl`: the billboard record and its quad) are
 //! prepended, since WGSL has no include. Everything is embedded at build time, so the binary
 //! runs from any directory.
 
 const FRAME: &str = include_str!("../../shaders/frame.wgsl");
 const INSTANCING: &str = include_str!("../../shaders/instancing.wgsl");
+const BILLBOARD: &str = include_str!("../../shaders/billboard.wgsl");
 const GEOMETRY: &str = include_str!("../../shaders/geometry.wgsl");
 const SHADOW: &str = include_str!("../../shaders/shadow.wgsl");
 const SKY: &str = include_str!("../../shaders/sky.wgsl");
 const BTF: &str = include_str!("../../shaders/btf.wgsl");
+const GROUND_MAP: &str = include_str!("../../shaders/ground_map.wgsl");
 
 /// A mesh pass's module: frame uniforms, instancing, then the pass's own file.
 fn with_instancing(pass: &str) -> String {
@@ -20,6 +23,11 @@ fn with_frame(pass: &str) -> String {
     format!("{FRAME}\n{pass}")
 }
 
+/// A pass that draws billboards: frame uniforms, the billboard record, the pass's file.
+fn with_billboards(pass: &str) -> String {
+    format!("{FRAME}\n{BILLBOARD}\n{pass}")
+}
+
 /// Every shader module the render core builds, by name, for validation and for pipelines.
 pub fn all() -> Vec<(&'static str, String)> {
     vec![
@@ -27,6 +35,7 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("shadow", shadow()),
         ("sky", sky()),
         ("btf", btf()),
+        ("ground_map", ground_map()),
     ]
 }
 
@@ -43,5 +52,10 @@ pub fn sky() -> String {
 }
 
 pub fn btf() -> String {
-    with_frame(BTF)
+    with_billboards(BTF)
+}
+
+/// The ground shadow maps' pass: its terrain is drawn with `shadow()`'s vertex stage.
+pub fn ground_map() -> String {
+    with_billboards(GROUND_MAP)
 }

@@ -7,6 +7,7 @@
 use glam::{Mat4, Vec3};
 
 use super::camera::Camera;
+use super::{GpuContext, SHADOW_FORMAT};
 use super::frame::ShadowSettings;
 use crate::model::mesh::Aabb;
 
@@ -126,6 +127,57 @@ pub fn split_depths(near: f32, far: f32) -> [f32; CASCADES] {
         *o = lambda * log + (1.0 - lambda) * uni;
     }
     out
+}
+
+/// The cascades' depth maps: one texture array, a layer per cascade.
+pub struct CascadeMaps {
+    /// Side of each layer, in texels.
+    pub size: u32,
+    /// The whole array, as the colour passes sample it.
+    pub array_view: wgpu::TextureView,
+    /// One view per cascade, to render into.
+    pub layer_views: Vec<wgpu::TextureView>,
+}
+
+impl CascadeMaps {
+    pub fn new(ctx: &GpuContext, size: u32) -> crate::Result<Self> {
+        let texture = ctx.checked("allocating the shadow maps", || {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("shadow cascades"),
+                size: wgpu::Extent3d {
+                    width: size,
+                    height: size,
+                    depth_or_array_layers: CASCADES as u32,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: SHADOW_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            })
+        })?;
+        let array_view = texture.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let layer_views = (0..CASCADES as u32)
+            .map(|i| {
+                texture.create_view(&wgpu::TextureViewDescriptor {
+                    dimension: Some(wgpu::TextureViewDimension::D2),
+                    base_array_layer: i,
+                    array_layer_count: Some(1),
+                    ..Default::default()
+                })
+            })
+            .collect();
+        Ok(Self {
+            size,
+            array_view,
+            layer_views,
+        })
+    }
 }
 
 #[cfg(test)]

@@ -6,6 +6,7 @@ use glam::{Mat4, Vec3};
 use wgpu::util::DeviceExt;
 
 use super::GpuContext;
+use super::pipelines::ColorPipelines;
 use super::camera::Frustum;
 use crate::model::World;
 use crate::model::mesh::{Aabb, Mesh, Vertex};
@@ -14,12 +15,23 @@ use crate::{Error, Result};
 /// Largest forest the GPU buffers are sized for (the scene file allows no more).
 pub const MAX_TREES: usize = 100_000;
 
-/// One tree instance as `common.wgsl` reads it.
+/// One tree instance as `instancing.wgsl` reads it (`struct TreeInstance`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct TreeGpu {
     pub model: [[f32; 4]; 4],
     pub tint: [f32; 4],
+}
+
+/// A part set's uniform as `instancing.wgsl` reads it (`struct PartSet`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct PartSetGpu {
+    /// Parts per tree: instance `i` of a draw is part `i % count` of tree `i / count`.
+    pub count: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+    pub _pad2: u32,
 }
 
 pub struct GpuMesh {
@@ -108,7 +120,10 @@ impl PartSet {
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(&format!("{label} part set")),
-                contents: bytemuck::cast_slice(&[parts.len() as u32, 0, 0, 0]),
+                contents: bytemuck::bytes_of(&PartSetGpu {
+                    count: parts.len() as u32,
+                    ..bytemuck::Zeroable::zeroed()
+                }),
                 usage: wgpu::BufferUsages::UNIFORM,
             });
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -313,6 +328,58 @@ impl WorldGpu {
             }
         }
         by_species
+    }
+
+    /// Draws the terrain (when asked) and the parts of `kinds` of the trees of `runs`; with
+    /// no colour pipelines it is a pass from the sun (its pipeline already set). Opaque parts
+    /// of every species first, then foliage, so the pipeline switches twice only. Returns
+    /// (triangles, trees, draw calls).
+    pub(crate) fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        runs: &[TreeRun],
+        pipes: Option<&ColorPipelines>,
+        terrain: bool,
+        kinds: &[PartKind],
+    ) -> (u64, u32, u32) {
+        let mut tris = 0u64;
+        let mut calls = 0u32;
+        let mut trees = 0u32;
+        if let Some(p) = pipes {
+            pass.set_pipeline(&p.opaque);
+        }
+        let mut draw =
+            |pass: &mut wgpu::RenderPass<'_>, set: &PartSet, first: u32, n: u32| {
+                pass.set_bind_group(2, &set.bind_group, &[]);
+                pass.set_vertex_buffer(0, set.mesh.vertices.slice(..));
+                pass.set_index_buffer(set.mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+                let start = first * set.count;
+                pass.draw_indexed(0..set.mesh.index_count, 0, start..start + n * set.count);
+                tris += set.mesh.triangles() * u64::from(n) * u64::from(set.count);
+                calls += 1;
+            };
+        if terrain {
+            draw(pass, &self.terrain, 0, 1);
+        }
+        // Opaque parts of every species first, then foliage, to switch pipelines twice only.
+        for foliage in [false, true] {
+            if let Some(p) = pipes {
+                pass.set_pipeline(if foliage { &p.foliage } else { &p.opaque });
+            }
+            for run in runs {
+                for set in self.species[run.species]
+                    .parts
+                    .iter()
+                    .filter(|s| s.foliage == foliage && kinds.contains(&s.kind))
+                {
+                    draw(pass, set, run.first, run.count);
+                }
+            }
+        }
+        for run in runs {
+            trees += run.count;
+        }
+        (tris, trees, calls)
     }
 
     /// Builds the instance list for this frame: index 0 is the terrain's identity, then each

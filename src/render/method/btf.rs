@@ -9,10 +9,12 @@ use std::collections::HashMap;
 
 use glam::{Mat3, Mat4, Vec3};
 
-use super::GpuContext;
-use super::camera::Frustum;
-use super::shading::{LevelBounds, Shade, VcmShading};
-use super::world_gpu::WorldGpu;
+use crate::render::GpuContext;
+use crate::render::camera::Frustum;
+use crate::render::shading::{LevelBounds, Shade, VcmShading};
+use crate::render::frame::FrameStats;
+use crate::render::pipelines::ColorPipelines;
+use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
 use crate::bake::billboard_axes;
 use crate::format::{Baked, Level};
 use crate::lod::{self, LevelTexels};
@@ -28,7 +30,8 @@ pub enum PlaneMode {
     /// One plane facing the eye; each view's image is reprojected onto it along its view.
     #[default]
     Single,
-    /// Three planes, each view's image on the plane facing its own sampled view.
+    /// Three planes, each view's image on the plane facing its own sampled view, summed
+    /// with the views' weights where the eye's ray meets each (annex A's weighted sum).
     Crossed,
 }
 
@@ -121,26 +124,69 @@ impl BtfStats {
     }
 }
 
-/// One billboard as `btf.wgsl` reads it.
+/// What a billboard's fragments show (`Billboard::mode` in `billboard.wgsl`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum BillboardMode {
+    /// The weighted images: the method itself.
+    Images = 0,
+    /// The tint alone, times coverage (the LOD-level overlay).
+    Tint = 1,
+    /// The VCM sun factor in grey, times coverage.
+    SunFactor = 2,
+}
+
+/// One billboard as `billboard.wgsl` reads it (`struct Billboard`), byte for byte: each
+/// `[_; 3]` is a WGSL `vec3` and the scalar after it fills its 16-byte slot (checked against
+/// the WGSL by tests/gpu_layout.rs).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct BillboardGpu {
-    pub center: [f32; 4],
-    pub plane_right: [f32; 4],
-    pub plane_up: [f32; 4],
-    pub obj_right: [f32; 4],
-    pub obj_up: [f32; 4],
-    pub view_index: [u32; 4],
-    pub light_index: [u32; 4],
-    pub view_weight: [f32; 4],
-    pub light_weight: [f32; 4],
-    /// rgb: tint; a: 0 images, 1 the tint alone (LOD colours), 2 the VCM sun factor.
-    pub tint: [f32; 4],
-    /// xyz: box coordinates of the billboard centre in its object's VCM box; w: the coarser
-    /// levels' sun factor.
-    pub vcm_box_origin: [f32; 4],
-    /// xyz: box coordinates per unit of `p` (radii); w: the coarser levels' sky factor.
-    pub vcm_box_scale: [f32; 4],
+    /// World centre of the quad.
+    pub center: [f32; 3],
+    /// World radius (half the quad's side).
+    pub radius: f32,
+    /// The quad's right axis in the world (unit).
+    pub plane_right: [f32; 3],
+    /// 1: one plane facing the eye; 3: crossed planes, one facing each sampled view (the
+    /// quad then bounds them and the fragment shader finds each plane's point).
+    pub planes: u32,
+    /// The quad's up axis in the world (unit).
+    pub plane_up: [f32; 3],
+    /// Opacity of the whole billboard (the LOD cross-fade).
+    pub opacity: f32,
+    /// The quad's axes in the object frame, where the images were taken.
+    pub obj_right: [f32; 3],
+    pub _pad0: f32,
+    pub obj_up: [f32; 3],
+    pub _pad1: f32,
+    /// Sample indices of the 3 nearest views.
+    pub view_index: [u32; 3],
+    /// First layer of this object's image set in the texture array.
+    pub layer_base: u32,
+    /// Sample indices of the 3 nearest lights.
+    pub light_index: [u32; 3],
+    /// Number of light samples of the bake.
+    pub light_count: u32,
+    /// View weights (0 = culled).
+    pub view_weight: [f32; 3],
+    /// Number of view samples of the bake.
+    pub view_count: u32,
+    /// Light weights (0 = culled).
+    pub light_weight: [f32; 3],
+    pub _pad2: f32,
+    /// Colour tint of the tree, or the overlay colour.
+    pub tint: [f32; 3],
+    /// A [`BillboardMode`].
+    pub mode: u32,
+    /// Box coordinates of the billboard centre in its object's VCM box.
+    pub vcm_box_origin: [f32; 3],
+    /// The coarser levels' sun factor at the billboard's centre.
+    pub parent_direct: f32,
+    /// Box coordinates per unit of `p` (radii).
+    pub vcm_box_scale: [f32; 3],
+    /// The coarser levels' sky factor at the billboard's centre.
+    pub parent_sky: f32,
     /// Sun visibility at the object's 8 box corners.
     pub vcm_direct: [[f32; 4]; 2],
     /// Sky visibility at the 8 corners.
@@ -149,18 +195,30 @@ pub struct BillboardGpu {
 
 /// A billboard with every field zero and no VCM shading (all factors 1).
 const NO_SHADE: BillboardGpu = BillboardGpu {
-    center: [0.0; 4],
-    plane_right: [0.0; 4],
-    plane_up: [0.0; 4],
-    obj_right: [0.0; 4],
-    obj_up: [0.0; 4],
-    view_index: [0; 4],
-    light_index: [0; 4],
-    view_weight: [0.0; 4],
-    light_weight: [0.0; 4],
-    tint: [0.0; 4],
-    vcm_box_origin: [0.5, 0.5, 0.5, 1.0],
-    vcm_box_scale: [0.0, 0.0, 0.0, 1.0],
+    center: [0.0; 3],
+    radius: 0.0,
+    plane_right: [0.0; 3],
+    planes: 1,
+    plane_up: [0.0; 3],
+    opacity: 1.0,
+    obj_right: [0.0; 3],
+    _pad0: 0.0,
+    obj_up: [0.0; 3],
+    _pad1: 0.0,
+    view_index: [0; 3],
+    layer_base: 0,
+    light_index: [0; 3],
+    light_count: 0,
+    view_weight: [0.0; 3],
+    view_count: 0,
+    light_weight: [0.0; 3],
+    _pad2: 0.0,
+    tint: [0.0; 3],
+    mode: BillboardMode::Images as u32,
+    vcm_box_origin: [0.5, 0.5, 0.5],
+    parent_direct: 1.0,
+    vcm_box_scale: [0.0; 3],
+    parent_sky: 1.0,
     vcm_direct: [[1.0; 4]; 2],
     vcm_sky: [[1.0; 4]; 2],
 };
@@ -171,10 +229,10 @@ impl BillboardGpu {
     fn shade(mut self, shade: &Shade, set: &SetInfo) -> Self {
         let points = crate::vcm::sample_box(&set.bounds);
         let ext = (points.max - points.min).max(Vec3::splat(1e-6));
-        let origin = (set.center - points.min) / ext;
-        let scale = Vec3::splat(set.radius) / ext;
-        self.vcm_box_origin = origin.extend(shade.parent_direct).to_array();
-        self.vcm_box_scale = scale.extend(shade.parent_sky).to_array();
+        self.vcm_box_origin = ((set.center - points.min) / ext).to_array();
+        self.vcm_box_scale = (Vec3::splat(set.radius) / ext).to_array();
+        self.parent_direct = shade.parent_direct;
+        self.parent_sky = shade.parent_sky;
         let d = shade.direct;
         let k = shade.sky;
         self.vcm_direct = [[d[0], d[1], d[2], d[3]], [d[4], d[5], d[6], d[7]]];
@@ -484,7 +542,7 @@ impl BtfAssets {
         ctx: &GpuContext,
         world: &WorldGpu,
         visible: &[Vec<u32>],
-        camera: &super::Camera,
+        camera: &crate::render::Camera,
         focal_px: f32,
         to_sun: Vec3,
         frustum: &Frustum,
@@ -539,12 +597,14 @@ impl BtfAssets {
                 for (level, opacity) in draws {
                     let li = level_index(level);
                     let tint = if settings.show_lod {
-                        let c = LOD_COLOURS[li];
-                        [c[0], c[1], c[2], 1.0]
+                        (LOD_COLOURS[li], BillboardMode::Tint)
                     } else if settings.show_shadow {
-                        [1.0, 1.0, 1.0, 2.0]
+                        ([1.0; 3], BillboardMode::SunFactor)
                     } else {
-                        [data.tint[0], data.tint[1], data.tint[2], 0.0]
+                        (
+                            [data.tint[0], data.tint[1], data.tint[2]],
+                            BillboardMode::Images,
+                        )
                     };
                     let mut emit = |part: Mat4,
                                     set: &SetInfo,
@@ -676,7 +736,7 @@ impl BtfAssets {
         to_sun: Vec3,
         frustum: &Frustum,
         settings: &BtfSettings,
-        tint: [f32; 4],
+        tint: ([f32; 3], BillboardMode),
         opacity: f32,
         level: usize,
         shade: &Shade,
@@ -711,55 +771,73 @@ impl BtfAssets {
         stats.billboards[level] += 1;
         let depth = (center - cam).dot(forward);
         let base = BillboardGpu {
-            center: center.extend(radius).to_array(),
-            plane_right: [0.0, 0.0, 0.0, -1.0],
-            plane_up: [0.0, 0.0, 0.0, 1.0],
-            obj_right: [0.0; 4],
-            obj_up: [0.0; 4],
-            view_index: [vb.index[0], vb.index[1], vb.index[2], set.layer_base],
-            light_index: [
-                lb.index[0],
-                lb.index[1],
-                lb.index[2],
-                self.lights.len() as u32,
-            ],
-            view_weight: [
-                vb.weight[0],
-                vb.weight[1],
-                vb.weight[2],
-                self.views.len() as f32,
-            ],
-            light_weight: [lb.weight[0], lb.weight[1], lb.weight[2], 0.0],
-            tint,
+            center: center.to_array(),
+            radius,
+            opacity,
+            view_index: vb.index,
+            layer_base: set.layer_base,
+            light_index: lb.index,
+            light_count: self.lights.len() as u32,
+            view_weight: vb.weight,
+            view_count: self.views.len() as u32,
+            light_weight: lb.weight,
+            tint: tint.0,
+            mode: tint.1 as u32,
             ..NO_SHADE
         }
         .shade(shade, set);
-        let with_axes = |obj_r: Vec3, obj_u: Vec3, slot: f32| {
-            let mut b = base;
-            b.plane_right = (rot * obj_r).normalize_or(Vec3::X).extend(slot).to_array();
-            b.plane_up = (rot * obj_u)
-                .normalize_or(Vec3::Y)
-                .extend(opacity)
-                .to_array();
-            b.obj_right = obj_r.extend(0.0).to_array();
-            b.obj_up = obj_u.extend(0.0).to_array();
-            b
+        // The quad faces the eye in both modes; with crossed planes it only bounds the
+        // three planes, one facing each sampled view, which the fragment shader intersects.
+        let (r, u) = billboard_axes(v_obj);
+        let bb = BillboardGpu {
+            plane_right: (rot * r).normalize_or(Vec3::X).to_array(),
+            plane_up: (rot * u).normalize_or(Vec3::Y).to_array(),
+            obj_right: r.to_array(),
+            obj_up: u.to_array(),
+            planes: match settings.planes {
+                PlaneMode::Single => 1,
+                PlaneMode::Crossed => 3,
+            },
+            ..base
         };
-        match settings.planes {
-            PlaneMode::Single => {
-                let (r, u) = billboard_axes(v_obj);
-                out.push((depth, with_axes(r, u, -1.0)));
-            }
-            PlaneMode::Crossed => {
-                for k in 0..3 {
-                    if vb.weight[k] > 0.0 {
-                        let dir = self.views.directions()[vb.index[k] as usize];
-                        let (r, u) = billboard_axes(dir);
-                        out.push((depth, with_axes(r, u, k as f32)));
-                    }
-                }
-            }
+        out.push((depth, bb));
+    }
+
+    /// The frame's draws in the main pass: the trunks (and limbs) of the trees drawn at the
+    /// finer levels as geometry (`runs`: trunk only, then trunk and limbs; the terrain with
+    /// the first when asked), then every billboard in one instanced draw, back to front.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn draw_main(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        world: &WorldGpu,
+        runs: &[Vec<TreeRun>],
+        pipes: &ColorPipelines,
+        pipeline: Option<&wgpu::RenderPipeline>,
+        bf: &BtfFrame,
+        terrain: bool,
+        stats: &mut FrameStats,
+    ) {
+        let (t0, _, c0) = world.draw(pass, &runs[0], Some(pipes), terrain, &[PartKind::Trunk]);
+        let (t1, _, c1) = world.draw(
+            pass,
+            &runs[1],
+            Some(pipes),
+            false,
+            &[PartKind::Trunk, PartKind::Limbs],
+        );
+        stats.triangles = t0 + t1 + 2 * u64::from(bf.billboards);
+        stats.trees_drawn = bf.stats.trees_per_level.iter().sum();
+        stats.draw_calls += c0 + c1;
+        if let Some(pipeline) = pipeline
+            && bf.billboards > 0
+        {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(1, &self.bind_group, &[]);
+            pass.draw(0..6, 0..bf.billboards);
+            stats.draw_calls += 1;
         }
+        stats.btf = Some(bf.stats);
     }
 
     /// Every tree's tree-level billboard as the sun sees it (for the ground alpha shadow
@@ -782,24 +860,18 @@ impl BtfAssets {
             let vb = self.views.blend(v_obj);
             let (r, u) = billboard_axes(v_obj);
             out.push(BillboardGpu {
-                center: m
-                    .transform_point3(set.center)
-                    .extend(set.radius * scale)
-                    .to_array(),
-                plane_right: (rot * r).normalize_or(Vec3::X).extend(-1.0).to_array(),
-                plane_up: (rot * u).normalize_or(Vec3::Y).extend(1.0).to_array(),
-                obj_right: r.extend(0.0).to_array(),
-                obj_up: u.extend(0.0).to_array(),
-                view_index: [vb.index[0], vb.index[1], vb.index[2], set.layer_base],
-                light_index: [0, 0, 0, self.lights.len() as u32],
-                view_weight: [
-                    vb.weight[0],
-                    vb.weight[1],
-                    vb.weight[2],
-                    self.views.len() as f32,
-                ],
-                light_weight: [0.0; 4],
-                tint: [1.0, 1.0, 1.0, 0.0],
+                center: m.transform_point3(set.center).to_array(),
+                radius: set.radius * scale,
+                plane_right: (rot * r).normalize_or(Vec3::X).to_array(),
+                plane_up: (rot * u).normalize_or(Vec3::Y).to_array(),
+                obj_right: r.to_array(),
+                obj_up: u.to_array(),
+                view_index: vb.index,
+                layer_base: set.layer_base,
+                light_count: self.lights.len() as u32,
+                view_weight: vb.weight,
+                view_count: self.views.len() as u32,
+                tint: [1.0; 3],
                 ..NO_SHADE
             });
         }
@@ -943,7 +1015,7 @@ fn upload_layer(
         );
         bytes += u64::from(4 * w * h);
         if w > 1 {
-            img = super::target::downsample(&img, 2);
+            img = crate::render::target::downsample(&img, 2);
         }
     }
     bytes
@@ -963,10 +1035,11 @@ fn build_opacity_pipeline(
     billboard_pipeline(
         device,
         [frame_layout, btf_layout],
+        ("ground_map.wgsl", crate::render::shaders::ground_map()),
         "fs_opacity",
-        super::GROUND_FORMAT,
+        crate::render::GROUND_FORMAT,
         transmit,
-        (super::SHADOW_FORMAT, wgpu::CompareFunction::Less),
+        (crate::render::SHADOW_FORMAT, wgpu::CompareFunction::Less),
     )
 }
 
@@ -986,26 +1059,29 @@ fn build_pipeline(
     billboard_pipeline(
         device,
         [frame_layout, btf_layout],
+        ("btf.wgsl", crate::render::shaders::btf()),
         "fs_billboard",
         format,
         over,
-        (super::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
+        (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
     )
 }
 
-/// A pipeline drawing the billboards of `btf.wgsl` with `fragment`, blended by `blend`,
+/// A pipeline drawing the billboards of `billboard.wgsl` with `fragment` of the module
+/// `source` (named, source), blended by `blend`,
 /// depth-tested (never written) against `depth`.
 fn billboard_pipeline(
     device: &wgpu::Device,
     layouts: [&wgpu::BindGroupLayout; 2],
+    source: (&str, String),
     fragment: &str,
     format: wgpu::TextureFormat,
     blend: wgpu::BlendComponent,
     depth: (wgpu::TextureFormat, wgpu::CompareFunction),
 ) -> wgpu::RenderPipeline {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("btf.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(super::shaders::btf().into()),
+        label: Some(source.0),
+        source: wgpu::ShaderSource::Wgsl(source.1.into()),
     });
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(fragment),

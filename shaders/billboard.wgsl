@@ -1,0 +1,153 @@
+// The billboards of the image-based methods: one record per billboard in a storage buffer,
+// drawn as an instanced quad. Shared by the btf pass and the ground-map pass. `BillboardGpu`
+// in src/render/btf.rs mirrors the record byte for byte (checked by tests/gpu_layout.rs).
+
+struct Billboard {
+    // World centre of the quad.
+    center: vec3<f32>,
+    // World radius (half the quad's side).
+    radius: f32,
+    // The quad's right axis in the world (unit); with the up axis, it faces the eye.
+    plane_right: vec3<f32>,
+    // 1: a single plane facing the eye, each view's image reprojected onto it; 3: crossed
+    // planes, each view's image on the plane facing that view (the quad then only bounds
+    // them, and the fragment finds where the eye's ray meets each).
+    planes: u32,
+    // The quad's up axis in the world (unit).
+    plane_up: vec3<f32>,
+    // Opacity of the whole billboard (the LOD cross-fade).
+    opacity: f32,
+    // The quad's axes in the object frame, where the images were taken.
+    obj_right: vec3<f32>,
+    _pad0: f32,
+    obj_up: vec3<f32>,
+    _pad1: f32,
+    // Sample indices of the 3 nearest views.
+    view_index: vec3<u32>,
+    // First layer of this object's image set in the texture array.
+    layer_base: u32,
+    // Sample indices of the 3 nearest lights.
+    light_index: vec3<u32>,
+    // Number of light samples of the bake.
+    light_count: u32,
+    // View weights (0 = culled).
+    view_weight: vec3<f32>,
+    // Number of view samples of the bake.
+    view_count: u32,
+    // Light weights (0 = culled).
+    light_weight: vec3<f32>,
+    _pad2: f32,
+    // Colour tint of the tree, or the overlay colour.
+    tint: vec3<f32>,
+    // What the fragment shows: MODE_IMAGES, MODE_TINT or MODE_SUN_FACTOR.
+    mode: u32,
+    // Visibility cube maps (Meyer 2001, 5.2): the billboard centre in its object's box
+    // coordinates (0..1 from the box's min to its max corner).
+    vcm_box_origin: vec3<f32>,
+    // The coarser levels' sun factor at the billboard's centre.
+    parent_direct: f32,
+    // Box coordinates per unit of `p`.
+    vcm_box_scale: vec3<f32>,
+    // The coarser levels' sky factor at the billboard's centre.
+    parent_sky: f32,
+    // Sun visibility at the 8 box corners (corner k: bit 0 = max x, bit 1 = max y,
+    // bit 2 = max z), then sky visibility at the same corners.
+    vcm_direct: array<vec4<f32>, 2>,
+    vcm_sky: array<vec4<f32>, 2>,
+}
+
+// `Billboard::mode`: the weighted images (the method itself).
+const MODE_IMAGES: u32 = 0u;
+// The tint alone, times coverage (the LOD-level overlay).
+const MODE_TINT: u32 = 1u;
+// The VCM sun factor in grey, times coverage.
+const MODE_SUN_FACTOR: u32 = 2u;
+
+@group(1) @binding(0) var<storage, read> billboards: array<Billboard>;
+// Two entries per view sample: the image's right and up axes in the object frame.
+@group(1) @binding(1) var<storage, read> view_axes: array<vec4<f32>>;
+@group(1) @binding(2) var btf_images: texture_2d_array<f32>;
+@group(1) @binding(3) var btf_sampler: sampler;
+
+struct BillboardOut {
+    @builtin(position) clip: vec4<f32>,
+    // position on the quad in the object frame, in units of the object's radius
+    @location(0) p: vec3<f32>,
+    @location(1) world: vec3<f32>,
+    @location(2) @interpolate(flat) instance: u32,
+    // the eye in the object frame, in radii (crossed planes)
+    @location(3) @interpolate(flat) eye: vec3<f32>,
+}
+
+// Crossed planes reach sqrt(2) radii from the centre (a square's corner). A quad through
+// the centre facing an eye at distance d covers a sphere of radius r when it is
+// d / sqrt(d^2 - r^2) times larger than r; near the sphere the growth is capped.
+fn crossed_half_side(center: vec3<f32>, radius: f32) -> f32 {
+    let r = radius * sqrt(2.0);
+    let d = max(length(frame.camera_pos - center), r * 1.05);
+    return min(r * d / sqrt(d * d - r * r), 4.0 * r);
+}
+
+@vertex
+fn vs_billboard(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance: u32) -> BillboardOut {
+    let b = billboards[instance];
+    // Two triangles: corners (-1,-1) (1,-1) (1,1), (-1,-1) (1,1) (-1,1).
+    var xs = array<f32, 6>(-1.0, 1.0, 1.0, -1.0, 1.0, -1.0);
+    var ys = array<f32, 6>(-1.0, -1.0, 1.0, -1.0, 1.0, 1.0);
+    let a = xs[vi % 6u];
+    let c = ys[vi % 6u];
+    var half = b.radius;
+    if b.planes == 3u {
+        half = crossed_half_side(b.center, b.radius);
+    }
+    let world = b.center + (a * b.plane_right + c * b.plane_up) * half;
+    var out: BillboardOut;
+    out.clip = frame.view_proj * vec4<f32>(world, 1.0);
+    out.p = a * b.obj_right + c * b.obj_up;
+    out.eye = vec3<f32>(0.0);
+    if b.planes == 3u {
+        out.p *= half / b.radius;
+        // World to object frame: the quad's axes are the same directions in both frames.
+        let to_eye = (frame.camera_pos - b.center) / b.radius;
+        let plane_fwd = cross(b.plane_right, b.plane_up);
+        let obj_fwd = cross(b.obj_right, b.obj_up);
+        out.eye = dot(to_eye, b.plane_right) * b.obj_right + dot(to_eye, b.plane_up) * b.obj_up
+            + dot(to_eye, plane_fwd) * obj_fwd;
+    }
+    out.world = world;
+    out.instance = instance;
+    return out;
+}
+
+// Where the point `p` of the quad (object frame, in radii) falls in the image of view
+// sample `v`, seen along that view, with the texture-coordinate gradients for filtering.
+struct ViewTexcoords {
+    uv: vec2<f32>,
+    gx: vec2<f32>,
+    gy: vec2<f32>,
+}
+
+fn view_texcoords(v: u32, p: vec3<f32>, dpx: vec3<f32>, dpy: vec3<f32>) -> ViewTexcoords {
+    let r = view_axes[2u * v].xyz;
+    let u = view_axes[2u * v + 1u].xyz;
+    var t: ViewTexcoords;
+    t.uv = vec2<f32>(dot(p, r), -dot(p, u)) * 0.5 + 0.5;
+    t.gx = vec2<f32>(dot(dpx, r), -dot(dpx, u)) * 0.5;
+    t.gy = vec2<f32>(dot(dpy, r), -dot(dpy, u)) * 0.5;
+    return t;
+}
+
+// Where the ray from `eye` through `p` (object frame, radii) meets the plane of view sample
+// `v` (through the centre, facing that view), in the same frame; w: 1 when the hit lies in
+// front of the eye and on the plane's square, else 0.
+fn view_plane_hit(v: u32, eye: vec3<f32>, p: vec3<f32>) -> vec4<f32> {
+    let r = view_axes[2u * v].xyz;
+    let u = view_axes[2u * v + 1u].xyz;
+    let n = cross(r, u);
+    let d = p - eye;
+    let denom = dot(d, n);
+    let t = -dot(eye, n) / select(denom, 1e-12, abs(denom) < 1e-12);
+    let h = eye + t * d;
+    let on = t > 0.0 && abs(dot(h, r)) <= 1.0 && abs(dot(h, u)) <= 1.0;
+    return vec4<f32>(h, select(0.0, 1.0, on));
+}

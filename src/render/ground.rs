@@ -1,0 +1,281 @@
+//! The ground shadow maps of the image-based methods, both seen from the sun over the whole
+//! scene and rebuilt only when the sun moves: the trees' transmittance (the alpha shadow
+//! map; the terrain is drawn white into it, so it hides the trees behind it but casts
+//! nothing) and the terrain's depth (its own shadows: a hill shading a valley). They are
+//! drawn in one pass, into the top-left `size` x `size` texels of the textures.
+//!
+//! The maps are allocated only when a method first asks for them (the `geometry` method and
+//! the bake's studio renderers never do); until then the frame binds a 1x1 placeholder.
+
+use super::frame::FrameUniforms;
+use super::pipelines::{self, Layouts};
+use super::shadow::Cascades;
+use super::timing::GpuTimer;
+use super::world_gpu::WorldGpu;
+use super::{GpuContext, SHADOW_FORMAT};
+use crate::Result;
+
+/// Format of the ground alpha shadow map (transmittance).
+pub const GROUND_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
+/// Side of the ground shadow maps (alpha and terrain depth), covering the whole scene
+/// (about 0.35 m per texel on the default square kilometre).
+pub const GROUND_MAP_SIZE: u32 = 4096;
+/// Side of the ground shadow maps while the user holds the sun (`FrameDesc::sun_held`):
+/// a sixteenth of the texels, so that dragging the sun does not stall a software
+/// renderer; the full map follows on the first frame after the sun is let go.
+pub const GROUND_PREVIEW_SIZE: u32 = 1024;
+
+/// What a ground map was built for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GroundKey {
+    pub to_sun: glam::Vec3,
+    /// The trees are in it (not while only terrain and sky are shown).
+    pub trees: bool,
+    /// Side of the part of the textures in use.
+    pub size: u32,
+}
+
+/// The textures the colour passes sample (the maps, or the placeholders).
+pub struct GroundTextures {
+    /// Transmittance, as the ground pass draws it and the colour passes sample it.
+    pub alpha: wgpu::TextureView,
+    /// The terrain depth as the ground pass draws into it.
+    depth: wgpu::TextureView,
+    /// The same texture as a one-layer array, as the colour passes sample it.
+    pub depth_sampled: wgpu::TextureView,
+    /// Side of the textures.
+    capacity: u32,
+}
+
+impl GroundTextures {
+    fn new(ctx: &GpuContext, size: u32) -> Result<Self> {
+        let extent = wgpu::Extent3d {
+            width: size,
+            height: size,
+            depth_or_array_layers: 1,
+        };
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let (color, depth) = ctx.checked("allocating the ground shadow maps", || {
+            let texture = |label, format| {
+                ctx.device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: extent,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage,
+                    view_formats: &[],
+                })
+            };
+            (
+                texture("ground alpha shadow map", GROUND_FORMAT),
+                texture("ground terrain depth map", SHADOW_FORMAT),
+            )
+        })?;
+        Ok(Self {
+            alpha: color.create_view(&Default::default()),
+            depth: depth.create_view(&Default::default()),
+            depth_sampled: depth.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            }),
+            capacity: size,
+        })
+    }
+
+    /// The 1x1 textures bound while no method has asked for the maps.
+    pub fn placeholder(ctx: &GpuContext) -> Result<Self> {
+        Self::new(ctx, 1)
+    }
+}
+
+/// Billboards drawn into the alpha map: a pipeline, its group-1 bind group, and how many.
+pub struct GroundBillboards<'a> {
+    pub pipeline: &'a wgpu::RenderPipeline,
+    pub bind_group: &'a wgpu::BindGroup,
+    pub count: u32,
+}
+
+/// The ground shadow maps and what they were last built for.
+pub struct GroundMaps {
+    pub textures: GroundTextures,
+    uniforms: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    terrain_pipeline: wgpu::RenderPipeline,
+    light_view_proj: glam::Mat4,
+    /// World size (m) of one texel of the maps as last built.
+    texel_world: f32,
+    /// What the maps hold now (None: nothing yet).
+    built: Option<GroundKey>,
+    /// Timestamps around the pass, the GPU side of a sun move.
+    pub timer: Option<GpuTimer>,
+}
+
+impl GroundMaps {
+    pub fn new(ctx: &GpuContext, layouts: &Layouts) -> Result<Self> {
+        let size = GROUND_MAP_SIZE.min(ctx.device.limits().max_texture_dimension_2d);
+        let textures = GroundTextures::new(ctx, size)?;
+        let uniforms = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("ground shadow uniforms"),
+            size: std::mem::size_of::<FrameUniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("ground shadow"),
+            layout: &layouts.shadow_frame,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: uniforms.as_entire_binding(),
+            }],
+        });
+        let terrain_pipeline = ctx.checked("building the ground shadow pipeline", || {
+            pipelines::ground_terrain_pipeline(&ctx.device, layouts)
+        })?;
+        Ok(Self {
+            textures,
+            uniforms,
+            bind_group,
+            terrain_pipeline,
+            light_view_proj: glam::Mat4::IDENTITY,
+            texel_world: 0.0,
+            built: None,
+            timer: GpuTimer::new(ctx),
+        })
+    }
+
+    /// Forgets what the maps hold, so the next frame that uses them rebuilds them.
+    pub fn invalidate(&mut self) {
+        self.built = None;
+    }
+
+    /// Side (texels) of the part of the maps in use, once built.
+    pub fn built_size(&self) -> Option<u32> {
+        self.built.map(|k| k.size)
+    }
+
+    /// The key of the maps a frame needs, and whether the ones held must be rebuilt for
+    /// it: the sun moved, the trees came or went, or the sun was let go after a preview.
+    pub fn wanted(&self, to_sun: glam::Vec3, trees: bool, held: bool) -> (GroundKey, bool) {
+        let capacity = self.textures.capacity;
+        let size = if held {
+            GROUND_PREVIEW_SIZE.min(capacity)
+        } else {
+            capacity
+        };
+        let want = GroundKey {
+            to_sun,
+            trees,
+            size,
+        };
+        let rebuild = match self.built {
+            None => true,
+            Some(k) => k.to_sun != to_sun || k.trees != trees || (!held && k.size != size),
+        };
+        (want, rebuild)
+    }
+
+    /// Sets the ground maps' uniforms: the light matrix, alpha map on, terrain depth on,
+    /// world size of one texel, and the fraction of the textures in use.
+    pub fn apply(&self, uniforms: &mut FrameUniforms, terrain_depth: bool) {
+        let capacity = self.textures.capacity;
+        let size = self.built.map_or(capacity, |k| k.size);
+        uniforms.ground_light_view_proj = self.light_view_proj.to_cols_array_2d();
+        uniforms.ground_alpha_on = 1;
+        uniforms.terrain_depth_on = u32::from(terrain_depth);
+        uniforms.ground_texel_world = self.texel_world;
+        uniforms.ground_uv_scale = size as f32 / capacity.max(1) as f32;
+        if terrain_depth {
+            uniforms.shadows_on = 1;
+        }
+    }
+
+    /// Draws the maps for `key` from the sun: the terrain (white, with depth), then the
+    /// `billboards`, multiplying the transmittance. Submits the pass.
+    pub fn build(
+        &mut self,
+        ctx: &GpuContext,
+        world: &WorldGpu,
+        uniforms: &FrameUniforms,
+        key: GroundKey,
+        billboards: Option<GroundBillboards<'_>>,
+    ) {
+        let b_box = &world.scene_bounds;
+        let light = Cascades::fit_sphere(
+            key.to_sun,
+            b_box.center(),
+            0.5 * b_box.extent().length(),
+            key.size,
+        );
+        self.light_view_proj = light.matrices[0];
+        self.texel_world = light.texel_world[0];
+        let light_uniforms = uniforms.for_light(self.light_view_proj);
+        ctx.queue
+            .write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&light_uniforms));
+        let queries = self.timer.as_mut().and_then(|t| t.begin()).cloned();
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("ground shadow maps"),
+            });
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("ground shadow maps"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &self.textures.alpha,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::WHITE),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.textures.depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: queries.as_ref().map(|q| wgpu::RenderPassTimestampWrites {
+                query_set: q,
+                beginning_of_pass_write_index: Some(0),
+                end_of_pass_write_index: Some(1),
+            }),
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        let side = key.size as f32;
+        pass.set_viewport(0.0, 0.0, side, side, 0.0, 1.0);
+        pass.set_scissor_rect(0, 0, key.size, key.size);
+        pass.set_pipeline(&self.terrain_pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_bind_group(1, &world.trees_bind_group, &[]);
+        world.draw(&mut pass, &[], None, true, &[]);
+        if let Some(b) = billboards.filter(|b| b.count > 0) {
+            pass.set_pipeline(b.pipeline);
+            pass.set_bind_group(1, b.bind_group, &[]);
+            pass.draw(0..6, 0..b.count);
+        }
+        drop(pass);
+        if let Some(t) = &self.timer {
+            t.resolve(&mut encoder);
+        }
+        ctx.queue.submit([encoder.finish()]);
+        if let Some(t) = &mut self.timer {
+            t.after_submit();
+        }
+        self.built = Some(key);
+    }
+}
+
+/// The linear sampler of the alpha map.
+pub fn ground_sampler(ctx: &GpuContext) -> wgpu::Sampler {
+    ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("ground shadow"),
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        ..Default::default()
+    })
+}

@@ -1,0 +1,159 @@
+//! Every uniform and storage struct the Rust side uploads has the size and field offsets
+//! that the WGSL declaration gives it (naga's layouter, so no GPU is needed): a field added
+//! on one side only, or a `vec3` whose 16-byte slot is not filled, fails here instead of
+//! shading a frame with shifted values.
+
+use std::mem::{offset_of, size_of};
+
+use canopy::render::btf::BillboardGpu;
+use canopy::render::frame::FrameUniforms;
+use canopy::render::world_gpu::{PartSetGpu, TreeGpu};
+
+/// (size, [(field, offset)]) of a Rust struct, fields named as in WGSL.
+macro_rules! rust_layout {
+    ($t:ty { $($f:ident),* $(,)? }) => {
+        (size_of::<$t>(), vec![$((stringify!($f), offset_of!($t, $f))),*])
+    };
+}
+
+/// (span, [(member, offset)]) of the WGSL struct `name` in `module`'s source.
+fn wgsl_layout(source: &str, name: &str) -> (usize, Vec<(String, usize)>) {
+    let module = naga::front::wgsl::parse_str(source).expect("the module parses");
+    let mut layouter = naga::proc::Layouter::default();
+    layouter
+        .update(module.to_ctx())
+        .expect("naga lays the module out");
+    for (handle, ty) in module.types.iter() {
+        if ty.name.as_deref() != Some(name) {
+            continue;
+        }
+        let naga::TypeInner::Struct { members, span } = &ty.inner else {
+            panic!("{name} is not a struct");
+        };
+        assert_eq!(layouter[handle].size, *span);
+        let fields = members
+            .iter()
+            .map(|m| (m.name.clone().unwrap_or_default(), m.offset as usize))
+            .collect();
+        return (*span as usize, fields);
+    }
+    panic!("no struct {name} in the module");
+}
+
+fn check(what: &str, wgsl: (usize, Vec<(String, usize)>), rust: (usize, Vec<(&str, usize)>)) {
+    let mut problems = Vec::new();
+    if wgsl.0 != rust.0 {
+        problems.push(format!("size: WGSL {} bytes, Rust {}", wgsl.0, rust.0));
+    }
+    for (name, offset) in &wgsl.1 {
+        match rust.1.iter().find(|(n, _)| n == name) {
+            Some((_, o)) if o == offset => {}
+            Some((_, o)) => problems.push(format!("{name}: WGSL offset {offset}, Rust {o}")),
+            None => problems.push(format!("{name}: in WGSL, not in Rust")),
+        }
+    }
+    for (name, _) in &rust.1 {
+        if !wgsl.1.iter().any(|(n, _)| n == name) {
+            problems.push(format!("{name}: in Rust, not in WGSL"));
+        }
+    }
+    assert!(problems.is_empty(), "{what}:\n{}", problems.join("\n"));
+}
+
+#[test]
+fn frame_uniforms_match_frame_wgsl() {
+    let rust = rust_layout!(FrameUniforms {
+        view_proj,
+        inv_view_proj,
+        light_view_proj,
+        camera_pos,
+        fog_density,
+        camera_forward,
+        exposure,
+        sun_dir,
+        shadows_on,
+        sun_color,
+        pcf_radius,
+        sky_ambient,
+        _pad0,
+        ground_ambient,
+        _pad1,
+        sky_zenith,
+        _pad2,
+        sky_horizon,
+        _pad3,
+        cascade_splits,
+        cascade_texel_uv,
+        cascade_texel_world,
+        _pad4,
+        ground_light_view_proj,
+        ground_alpha_on,
+        terrain_depth_on,
+        ground_texel_world,
+        ground_uv_scale,
+    });
+    // Every module sees the same block; one is enough to lay it out.
+    check(
+        "Frame",
+        wgsl_layout(&canopy::render::shaders::sky(), "Frame"),
+        rust,
+    );
+}
+
+#[test]
+fn billboard_record_matches_billboard_wgsl() {
+    let rust = rust_layout!(BillboardGpu {
+        center,
+        radius,
+        plane_right,
+        planes,
+        plane_up,
+        opacity,
+        obj_right,
+        _pad0,
+        obj_up,
+        _pad1,
+        view_index,
+        layer_base,
+        light_index,
+        light_count,
+        view_weight,
+        view_count,
+        light_weight,
+        _pad2,
+        tint,
+        mode,
+        vcm_box_origin,
+        parent_direct,
+        vcm_box_scale,
+        parent_sky,
+        vcm_direct,
+        vcm_sky,
+    });
+    for source in [
+        canopy::render::shaders::btf(),
+        canopy::render::shaders::ground_map(),
+    ] {
+        check("Billboard", wgsl_layout(&source, "Billboard"), rust.clone());
+    }
+}
+
+#[test]
+fn instancing_structs_match_instancing_wgsl() {
+    let source = canopy::render::shaders::geometry();
+    check(
+        "TreeInstance",
+        wgsl_layout(&source, "TreeInstance"),
+        rust_layout!(TreeGpu { model, tint }),
+    );
+    check(
+        "PartSet",
+        wgsl_layout(&source, "PartSet"),
+        rust_layout!(PartSetGpu {
+            count,
+            _pad0,
+            _pad1,
+            _pad2
+        }),
+    );
+}
