@@ -373,6 +373,12 @@ fn crossed_planes_are_drawn_and_stay_near_the_ground_truth() {
     eprintln!(
         "over {covered} tree pixels: single {e1:.4}, crossed {e3:.4} against geometry; crossed against single {between:.4}"
     );
-    assert!(between > 0.01, "crossed planes look like the single plane: {between}");
-    assert!(e3 < CROSSED_MAX_MEAN_FLIP, "crossed planes vs geometry: {e3}");
+    assert!(
+        between > 0.01,
+        "crossed planes look like the single plane: {between}"
+    );
+    assert!(
+        e3 < CROSSED_MAX_MEAN_FLIP,
+        "crossed planes vs geometry: {e3}"
+    );
 }

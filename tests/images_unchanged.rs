@@ -53,10 +53,20 @@ fn geometry_and_btf_match_their_references_at_three_distances() {
                 .render_image(&ctx, &frame, SIZE.0, SIZE.1, 1)
                 .unwrap();
             if method == Method::Btf {
-                eprintln!("{name}: btf levels {:?}", stats.btf.unwrap().trees_per_level);
+                eprintln!(
+                    "{name}: btf levels {:?}",
+                    stats.btf.unwrap().trees_per_level
+                );
             }
-            let mean = check_snapshot(&format!("stand_{name}_{}", method.name()), &img, MAX_MEAN_FLIP);
-            eprintln!("{name} {}: mean FLIP {mean:.5} against the reference", method.name());
+            let mean = check_snapshot(
+                &format!("stand_{name}_{}", method.name()),
+                &img,
+                MAX_MEAN_FLIP,
+            );
+            eprintln!(
+                "{name} {}: mean FLIP {mean:.5} against the reference",
+                method.name()
+            );
             worst = worst.max(mean);
         }
     }

@@ -13,6 +13,7 @@
 pub mod camera;
 pub mod context;
 pub mod frame;
+mod frame_bindings;
 pub mod ground;
 pub mod method;
 mod pipelines;
@@ -35,6 +36,7 @@ pub use method::btf;
 pub use target::{OFFSCREEN_FORMAT, OffscreenTarget};
 
 use frame::FrameUniforms;
+use frame_bindings::{DepthTarget, FrameBindings};
 use ground::{GroundBillboards, GroundMaps, GroundTextures};
 use method::geometry::{GeometryFrame, GeometryMethod};
 use pipelines::{ColorPipelines, Layouts};
@@ -50,18 +52,6 @@ pub const SHADOW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float
 
 /// Largest shadow-map side accepted.
 pub const MAX_SHADOW_MAP: u32 = 8192;
-
-/// The cascades' maps and the frame's bind group (group 0 of every colour pass), which
-/// binds them with the ground maps.
-struct FrameBindings {
-    cascades: CascadeMaps,
-    bind_group: wgpu::BindGroup,
-}
-
-struct DepthTarget {
-    size: (u32, u32),
-    view: wgpu::TextureView,
-}
 
 /// Where a frame goes: a view of a colour texture, its format and size.
 #[derive(Clone, Copy, Debug)]
@@ -205,7 +195,11 @@ impl Renderer {
             16,
             MAX_SHADOW_MAP.min(ctx.device.limits().max_texture_dimension_2d),
         );
-        if self.bindings.as_ref().is_some_and(|b| b.cascades.size == size) {
+        if self
+            .bindings
+            .as_ref()
+            .is_some_and(|b| b.cascades.size == size)
+        {
             return Ok(());
         }
         let cascades = match self.bindings.take() {
@@ -216,40 +210,14 @@ impl Renderer {
             .ground
             .as_ref()
             .map_or(&self.ground_placeholder, |g| &g.textures);
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("frame"),
-            layout: &self.layouts.frame,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: self.frame_uniforms.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&cascades.array_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(&self.shadow_sampler),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(&ground.alpha),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: wgpu::BindingResource::Sampler(&self.ground_sampler),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: wgpu::BindingResource::TextureView(&ground.depth_sampled),
-                },
-            ],
-        });
-        self.bindings = Some(FrameBindings {
+        self.bindings = Some(FrameBindings::new(
+            ctx,
+            &self.layouts,
+            &self.frame_uniforms,
             cascades,
-            bind_group,
-        });
+            (&self.shadow_sampler, &self.ground_sampler),
+            ground,
+        ));
         Ok(())
     }
 
@@ -257,30 +225,10 @@ impl Renderer {
         if self
             .depth
             .as_ref()
-            .is_some_and(|d| d.size == (width, height))
+            .is_none_or(|d| d.size != (width, height))
         {
-            return Ok(());
+            self.depth = Some(DepthTarget::new(ctx, width, height)?);
         }
-        let texture = ctx.checked("allocating the depth buffer", || {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("depth"),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: DEPTH_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-                view_formats: &[],
-            })
-        })?;
-        self.depth = Some(DepthTarget {
-            size: (width, height),
-            view: texture.create_view(&Default::default()),
-        });
         Ok(())
     }
 
@@ -314,8 +262,7 @@ impl Renderer {
         // The btf method's trees are not geometry, so their shadows on the ground come from
         // the alpha shadow map, and the terrain's own shadows from the terrain depth drawn
         // with it, both rebuilt only when the sun moves.
-        let ground_on =
-            is_btf && frame.ground_shadows && frame.sun.elevation_deg > 0.0 && !studio;
+        let ground_on = is_btf && frame.ground_shadows && frame.sun.elevation_deg > 0.0 && !studio;
         let terrain_depth_on = ground_on && frame.shadows.enabled;
         if ground_on && self.ground.is_none() {
             self.ground = Some(GroundMaps::new(ctx, &self.layouts)?);
@@ -372,10 +319,8 @@ impl Renderer {
                 g.shadows_on,
             ),
             Prepared::Btf(b) => (
-                self.world.upload_lists(
-                    ctx,
-                    &[b.trunk_only.clone(), b.trunk_and_limbs.clone()],
-                ),
+                self.world
+                    .upload_lists(ctx, &[b.trunk_only.clone(), b.trunk_and_limbs.clone()]),
                 Cascades::none(),
                 false,
             ),
@@ -400,14 +345,15 @@ impl Renderer {
                     }
                     _ => None,
                 };
-                let billboards = sun_billboards
-                    .as_ref()
-                    .zip(self.btf.as_ref())
-                    .map(|((pipeline, count), b)| GroundBillboards {
-                        pipeline,
-                        bind_group: b.sun_bind_group(),
-                        count: *count,
-                    });
+                let billboards =
+                    sun_billboards
+                        .as_ref()
+                        .zip(self.btf.as_ref())
+                        .map(|((pipeline, count), b)| GroundBillboards {
+                            pipeline,
+                            bind_group: b.sun_bind_group(),
+                            count: *count,
+                        });
                 ground.build(ctx, &self.world, &uniforms, want, billboards);
                 if measure_gpu {
                     let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
@@ -482,8 +428,14 @@ impl Renderer {
             if let Prepared::Geometry(g) = &prepared
                 && g.shadows_on
             {
-                self.geometry
-                    .draw_cascade(&mut pass, c, &self.world, &runs[c + 1], !studio, &mut stats);
+                self.geometry.draw_cascade(
+                    &mut pass,
+                    c,
+                    &self.world,
+                    &runs[c + 1],
+                    !studio,
+                    &mut stats,
+                );
             }
         }
 

@@ -7,8 +7,8 @@
 use glam::{Mat4, Vec3};
 
 use super::camera::Camera;
-use super::{GpuContext, SHADOW_FORMAT};
 use super::frame::ShadowSettings;
+use super::{GpuContext, SHADOW_FORMAT};
 use crate::model::mesh::Aabb;
 
 pub const CASCADES: usize = 3;

@@ -6,8 +6,8 @@ use glam::{Mat4, Vec3};
 use wgpu::util::DeviceExt;
 
 use super::GpuContext;
-use super::pipelines::ColorPipelines;
 use super::camera::Frustum;
+use super::pipelines::ColorPipelines;
 use crate::model::World;
 use crate::model::mesh::{Aabb, Mesh, Vertex};
 use crate::{Error, Result};
@@ -348,16 +348,15 @@ impl WorldGpu {
         if let Some(p) = pipes {
             pass.set_pipeline(&p.opaque);
         }
-        let mut draw =
-            |pass: &mut wgpu::RenderPass<'_>, set: &PartSet, first: u32, n: u32| {
-                pass.set_bind_group(2, &set.bind_group, &[]);
-                pass.set_vertex_buffer(0, set.mesh.vertices.slice(..));
-                pass.set_index_buffer(set.mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-                let start = first * set.count;
-                pass.draw_indexed(0..set.mesh.index_count, 0, start..start + n * set.count);
-                tris += set.mesh.triangles() * u64::from(n) * u64::from(set.count);
-                calls += 1;
-            };
+        let mut draw = |pass: &mut wgpu::RenderPass<'_>, set: &PartSet, first: u32, n: u32| {
+            pass.set_bind_group(2, &set.bind_group, &[]);
+            pass.set_vertex_buffer(0, set.mesh.vertices.slice(..));
+            pass.set_index_buffer(set.mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+            let start = first * set.count;
+            pass.draw_indexed(0..set.mesh.index_count, 0, start..start + n * set.count);
+            tris += set.mesh.triangles() * u64::from(n) * u64::from(set.count);
+            calls += 1;
+        };
         if terrain {
             draw(pass, &self.terrain, 0, 1);
         }

@@ -9,17 +9,17 @@ use std::collections::HashMap;
 
 use glam::{Mat3, Mat4, Vec3};
 
-use crate::render::GpuContext;
-use crate::render::camera::Frustum;
-use crate::render::shading::{LevelBounds, Shade, VcmShading};
-use crate::render::frame::FrameStats;
-use crate::render::pipelines::ColorPipelines;
-use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
 use crate::bake::billboard_axes;
 use crate::format::{Baked, Level};
 use crate::lod::{self, LevelTexels};
 use crate::model::World;
 use crate::model::mesh::Aabb;
+use crate::render::GpuContext;
+use crate::render::camera::Frustum;
+use crate::render::frame::FrameStats;
+use crate::render::pipelines::ColorPipelines;
+use crate::render::shading::{LevelBounds, Shade, VcmShading};
+use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
 use crate::sphere::DirectionSet;
 use crate::{Error, Result};
 

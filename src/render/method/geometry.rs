@@ -38,8 +38,7 @@ impl GeometryFrame {
         visible: Vec<Vec<u32>>,
     ) -> Self {
         let studio = frame.stage == Stage::Studio;
-        let shadows_on =
-            frame.shadows.enabled && (frame.sun.elevation_deg > 0.0 || studio);
+        let shadows_on = frame.shadows.enabled && (frame.sun.elevation_deg > 0.0 || studio);
         let cascades = if shadows_on && studio {
             let b = &world.forest_bounds;
             Cascades::fit_sphere(
@@ -109,7 +108,12 @@ impl GeometryMethod {
     }
 
     /// Uploads each cascade's uniforms (the frame's, seen from the cascade's light).
-    pub fn write_uniforms(&self, ctx: &GpuContext, uniforms: &FrameUniforms, prepared: &GeometryFrame) {
+    pub fn write_uniforms(
+        &self,
+        ctx: &GpuContext,
+        uniforms: &FrameUniforms,
+        prepared: &GeometryFrame,
+    ) {
         if !prepared.shadows_on {
             return;
         }

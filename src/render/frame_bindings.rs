@@ -1,0 +1,94 @@
+//! What every colour pass binds: the frame's group 0 (uniforms, the shadow cascades' maps,
+//! the ground maps and their samplers) and the depth buffer of the target's size.
+
+use super::ground::GroundTextures;
+use super::pipelines::Layouts;
+use super::shadow::CascadeMaps;
+use super::{DEPTH_FORMAT, GpuContext};
+use crate::Result;
+
+/// The cascades' maps and the frame's bind group (group 0 of every colour pass), which
+/// binds them with the ground maps.
+pub struct FrameBindings {
+    pub cascades: CascadeMaps,
+    pub bind_group: wgpu::BindGroup,
+}
+
+impl FrameBindings {
+    /// Group 0 over `frame_uniforms`, the `cascades`, the `ground` textures and the
+    /// (shadow comparison, ground) samplers.
+    pub fn new(
+        ctx: &GpuContext,
+        layouts: &Layouts,
+        frame_uniforms: &wgpu::Buffer,
+        cascades: CascadeMaps,
+        samplers: (&wgpu::Sampler, &wgpu::Sampler),
+        ground: &GroundTextures,
+    ) -> Self {
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame"),
+            layout: &layouts.frame,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: frame_uniforms.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&cascades.array_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(samplers.0),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&ground.alpha),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::Sampler(samplers.1),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: wgpu::BindingResource::TextureView(&ground.depth_sampled),
+                },
+            ],
+        });
+        Self {
+            cascades,
+            bind_group,
+        }
+    }
+}
+
+/// The depth buffer of the main pass.
+pub struct DepthTarget {
+    pub size: (u32, u32),
+    pub view: wgpu::TextureView,
+}
+
+impl DepthTarget {
+    pub fn new(ctx: &GpuContext, width: u32, height: u32) -> Result<Self> {
+        let texture = ctx.checked("allocating the depth buffer", || {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("depth"),
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: DEPTH_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            })
+        })?;
+        Ok(Self {
+            size: (width, height),
+            view: texture.create_view(&Default::default()),
+        })
+    }
+}
