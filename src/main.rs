@@ -410,16 +410,8 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         });
         let mut json = json;
         if let Some(b) = &stats.btf {
-            json["billboards"] = serde_json::json!({
-                "twig": b.billboards[0],
-                "main_branch": b.billboards[1],
-                "tree": b.billboards[2],
-            });
-            json["trees_per_level"] = serde_json::json!({
-                "twig": b.trees_per_level[0],
-                "main_branch": b.trees_per_level[1],
-                "tree": b.trees_per_level[2],
-            });
+            json["billboards"] = serde_json::json!(b.billboards);
+            json["trees_per_level"] = serde_json::json!(b.trees_per_level);
             json["faded_trees"] = serde_json::json!(b.faded_trees);
             json["lod_fade"] = serde_json::json!(args.lod_fade);
             json["images_per_billboard"] = serde_json::json!(b.images_per_billboard());
@@ -529,7 +521,7 @@ fn bake(
         .map(|s| {
             serde_json::json!({
                 "species": world.species.get(s.species as usize).map(|t| t.name.clone()).unwrap_or_default(),
-                "level": canopy::bake::level_name(s.level),
+                "level": s.level.name(),
                 "bytes": s.direct.len() + s.ambient.len(),
                 "radius_m": s.radius,
                 "texel_m": s.texel_size,

@@ -5,7 +5,7 @@
 mod common;
 
 use canopy::bake::{self, Source};
-use canopy::format::Level;
+use canopy::model::Level;
 use canopy::model::World;
 use canopy::render::btf::BtfSettings;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
@@ -86,12 +86,12 @@ fn btf_matches_geometry_where_the_tree_level_is_valid() {
     let (btf, stats) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
     let b = stats.btf.expect("btf stats");
     assert_eq!(
-        b.trees_per_level[0] + b.trees_per_level[1],
+        b.trees_per_level.twig + b.trees_per_level.branch,
         0,
         "all trees at the tree level: {b:?}"
     );
     assert!(
-        b.trees_per_level[2] as usize >= world.forest.instances.len() / 2,
+        b.trees_per_level.tree as usize >= world.forest.instances.len() / 2,
         "{b:?}"
     );
     // Judge the trees, not the terrain around them: the mask is where the billboards drew
@@ -215,9 +215,9 @@ fn approaching_a_tree_switches_levels_where_the_criterion_says() {
         let n = b.trees_per_level;
         assert!(n.iter().sum::<u32>() >= 1, "the tree is in view");
         // Report the finest level in view (the tree under the camera is the nearest).
-        if n[0] > 0 {
+        if n.twig > 0 {
             Level::Twig
-        } else if n[1] > 0 {
+        } else if n.branch > 0 {
             Level::Branch
         } else {
             Level::Tree

@@ -149,7 +149,7 @@ fn a_ridge_shades_the_valley_behind_it_at_a_low_sun_but_not_at_noon() {
     let mut species_only = baked().clone();
     species_only
         .vcm
-        .retain(|s| s.level != canopy::format::Level::Tree);
+        .retain(|s| s.level != canopy::model::Level::Tree);
     renderer.attach_btf(&ctx, &species_only, &world).unwrap();
     let mut frame = FrameDesc::from_scene(&scene);
     frame.fog_density = 0.0;

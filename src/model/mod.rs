@@ -6,6 +6,7 @@
 //! anything is allocated) and reports problems as [`ModelError`].
 
 pub mod forest;
+pub mod level;
 pub mod mesh;
 pub mod rng;
 pub mod species;
@@ -14,6 +15,7 @@ pub mod tree;
 pub mod world;
 
 pub use forest::{Forest, TreeInstance};
+pub use level::{Level, PerLevel};
 pub use mesh::{Aabb, Mesh, Vertex};
 pub use species::{CrownShape, FoliageKind, PRESET_NAMES, SpeciesParams, TwigArrangement, preset};
 pub use terrain::Terrain;
