@@ -285,7 +285,7 @@ fn main() -> ExitCode {
 
 fn render(args: RenderArgs) -> anyhow::Result<()> {
     let scene = load_scene(args.scene.as_deref())?;
-    let world = World::build(&scene).map_err(canopy::Error::from)?;
+    let world = scene.build_world().map_err(canopy::Error::from)?;
     let mut frame = FrameDesc::from_scene(&scene);
     frame.method = args.method;
     frame.shadows.map_size = args.shadow_map;
@@ -476,7 +476,7 @@ fn bake(
     json: bool,
 ) -> anyhow::Result<()> {
     let scene = load_scene(scene_path)?;
-    let world = World::build(&scene).map_err(canopy::Error::from)?;
+    let world = scene.build_world().map_err(canopy::Error::from)?;
     let pref = if cpu {
         AdapterPreference::Cpu
     } else {
@@ -608,7 +608,7 @@ fn compare(a: &Path, b: &Path, json: bool, diff: Option<&Path>) -> anyhow::Resul
 fn info(scene: Option<&Path>, json: bool) -> anyhow::Result<()> {
     let scene = load_scene(scene)?;
     let t0 = Instant::now();
-    let world = World::build(&scene).map_err(canopy::Error::from)?;
+    let world = scene.build_world().map_err(canopy::Error::from)?;
     let build_ms = t0.elapsed().as_secs_f64() * 1e3;
     let species: Vec<_> = world
         .species

@@ -32,7 +32,7 @@ fn baked() -> &'static canopy::format::Baked {
     BAKED.get_or_init(|| {
         let ctx = gpu();
         let scene = btf_scene();
-        let world = World::build(&scene).unwrap();
+        let world = scene.build_world().unwrap();
         bake::load_or_bake_at(
             &cache_file("shared.canopy"),
             &ctx,
@@ -48,7 +48,7 @@ fn baked() -> &'static canopy::format::Baked {
 /// A renderer with the stand's bake attached.
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
     let scene = btf_scene();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let mut renderer = Renderer::new(ctx, &world).unwrap();
     renderer.attach_btf(ctx, baked(), &world).unwrap();
     (scene, world, renderer)
@@ -99,7 +99,7 @@ fn btf_matches_geometry_where_the_tree_level_is_valid() {
     // the btf method has none until visibility cube maps and alpha shadow maps exist.
     let mut bare_scene = scene.clone();
     bare_scene.forest.count = 0;
-    let bare_world = World::build(&bare_scene).unwrap();
+    let bare_world = bare_scene.build_world().unwrap();
     let mut bare = Renderer::new(&ctx, &bare_world).unwrap();
     frame.method = Method::Geometry;
     let (ground, _) = bare.render_image(&ctx, &frame, w, h, 2).unwrap();
@@ -249,7 +249,7 @@ fn renderer_texels(renderer: &Renderer, species: usize) -> canopy::lod::LevelTex
 fn the_cache_is_reused_and_a_corrupt_file_is_baked_again() {
     let ctx = gpu();
     let scene = btf_scene();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let path = cache_file("own.canopy");
     let _ = std::fs::remove_file(&path);
     let first = baked().clone();

@@ -374,7 +374,7 @@ mod tests {
         let mut scene =
             crate::scene::Scene::parse(crate::scene::SMALL_TEST_SCENE_TOML, "small.toml").unwrap();
         scene.forest.count = 1;
-        World::build(&scene).unwrap()
+        scene.build_world().unwrap()
     }
 
     fn set(species: u32, owner: u32, level: Level) -> crate::format::VcmSet {
