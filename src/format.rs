@@ -94,6 +94,8 @@ use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use crate::model::Level;
+
 /// The first 8 bytes of every `.canopy` file.
 pub const MAGIC: [u8; 8] = *b"CANOPY\r\n";
 /// The format version this code writes and the only one it reads.
@@ -266,15 +268,6 @@ pub struct BakeSettings {
     pub vcm_resolution: u32,
 }
 
-/// A level of the tree hierarchy.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-#[repr(u8)]
-pub enum Level {
-    Twig = 0,
-    Branch = 1,
-    Tree = 2,
-}
-
 /// The billboard images of one species at one level.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BtfImageSet {
@@ -340,17 +333,22 @@ impl SectionKind {
     }
 }
 
-impl Level {
-    pub const ALL: [Level; 3] = [Level::Twig, Level::Branch, Level::Tree];
+/// The byte that stores `level` in a record: 0 twig, 1 branch, 2 tree.
+fn level_tag(level: Level) -> u8 {
+    match level {
+        Level::Twig => 0,
+        Level::Branch => 1,
+        Level::Tree => 2,
+    }
+}
 
-    /// The level with this tag, if any.
-    pub fn from_u8(tag: u8) -> Option<Level> {
-        match tag {
-            0 => Some(Level::Twig),
-            1 => Some(Level::Branch),
-            2 => Some(Level::Tree),
-            _ => None,
-        }
+/// The level stored as `tag`, if any.
+fn level_from_tag(tag: u8) -> Option<Level> {
+    match tag {
+        0 => Some(Level::Twig),
+        1 => Some(Level::Branch),
+        2 => Some(Level::Tree),
+        _ => None,
     }
 }
 
@@ -670,7 +668,7 @@ fn write_section_payload<W: Write>(
         SectionKind::Btf => {
             for s in &baked.btf[range] {
                 w.write_all(&s.species.to_le_bytes())?;
-                w.write_all(&[s.level as u8, 0, 0, 0])?;
+                w.write_all(&[level_tag(s.level), 0, 0, 0])?;
                 w.write_all(&s.views.to_le_bytes())?;
                 w.write_all(&s.lights.to_le_bytes())?;
                 w.write_all(&s.resolution.to_le_bytes())?;
@@ -689,7 +687,7 @@ fn write_section_payload<W: Write>(
             for s in &baked.vcm[range] {
                 w.write_all(&s.species.to_le_bytes())?;
                 w.write_all(&s.owner.to_le_bytes())?;
-                w.write_all(&[s.level as u8, 0, 0, 0])?;
+                w.write_all(&[level_tag(s.level), 0, 0, 0])?;
                 w.write_all(&s.resolution.to_le_bytes())?;
                 for m in s.mean_opacity {
                     w.write_all(&m.to_le_bytes())?;
@@ -1203,7 +1201,7 @@ impl<R: Read> Section<'_, '_, R> {
                 [r0, r1, r2]
             )));
         }
-        Level::from_u8(tag).ok_or_else(|| {
+        level_from_tag(tag).ok_or_else(|| {
             self.malformed(format!(
                 "level {tag} is not 0 (twig), 1 (branch) or 2 (tree)"
             ))
@@ -1422,6 +1420,15 @@ mod tests {
             supersample: 2,
             vcm_resolution: 8,
         }
+    }
+
+    #[test]
+    fn level_tags_are_the_documented_bytes() {
+        for (tag, level) in [(0, Level::Twig), (1, Level::Branch), (2, Level::Tree)] {
+            assert_eq!(level_tag(level), tag);
+            assert_eq!(level_from_tag(tag), Some(level));
+        }
+        assert_eq!(level_from_tag(3), None);
     }
 
     fn btf_set(species: u32, level: Level) -> BtfImageSet {

@@ -3,25 +3,10 @@
 //! lod_scale, and each tree takes the coarsest valid level. Pure arithmetic, so the
 //! distances at which a tree switches level can be predicted and tested.
 
-use crate::format::Level;
+use crate::model::{Level, PerLevel};
 
-/// Texel sizes (m, at scale 1) of one species' three levels, finest first.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LevelTexels {
-    pub twig: f32,
-    pub branch: f32,
-    pub tree: f32,
-}
-
-impl LevelTexels {
-    pub fn get(&self, level: Level) -> f32 {
-        match level {
-            Level::Twig => self.twig,
-            Level::Branch => self.branch,
-            Level::Tree => self.tree,
-        }
-    }
-}
+/// Texel sizes (m, at scale 1) of one species' three levels.
+pub type LevelTexels = PerLevel<f32>;
 
 /// Projected size in pixels of a texel of `texel` metres at distance `z`.
 pub fn projected_px(texel: f32, focal_px: f32, z: f32) -> f32 {
@@ -37,7 +22,7 @@ pub fn valid_beyond(texel: f32, focal_px: f32, lod_scale: f32) -> f32 {
 /// is valid (up close the finest level is used, and blurs).
 pub fn choose(texels: &LevelTexels, scale: f32, focal_px: f32, z: f32, lod_scale: f32) -> Level {
     for level in [Level::Tree, Level::Branch] {
-        if projected_px(texels.get(level) * scale, focal_px, z) < lod_scale {
+        if projected_px(texels[level] * scale, focal_px, z) < lod_scale {
             return level;
         }
     }

@@ -285,7 +285,7 @@ fn main() -> ExitCode {
 
 fn render(args: RenderArgs) -> anyhow::Result<()> {
     let scene = load_scene(args.scene.as_deref())?;
-    let world = World::build(&scene).map_err(canopy::Error::from)?;
+    let world = scene.build_world().map_err(canopy::Error::from)?;
     let mut frame = FrameDesc::from_scene(&scene);
     frame.method = args.method;
     frame.shadows.map_size = args.shadow_map;
@@ -410,16 +410,8 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         });
         let mut json = json;
         if let Some(b) = &stats.btf {
-            json["billboards"] = serde_json::json!({
-                "twig": b.billboards[0],
-                "main_branch": b.billboards[1],
-                "tree": b.billboards[2],
-            });
-            json["trees_per_level"] = serde_json::json!({
-                "twig": b.trees_per_level[0],
-                "main_branch": b.trees_per_level[1],
-                "tree": b.trees_per_level[2],
-            });
+            json["billboards"] = serde_json::json!(b.billboards);
+            json["trees_per_level"] = serde_json::json!(b.trees_per_level);
             json["faded_trees"] = serde_json::json!(b.faded_trees);
             json["lod_fade"] = serde_json::json!(args.lod_fade);
             json["images_per_billboard"] = serde_json::json!(b.images_per_billboard());
@@ -484,7 +476,7 @@ fn bake(
     json: bool,
 ) -> anyhow::Result<()> {
     let scene = load_scene(scene_path)?;
-    let world = World::build(&scene).map_err(canopy::Error::from)?;
+    let world = scene.build_world().map_err(canopy::Error::from)?;
     let pref = if cpu {
         AdapterPreference::Cpu
     } else {
@@ -529,7 +521,7 @@ fn bake(
         .map(|s| {
             serde_json::json!({
                 "species": world.species.get(s.species as usize).map(|t| t.name.clone()).unwrap_or_default(),
-                "level": canopy::bake::level_name(s.level),
+                "level": s.level.name(),
                 "bytes": s.direct.len() + s.ambient.len(),
                 "radius_m": s.radius,
                 "texel_m": s.texel_size,
@@ -616,7 +608,7 @@ fn compare(a: &Path, b: &Path, json: bool, diff: Option<&Path>) -> anyhow::Resul
 fn info(scene: Option<&Path>, json: bool) -> anyhow::Result<()> {
     let scene = load_scene(scene)?;
     let t0 = Instant::now();
-    let world = World::build(&scene).map_err(canopy::Error::from)?;
+    let world = scene.build_world().map_err(canopy::Error::from)?;
     let build_ms = t0.elapsed().as_secs_f64() * 1e3;
     let species: Vec<_> = world
         .species

@@ -5,7 +5,7 @@
 mod common;
 
 use canopy::bake::{self, Source};
-use canopy::format::Level;
+use canopy::model::Level;
 use canopy::model::World;
 use canopy::render::btf::BtfSettings;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
@@ -32,7 +32,7 @@ fn baked() -> &'static canopy::format::Baked {
     BAKED.get_or_init(|| {
         let ctx = gpu();
         let scene = btf_scene();
-        let world = World::build(&scene).unwrap();
+        let world = scene.build_world().unwrap();
         bake::load_or_bake_at(
             &cache_file("shared.canopy"),
             &ctx,
@@ -48,7 +48,7 @@ fn baked() -> &'static canopy::format::Baked {
 /// A renderer with the stand's bake attached.
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
     let scene = btf_scene();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let mut renderer = Renderer::new(ctx, &world).unwrap();
     renderer.attach_btf(ctx, baked(), &world).unwrap();
     (scene, world, renderer)
@@ -86,12 +86,12 @@ fn btf_matches_geometry_where_the_tree_level_is_valid() {
     let (btf, stats) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
     let b = stats.btf.expect("btf stats");
     assert_eq!(
-        b.trees_per_level[0] + b.trees_per_level[1],
+        b.trees_per_level.twig + b.trees_per_level.branch,
         0,
         "all trees at the tree level: {b:?}"
     );
     assert!(
-        b.trees_per_level[2] as usize >= world.forest.instances.len() / 2,
+        b.trees_per_level.tree as usize >= world.forest.instances.len() / 2,
         "{b:?}"
     );
     // Judge the trees, not the terrain around them: the mask is where the billboards drew
@@ -99,7 +99,7 @@ fn btf_matches_geometry_where_the_tree_level_is_valid() {
     // the btf method has none until visibility cube maps and alpha shadow maps exist.
     let mut bare_scene = scene.clone();
     bare_scene.forest.count = 0;
-    let bare_world = World::build(&bare_scene).unwrap();
+    let bare_world = bare_scene.build_world().unwrap();
     let mut bare = Renderer::new(&ctx, &bare_world).unwrap();
     frame.method = Method::Geometry;
     let (ground, _) = bare.render_image(&ctx, &frame, w, h, 2).unwrap();
@@ -215,9 +215,9 @@ fn approaching_a_tree_switches_levels_where_the_criterion_says() {
         let n = b.trees_per_level;
         assert!(n.iter().sum::<u32>() >= 1, "the tree is in view");
         // Report the finest level in view (the tree under the camera is the nearest).
-        if n[0] > 0 {
+        if n.twig > 0 {
             Level::Twig
-        } else if n[1] > 0 {
+        } else if n.branch > 0 {
             Level::Branch
         } else {
             Level::Tree
@@ -249,7 +249,7 @@ fn renderer_texels(renderer: &Renderer, species: usize) -> canopy::lod::LevelTex
 fn the_cache_is_reused_and_a_corrupt_file_is_baked_again() {
     let ctx = gpu();
     let scene = btf_scene();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let path = cache_file("own.canopy");
     let _ = std::fs::remove_file(&path);
     let first = baked().clone();
@@ -343,7 +343,7 @@ fn crossed_planes_are_drawn_and_stay_near_the_ground_truth() {
     assert!(b3.total_billboards() > 0);
     let mut bare_scene = scene.clone();
     bare_scene.forest.count = 0;
-    let bare_world = World::build(&bare_scene).unwrap();
+    let bare_world = bare_scene.build_world().unwrap();
     let mut bare = Renderer::new(&ctx, &bare_world).unwrap();
     frame.method = Method::Geometry;
     let (ground, _) = bare.render_image(&ctx, &frame, w, h, 2).unwrap();

@@ -4,7 +4,6 @@
 
 mod common;
 
-use canopy::model::World;
 use canopy::render::{Camera, FrameDesc, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
@@ -21,7 +20,7 @@ const SNAPSHOT_MAX_MEAN_FLIP: f32 = 0.03;
 fn small_scene_matches_the_reference_render() {
     let ctx = gpu();
     let scene = small_scene();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let frame = FrameDesc::from_scene(&scene);
     let img = render(&ctx, &world, &frame, 256, 256);
     let mean = check_snapshot("small_geometry", &img, SNAPSHOT_MAX_MEAN_FLIP);
@@ -37,7 +36,7 @@ fn lone_tree_scene() -> Scene {
 fn a_tree_between_the_sun_and_the_ground_darkens_the_ground_under_it() {
     let ctx = gpu();
     let scene = lone_tree_scene();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let (w, h) = (192u32, 192u32);
     let CrownShadow {
         mut frame,
@@ -75,7 +74,7 @@ fn a_tree_between_the_sun_and_the_ground_darkens_the_ground_under_it() {
 fn moving_the_sun_changes_the_image() {
     let ctx = gpu();
     let scene = small_scene();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     let mut frame = FrameDesc::from_scene(&scene);
     let (a, _) = renderer.render_image(&ctx, &frame, 128, 128, 1).unwrap();
@@ -106,7 +105,7 @@ fn moving_the_sun_changes_the_image() {
 fn frame_stats_count_what_was_drawn_and_culling_drops_trees_behind() {
     let ctx = gpu();
     let scene = small_scene();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     let mut frame = FrameDesc::from_scene(&scene);
     let (_, s) = renderer.render_image(&ctx, &frame, 64, 64, 1).unwrap();
@@ -127,7 +126,7 @@ fn frame_stats_count_what_was_drawn_and_culling_drops_trees_behind() {
 fn supersampling_keeps_the_output_size() {
     let ctx = gpu();
     let scene = small_scene();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     let frame = FrameDesc::from_scene(&scene);
     let (img, s) = renderer.render_image(&ctx, &frame, 48, 32, 3).unwrap();
@@ -139,7 +138,7 @@ fn supersampling_keeps_the_output_size() {
 fn zero_sized_frames_are_an_error_not_a_panic() {
     let ctx = gpu();
     let scene = small_scene();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     let frame = FrameDesc::from_scene(&scene);
     assert!(renderer.render_image(&ctx, &frame, 0, 32, 1).is_err());

@@ -30,7 +30,7 @@ fn baked() -> &'static canopy::format::Baked {
     BAKED.get_or_init(|| {
         let ctx = gpu();
         let scene = lone_tree();
-        let world = World::build(&scene).unwrap();
+        let world = scene.build_world().unwrap();
         let cache =
             std::env::temp_dir().join(format!("canopy-ground-{}.canopy", std::process::id()));
         bake::load_or_bake_at(&cache, &ctx, &scene, &world, &mut |_| {})
@@ -43,7 +43,7 @@ fn baked() -> &'static canopy::format::Baked {
 fn the_alpha_shadow_map_darkens_the_ground_under_a_tree_and_nowhere_else() {
     let ctx = gpu();
     let scene = lone_tree();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     renderer.attach_btf(&ctx, baked(), &world).unwrap();
 
@@ -125,7 +125,7 @@ fn ridge_world() -> World {
         }
     }
     let scene = lone_tree();
-    let species = World::build(&scene).unwrap().species;
+    let species = scene.build_world().unwrap().species;
     World {
         terrain: Terrain {
             size,
@@ -149,7 +149,7 @@ fn a_ridge_shades_the_valley_behind_it_at_a_low_sun_but_not_at_noon() {
     let mut species_only = baked().clone();
     species_only
         .vcm
-        .retain(|s| s.level != canopy::format::Level::Tree);
+        .retain(|s| s.level != canopy::model::Level::Tree);
     renderer.attach_btf(&ctx, &species_only, &world).unwrap();
     let mut frame = FrameDesc::from_scene(&scene);
     frame.fog_density = 0.0;
@@ -254,7 +254,7 @@ fn the_alpha_shadow_map_darkens_the_ground_in_proportion_to_the_trees_opacity() 
     let mut scene = lone_tree();
     scene.sun.azimuth = 90.0;
     scene.sun.elevation = 45.0;
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     renderer.attach_btf(&ctx, baked(), &world).unwrap();
     let (w, h) = (192u32, 192u32);

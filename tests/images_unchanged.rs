@@ -7,7 +7,6 @@
 mod common;
 
 use canopy::bake;
-use canopy::model::World;
 use canopy::render::{Camera, FrameDesc, Method, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
@@ -36,7 +35,7 @@ fn scene() -> Scene {
 fn geometry_and_btf_match_their_references_at_three_distances() {
     let ctx = gpu();
     let scene = scene();
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let cache = std::env::temp_dir()
         .join(format!("canopy-images-test-{}", std::process::id()))
         .join("stand.canopy");

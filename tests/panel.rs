@@ -2,6 +2,7 @@
 //! clicked, and the frame description and requested actions change accordingly.
 
 use canopy::app::panel::{PanelActions, PanelStats, controls};
+use canopy::model::PerLevel;
 use canopy::render::FrameDesc;
 use canopy::scene::Scene;
 use egui_kittest::Harness;
@@ -55,8 +56,16 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
     };
     let stats = PanelStats {
         btf: Some(canopy::render::btf::BtfStats {
-            billboards: [10, 20, 30],
-            trees_per_level: [1, 2, 3],
+            billboards: PerLevel {
+                twig: 10,
+                branch: 20,
+                tree: 30,
+            },
+            trees_per_level: PerLevel {
+                twig: 1,
+                branch: 2,
+                tree: 3,
+            },
             faded_trees: 4,
             images_sampled: 540,
             fetches_saved: 180,

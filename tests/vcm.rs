@@ -27,7 +27,7 @@ fn fir_btf() -> &'static Baked {
     BAKED.get_or_init(|| {
         let ctx = gpu();
         let scene = lone_tree();
-        let world = World::build(&scene).unwrap();
+        let world = scene.build_world().unwrap();
         let settings = bake::cache::settings_of(&scene);
         bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap()
     })
@@ -42,7 +42,7 @@ fn bake_for(world: &World) -> Baked {
 
 /// A world of firs at `positions` (with their scales) on the lone tree's flat ground.
 fn firs_at(trees: &[(Vec3, f32)]) -> World {
-    let mut world = World::build(&lone_tree()).unwrap();
+    let mut world = lone_tree().build_world().unwrap();
     let tree = world.forest.instances[0];
     world.forest.instances = trees
         .iter()
@@ -145,7 +145,7 @@ fn a_tree_behind_another_towards_the_sun_is_darker_and_not_with_the_sun_opposite
 fn dense_stand() -> (Scene, World, &'static Baked) {
     static BAKED: OnceLock<Baked> = OnceLock::new();
     let scene = Scene::load(&data("dense_stand.toml")).expect("tests/data/dense_stand.toml parses");
-    let world = World::build(&scene).unwrap();
+    let world = scene.build_world().unwrap();
     let baked = BAKED.get_or_init(|| {
         let ctx = gpu();
         let cache =

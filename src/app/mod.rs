@@ -53,7 +53,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         Some(p) => Scene::load(p)?,
         None => Scene::default_scene(),
     };
-    let world = World::build(&scene)?;
+    let world = scene.build_world()?;
     let title = match scene_path {
         Some(p) => format!("canopy: {}", p.display()),
         None => "canopy: default forest".to_string(),

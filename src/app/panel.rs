@@ -123,13 +123,13 @@ pub fn controls(
                 ui.label("billboards twig/branch/tree");
                 ui.label(format!(
                     "{} / {} / {}",
-                    s.billboards[0], s.billboards[1], s.billboards[2]
+                    s.billboards.twig, s.billboards.branch, s.billboards.tree
                 ));
                 ui.end_row();
                 ui.label("trees twig/branch/tree");
                 ui.label(format!(
                     "{} / {} / {}",
-                    s.trees_per_level[0], s.trees_per_level[1], s.trees_per_level[2]
+                    s.trees_per_level.twig, s.trees_per_level.branch, s.trees_per_level.tree
                 ));
                 ui.end_row();
                 ui.label("trees cross-fading");

@@ -10,7 +10,8 @@ pub mod vcm;
 
 use glam::{Mat4, Vec3};
 
-use crate::format::{BakeSettings, Baked, BtfImageSet, Level};
+use crate::format::{BakeSettings, Baked, BtfImageSet};
+use crate::model::Level;
 use crate::model::World;
 use crate::model::forest::{Forest, TreeInstance};
 use crate::model::mesh::{Aabb, Mesh};
@@ -19,22 +20,8 @@ use crate::model::tree::TreeModel;
 use crate::render::{
     Camera, FrameDesc, GpuContext, Method, Renderer, ShadowSettings, Sky, Stage, Sun,
 };
-use crate::sphere::DirectionSet;
+use crate::sphere::{DirectionSet, billboard_axes};
 use crate::{Error, Result};
-
-/// The levels in bake order, finest first.
-pub const LEVELS: [Level; 3] = [Level::Twig, Level::Branch, Level::Tree];
-
-/// Image axes of the billboard seen from `view` (a unit vector from the object towards the
-/// viewer): (right, up). The bake's camera and the billboards at render time use the same
-/// rule, so an image lands on its plane the way it was taken.
-pub fn billboard_axes(view: Vec3) -> (Vec3, Vec3) {
-    let v = view.normalize_or(Vec3::Z);
-    let hint = if v.y.abs() > 0.999 { Vec3::Z } else { Vec3::Y };
-    let right = hint.cross(v).normalize_or(Vec3::X);
-    let up = v.cross(right).normalize_or(Vec3::Y);
-    (right, up)
-}
 
 /// One level of a species as an object of its own, in the level's frame: the twig alone;
 /// a main branch (limb + its twigs); or the whole tree.
@@ -95,7 +82,7 @@ pub struct Progress {
 /// Number of images the bake renders for `species` species.
 pub fn image_count(settings: &BakeSettings, species: usize) -> u64 {
     let per_level = u64::from(settings.views) * (u64::from(settings.lights) + 1);
-    per_level * LEVELS.len() as u64 * species as u64
+    per_level * Level::ALL.len() as u64 * species as u64
 }
 
 /// Steps of a whole bake of `world` (what [`Progress::total`] counts): one per BTF image and
@@ -162,7 +149,7 @@ pub fn bake_btf(
     let mut done = 0u64;
     let mut btf = Vec::new();
     for (s, tree) in world.species.iter().enumerate() {
-        for level in LEVELS {
+        for level in Level::ALL {
             let object = level_object(tree, level);
             let (center, radius) = bounding_sphere(&object.tree_bounds);
             let studio = studio_world(object);
@@ -199,7 +186,7 @@ pub fn bake_btf(
                     progress(&Progress {
                         done,
                         total,
-                        what: format!("{} {}", tree.name, level_name(level)),
+                        what: format!("{} {}", tree.name, level.name()),
                     });
                 }
             }
@@ -305,34 +292,9 @@ pub fn load_or_bake_at(
     Ok((baked, Source::Baked { replaced }))
 }
 
-pub fn level_name(level: Level) -> &'static str {
-    match level {
-        Level::Twig => "twig",
-        Level::Branch => "main branch",
-        Level::Tree => "tree",
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn billboard_axes_are_orthonormal_everywhere() {
-        for v in [
-            Vec3::X,
-            Vec3::Y,
-            -Vec3::Y,
-            Vec3::Z,
-            Vec3::new(1.0, 2.0, 3.0).normalize_or_zero(),
-        ] {
-            let (r, u) = billboard_axes(v);
-            assert!((r.length() - 1.0).abs() < 1e-5 && (u.length() - 1.0).abs() < 1e-5);
-            assert!(r.dot(u).abs() < 1e-5 && r.dot(v).abs() < 1e-5 && u.dot(v).abs() < 1e-5);
-            // right, up, view form a right-handed frame: the viewer sees right to the right.
-            assert!((r.cross(u) - v).length() < 1e-4, "{v}");
-        }
-    }
 
     #[test]
     fn level_objects_hold_the_parts_of_their_level() {

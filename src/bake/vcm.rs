@@ -19,11 +19,10 @@
 use glam::{Mat3, Mat4, Vec2, Vec3};
 use rayon::prelude::*;
 
-use super::billboard_axes;
-use crate::format::{BtfImageSet, Level, VcmSet};
-use crate::model::World;
+use crate::format::{BtfImageSet, VcmSet};
 use crate::model::mesh::Aabb;
-use crate::sphere::{Blend, DirectionSet};
+use crate::model::{Level, PerLevel, World};
+use crate::sphere::{Blend, DirectionSet, billboard_axes};
 use crate::vcm::{CORNERS, CubeRaster, Horizon, Occluder, corner, sample_box};
 use crate::{Error, Result};
 
@@ -279,25 +278,25 @@ pub fn bake_vcm(
             .ok_or_else(|| {
                 Error::BadInput(format!(
                     "the VCM bake needs the {} BTF of species {species}",
-                    super::level_name(level)
+                    level.name()
                 ))
             })?;
         AlphaSet::new(set)
     };
-    let mut alpha = Vec::new();
+    let mut alpha: Vec<PerLevel<AlphaSet>> = Vec::new();
     for s in 0..world.species.len() {
-        alpha.push([
-            find(s, Level::Twig)?,
-            find(s, Level::Branch)?,
-            find(s, Level::Tree)?,
-        ]);
+        alpha.push(PerLevel {
+            twig: find(s, Level::Twig)?,
+            branch: find(s, Level::Branch)?,
+            tree: find(s, Level::Tree)?,
+        });
     }
     let mut out = Vec::new();
     let mut done = 0u64;
 
     // Species data: siblings inside one reference object.
     for (s, tree) in world.species.iter().enumerate() {
-        let [twig, branch, _] = &alpha[s];
+        let PerLevel { twig, branch, .. } = &alpha[s];
         let groups: [(&[Mat4], &Aabb, &AlphaSet, Level, u32); 3] = [
             (
                 &tree.tree_branches,
@@ -355,7 +354,7 @@ pub fn bake_vcm(
         .map(|t| {
             let r = alpha
                 .get(t.species as usize)
-                .map_or(0.0, |a| a[2].radius * t.scale);
+                .map_or(0.0, |a| a.tree.radius * t.scale);
             (t.transform(), r)
         })
         .collect();
@@ -399,7 +398,7 @@ pub fn bake_vcm(
                             alpha
                                 .get(o.species as usize)
                                 .filter(|_| close)
-                                .map(|a| (&a[2], om))
+                                .map(|a| (&a.tree, om))
                         })
                         .collect();
                     let (opacity, mean_opacity) = bake_corners(

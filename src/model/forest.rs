@@ -5,9 +5,9 @@
 use glam::{Mat4, Vec2, Vec3};
 
 use super::ModelError;
+use super::params::ForestParams;
 use super::rng::Rng;
 use super::terrain::Terrain;
-use crate::scene::ForestParams;
 
 /// Largest number of grid cells per side of the placement acceleration grid.
 const MAX_GRID: usize = 1024;
@@ -206,7 +206,7 @@ impl Forest {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::TerrainParams;
+    use crate::model::params::TerrainParams;
 
     fn terrain() -> Terrain {
         let p = TerrainParams {

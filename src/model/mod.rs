@@ -6,7 +6,9 @@
 //! anything is allocated) and reports problems as [`ModelError`].
 
 pub mod forest;
+pub mod level;
 pub mod mesh;
+pub mod params;
 pub mod rng;
 pub mod species;
 pub mod terrain;
@@ -14,7 +16,9 @@ pub mod tree;
 pub mod world;
 
 pub use forest::{Forest, TreeInstance};
+pub use level::{Level, PerLevel};
 pub use mesh::{Aabb, Mesh, Vertex};
+pub use params::{BakeParams, ForestParams, SpeciesEntry, TerrainParams};
 pub use species::{CrownShape, FoliageKind, PRESET_NAMES, SpeciesParams, TwigArrangement, preset};
 pub use terrain::Terrain;
 pub use tree::{LevelCounts, PartCounts, TreeModel};

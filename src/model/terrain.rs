@@ -7,8 +7,8 @@ use rayon::prelude::*;
 
 use super::ModelError;
 use super::mesh::{Aabb, Mesh, Vertex};
+use super::params::{TERRAIN_RESOLUTION, TerrainParams};
 use super::rng::{hash2, mix64, unit_f32};
-use crate::scene::TerrainParams;
 
 /// A square heightfield centred on the origin. Heights run from 0 (the lowest point) to
 /// `relief` (the highest).
@@ -121,7 +121,7 @@ impl Terrain {
 
     /// A flat terrain at height 0 (resolution clamped to 2..=4097).
     pub fn flat(size: f32, resolution: u32) -> Terrain {
-        let (lo, hi) = crate::scene::TERRAIN_RESOLUTION;
+        let (lo, hi) = TERRAIN_RESOLUTION;
         let res = resolution.clamp(lo, hi);
         Terrain {
             size,

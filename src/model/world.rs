@@ -5,9 +5,9 @@ use rayon::prelude::*;
 
 use super::ModelError;
 use super::forest::Forest;
+use super::params::{ForestParams, SpeciesEntry, TerrainParams};
 use super::terrain::Terrain;
 use super::tree::TreeModel;
-use crate::scene::Scene;
 
 /// Terrain, species prototypes and tree instances of one scene.
 #[derive(Clone, Debug)]
@@ -22,16 +22,20 @@ pub struct World {
 }
 
 impl World {
-    /// Builds the world of `scene`: the terrain and the species prototypes in parallel, then
-    /// the forest on the terrain. Deterministic for the scene.
-    pub fn build(scene: &Scene) -> Result<World, ModelError> {
-        let entries = scene
-            .species
+    /// Builds the world of a scene's terrain, species entries and forest: the terrain and
+    /// the species prototypes in parallel, then the forest on the terrain. Deterministic for
+    /// its inputs.
+    pub fn build(
+        terrain: &TerrainParams,
+        species: &[SpeciesEntry],
+        forest: &ForestParams,
+    ) -> Result<World, ModelError> {
+        let entries = species
             .iter()
             .map(|e| Ok((e.name.as_str(), e.try_params()?, e.seed)))
             .collect::<Result<Vec<_>, ModelError>>()?;
         let (terrain, species) = rayon::join(
-            || Terrain::generate(&scene.terrain),
+            || Terrain::generate(terrain),
             || {
                 entries
                     .par_iter()
@@ -51,7 +55,7 @@ impl World {
         );
         let terrain = terrain?;
         let species = species?;
-        let forest = Forest::place(&scene.forest, &terrain, species.len())?;
+        let forest = Forest::place(forest, &terrain, species.len())?;
         Ok(World {
             terrain,
             species,
@@ -82,83 +86,65 @@ impl World {
 mod tests {
     use super::*;
 
-    fn small() -> Scene {
-        match Scene::parse(crate::scene::SMALL_TEST_SCENE_TOML, "small.toml") {
-            Ok(s) => s,
-            Err(e) => panic!("{e}"),
+    fn terrain() -> TerrainParams {
+        TerrainParams {
+            size: 120.0,
+            resolution: 33,
+            seed: 4,
+            relief: 8.0,
+            ..TerrainParams::default()
+        }
+    }
+
+    fn entry(name: &str, preset: &str, seed: u64) -> SpeciesEntry {
+        SpeciesEntry {
+            name: name.into(),
+            preset: Some(preset.into()),
+            params: None,
+            seed,
+        }
+    }
+
+    fn forest(count: u32) -> ForestParams {
+        ForestParams {
+            count,
+            seed: 3,
+            min_spacing: 5.0,
+            mix: vec![0.5, 0.5],
+            ..ForestParams::default()
         }
     }
 
     #[test]
-    fn small_scene_builds() {
-        let scene = small();
-        let w = match World::build(&scene) {
+    fn builds_every_species_and_tree_deterministically() {
+        let species = [entry("fir", "fir", 1), entry("oak", "broadleaf", 2)];
+        let build = || match World::build(&terrain(), &species, &forest(40)) {
             Ok(w) => w,
             Err(e) => panic!("{e}"),
         };
-        assert_eq!(w.species.len(), scene.species.len());
-        assert_eq!(w.forest.instances.len(), scene.forest.count as usize);
-        assert_eq!(w.species[0].name, scene.species[0].name);
-        let hist = w.forest.species_histogram(w.species.len());
-        assert!(
-            hist.iter().all(|&c| c > 0),
-            "both species present: {hist:?}"
-        );
-        assert!(w.total_triangles() > w.terrain_triangles());
-        // The camera sees the trees: the look-at point is near the forest's centre and the
-        // camera is above the ground.
-        let cam = glam::Vec3::from(scene.camera.position);
-        assert!(cam.y > w.terrain.height_at(cam.x, cam.z) + 2.0);
+        let a = build();
+        assert_eq!(a.species.len(), 2);
+        assert_eq!(a.species[1].name, "oak");
+        assert_eq!(a.forest.instances.len(), 40);
+        assert!(a.forest.species_histogram(2).iter().all(|&c| c > 0));
+        assert!(a.total_triangles() > a.terrain_triangles());
+        assert_eq!(a.forest.instances, build().forest.instances);
     }
 
     #[test]
-    fn default_scene_builds_deterministically() {
-        let scene = Scene::default_scene();
-        let start = std::time::Instant::now();
-        let a = match World::build(&scene) {
-            Ok(w) => w,
-            Err(e) => panic!("{e}"),
-        };
-        eprintln!("default world built in {:.2?}", start.elapsed());
-        assert_eq!(a.forest.instances.len(), 1000);
-        let b = World::build(&scene)
-            .map(|w| w.forest.instances)
-            .unwrap_or_default();
-        assert_eq!(a.forest.instances, b);
-        let hist = a.forest.species_histogram(a.species.len());
-        eprintln!("species histogram {hist:?}");
-        for s in &a.species {
-            eprintln!(
-                "{}: {:?} {:?} bounds {:?}",
-                s.name,
-                s.triangle_counts(),
-                s.counts(),
-                s.tree_bounds
-            );
-        }
-        // Trees cover the whole terrain.
-        let half = 0.5 * a.terrain.size;
-        let xs: Vec<f32> = a.forest.instances.iter().map(|t| t.position.x).collect();
-        let (lo, hi) = xs
-            .iter()
-            .fold((f32::MAX, f32::MIN), |(l, h), &x| (l.min(x), h.max(x)));
-        assert!(lo < -0.8 * half && hi > 0.8 * half, "{lo}..{hi}");
-        // The start camera stands above the terrain.
-        let cam = glam::Vec3::from(scene.camera.position);
-        let ground = a.terrain.height_at(cam.x, cam.z);
-        eprintln!("camera {cam} ground {ground}");
-        assert!(cam.y > ground + 10.0);
-    }
-
-    #[test]
-    fn unknown_preset_is_reported() {
-        let mut scene = small();
-        scene.species[0].preset = Some("oak".into());
-        scene.species[0].params = None;
-        let e = World::build(&scene)
+    fn a_bad_species_entry_is_an_error_not_a_fallback() {
+        let mut bad = entry("oak", "oak", 2);
+        let species = |bad: &SpeciesEntry| [entry("fir", "fir", 1), bad.clone()];
+        let e = World::build(&terrain(), &species(&bad), &forest(10))
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();
-        assert!(e.contains("oak"), "{e}");
+        assert!(e.contains("unknown preset `oak`"), "{e}");
+        bad.preset = None;
+        let e = World::build(&terrain(), &species(&bad), &forest(10))
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("exactly one of"), "{e}");
     }
 }

@@ -13,9 +13,9 @@
 
 use glam::{Mat3, Mat4, Vec3};
 
-use crate::format::{Baked, Level};
-use crate::model::World;
+use crate::format::Baked;
 use crate::model::mesh::Aabb;
+use crate::model::{Level, PerLevel, World};
 use crate::vcm::{self, CORNERS, FACES};
 use crate::{Error, Result};
 
@@ -145,13 +145,13 @@ impl VcmShading {
             let Some(slot) = slot else {
                 return Err(bad(format!(
                     "no {} {o} of species {sp} in this scene",
-                    crate::bake::level_name(set.level)
+                    set.level.name()
                 )));
             };
             if slot.is_some() {
                 return Err(bad(format!(
                     "the {} {o} of species {sp} has two sets",
-                    crate::bake::level_name(set.level)
+                    set.level.name()
                 )));
             }
             bytes += set.opacity.len() as u64;
@@ -218,7 +218,7 @@ impl VcmShading {
         t: usize,
         species: usize,
         model: &'a Mat4,
-        bounds: &'a LevelBounds,
+        frames: &'a PerLevel<ObjectFrame>,
     ) -> TreeShading<'a> {
         let scale = model.x_axis.truncate().length().max(1e-12);
         let rot = Mat3::from_mat4(*model) * (1.0 / scale);
@@ -228,19 +228,16 @@ impl VcmShading {
             species,
             tree: self.tree(t),
             sun_tree: (rot.transpose() * sun).normalize_or(Vec3::Y),
-            bounds,
+            frames,
         }
     }
 }
 
-/// Bounds of each level's object in its own frame, and the billboard centres.
+/// One level's object in its own frame: its bounds (the VCM box) and its billboard centre.
 #[derive(Clone, Copy, Debug)]
-pub struct LevelBounds {
-    pub twig: Aabb,
-    pub branch: Aabb,
-    pub tree: Aabb,
-    /// Billboard centres (object frame): twig, main branch, tree.
-    pub centers: [Vec3; 3],
+pub struct ObjectFrame {
+    pub bounds: Aabb,
+    pub center: Vec3,
 }
 
 /// The shading of one tree instance's billboards.
@@ -249,7 +246,7 @@ pub struct TreeShading<'a> {
     species: usize,
     tree: Factors,
     sun_tree: Vec3,
-    bounds: &'a LevelBounds,
+    frames: &'a PerLevel<ObjectFrame>,
 }
 
 impl TreeShading<'_> {
@@ -286,8 +283,8 @@ impl TreeShading<'_> {
     /// Main branch `i` (placed by `branch` in the tree frame): c per pixel, d at its centre.
     pub fn branch(&self, i: usize, branch: &Mat4) -> Shade {
         let c = self.branch_factors(i);
-        let centre = branch.transform_point3(self.bounds.centers[1]);
-        let (d, d_sky) = at(&self.tree, &self.bounds.tree, centre);
+        let centre = branch.transform_point3(self.frames.branch.center);
+        let (d, d_sky) = at(&self.tree, &self.frames.tree.bounds, centre);
         Shade {
             direct: c.0,
             sky: c.1,
@@ -300,8 +297,8 @@ impl TreeShading<'_> {
     /// pixel, d at its centre.
     pub fn trunk_twig(&self, index: usize, twig: &Mat4) -> Shade {
         let b = self.twig_factors(index, self.sun_tree);
-        let centre = twig.transform_point3(self.bounds.centers[0]);
-        let (d, d_sky) = at(&self.tree, &self.bounds.tree, centre);
+        let centre = twig.transform_point3(self.frames.twig.center);
+        let (d, d_sky) = at(&self.tree, &self.frames.tree.bounds, centre);
         Shade {
             direct: b.0,
             sky: b.1,
@@ -325,11 +322,11 @@ impl TreeShading<'_> {
         let sun_branch = (rot.transpose() * self.sun_tree).normalize_or(Vec3::Y);
         for (j, t) in twigs.iter().enumerate() {
             let b = self.twig_factors(j, sun_branch);
-            let in_branch = t.transform_point3(self.bounds.centers[0]);
-            let (cc, c_sky) = at(&c, &self.bounds.branch, in_branch);
+            let in_branch = t.transform_point3(self.frames.twig.center);
+            let (cc, c_sky) = at(&c, &self.frames.branch.bounds, in_branch);
             let (d, d_sky) = at(
                 &self.tree,
-                &self.bounds.tree,
+                &self.frames.tree.bounds,
                 branch.transform_point3(in_branch),
             );
             emit(
@@ -377,7 +374,7 @@ mod tests {
         let mut scene =
             crate::scene::Scene::parse(crate::scene::SMALL_TEST_SCENE_TOML, "small.toml").unwrap();
         scene.forest.count = 1;
-        World::build(&scene).unwrap()
+        scene.build_world().unwrap()
     }
 
     fn set(species: u32, owner: u32, level: Level) -> crate::format::VcmSet {

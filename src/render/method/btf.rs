@@ -9,18 +9,17 @@ use std::collections::HashMap;
 
 use glam::{Mat3, Mat4, Vec3};
 
-use crate::bake::billboard_axes;
-use crate::format::{Baked, Level};
+use crate::format::Baked;
 use crate::lod::{self, LevelTexels};
-use crate::model::World;
 use crate::model::mesh::Aabb;
+use crate::model::{Level, PerLevel, World};
 use crate::render::GpuContext;
 use crate::render::camera::Frustum;
 use crate::render::frame::FrameStats;
 use crate::render::pipelines::ColorPipelines;
-use crate::render::shading::{LevelBounds, Shade, VcmShading};
+use crate::render::shading::{ObjectFrame, Shade, VcmShading};
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
-use crate::sphere::DirectionSet;
+use crate::sphere::{DirectionSet, billboard_axes};
 use crate::{Error, Result};
 
 /// How each billboard is drawn.
@@ -92,10 +91,10 @@ impl Default for BtfSettings {
 /// What the `btf` method did in one frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct BtfStats {
-    /// Billboards drawn per level: twig, main branch, tree.
-    pub billboards: [u32; 3],
-    /// Trees drawn at each level: twig, main branch, tree (by the coarser level while fading).
-    pub trees_per_level: [u32; 3],
+    /// Billboards drawn per level.
+    pub billboards: PerLevel<u32>,
+    /// Trees drawn at each level (by the coarser level while fading).
+    pub trees_per_level: PerLevel<u32>,
     /// Trees drawn at two levels at once, cross-fading.
     pub faded_trees: u32,
     /// Image fetches per fragment summed over billboards (views x (lights + ambient)).
@@ -257,14 +256,19 @@ struct SpeciesParts {
     /// Twigs of the reference main branch, in the branch frame.
     branch_twigs: Vec<Mat4>,
     trunk_twigs: Vec<Mat4>,
-    sets: [SetInfo; 3],
+    sets: PerLevel<SetInfo>,
     texels: LevelTexels,
     bounds: Aabb,
-    levels: LevelBounds,
+    /// The sets' bounds and billboard centres, for the VCM shading.
+    frames: PerLevel<ObjectFrame>,
 }
 
-/// Colours of the 'show LOD level' overlay: twig, main branch, tree.
-pub const LOD_COLOURS: [[f32; 3]; 3] = [[0.9, 0.2, 0.15], [0.95, 0.8, 0.1], [0.2, 0.45, 0.95]];
+/// Colours of the 'show LOD level' overlay.
+pub const LOD_COLOURS: PerLevel<[f32; 3]> = PerLevel {
+    twig: [0.9, 0.2, 0.15],
+    branch: [0.95, 0.8, 0.1],
+    tree: [0.2, 0.45, 0.95],
+};
 
 /// The BTF image sets on the GPU and the per-frame billboard buffer.
 pub struct BtfAssets {
@@ -302,14 +306,6 @@ pub struct BtfFrame {
     pub stats: BtfStats,
 }
 
-fn level_index(level: Level) -> usize {
-    match level {
-        Level::Twig => 0,
-        Level::Branch => 1,
-        Level::Tree => 2,
-    }
-}
-
 impl BtfAssets {
     pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
         let bad = |m: String| {
@@ -323,20 +319,21 @@ impl BtfAssets {
         let res = s.resolution;
         let per_set = s.views * s.lights + s.views;
         // Every species needs its three levels.
-        let mut index: HashMap<(u32, usize), usize> = HashMap::new();
+        let mut index: HashMap<(u32, Level), usize> = HashMap::new();
         for (i, set) in baked.btf.iter().enumerate() {
             if set.views != s.views || set.lights != s.lights || set.resolution != res {
                 return Err(bad(format!(
                     "image set {i} has other sizes than the file's settings"
                 )));
             }
-            index.insert((set.species, level_index(set.level)), i);
+            index.insert((set.species, set.level), i);
         }
         let mut order = Vec::new();
         for sp in 0..world.species.len() {
-            for l in 0..3 {
+            for level in Level::ALL {
+                let l = level.index();
                 let i = index
-                    .get(&(sp as u32, l))
+                    .get(&(sp as u32, level))
                     .copied()
                     .ok_or_else(|| bad(format!("species {sp} level {l} is missing")))?;
                 order.push(i);
@@ -370,25 +367,29 @@ impl BtfAssets {
         let mut bytes = 0u64;
         let mut species: Vec<SpeciesParts> = Vec::new();
         for (sp, tree) in world.species.iter().enumerate() {
-            let level_bounds = [tree.twig_bounds, tree.branch_bounds, tree.tree_bounds];
-            let mut sets = [SetInfo {
+            let level_bounds = PerLevel {
+                twig: tree.twig_bounds,
+                branch: tree.branch_bounds,
+                tree: tree.tree_bounds,
+            };
+            let mut sets = level_bounds.map(|bounds| SetInfo {
                 layer_base: 0,
                 center: Vec3::ZERO,
                 radius: 1.0,
-                bounds: tree.tree_bounds,
-            }; 3];
-            let mut texel = [0.0f32; 3];
-            for (l, info) in sets.iter_mut().enumerate() {
-                let k = sp * 3 + l;
+                bounds,
+            });
+            let mut texels = LevelTexels::default();
+            for level in Level::ALL {
+                let k = sp * 3 + level.index();
                 let set = &baked.btf[order[k]];
                 let base = k as u32 * per_set;
-                *info = SetInfo {
+                sets[level] = SetInfo {
                     layer_base: base,
                     center: Vec3::from(set.center),
                     radius: set.radius,
-                    bounds: level_bounds[l],
+                    bounds: level_bounds[level],
                 };
-                texel[l] = set.texel_size;
+                texels[level] = set.texel_size;
                 let images = set
                     .direct
                     .chunks_exact(image_bytes)
@@ -401,18 +402,12 @@ impl BtfAssets {
                 branches: tree.tree_branches.clone(),
                 branch_twigs: tree.branch_twigs.clone(),
                 trunk_twigs: tree.tree_twigs.clone(),
-                levels: LevelBounds {
-                    twig: tree.twig_bounds,
-                    branch: tree.branch_bounds,
-                    tree: tree.tree_bounds,
-                    centers: [sets[0].center, sets[1].center, sets[2].center],
-                },
+                frames: sets.map(|s| ObjectFrame {
+                    bounds: s.bounds,
+                    center: s.center,
+                }),
                 sets,
-                texels: LevelTexels {
-                    twig: texel[0],
-                    branch: texel[1],
-                    tree: texel[2],
-                },
+                texels,
                 bounds: tree.tree_bounds,
             });
         }
@@ -574,13 +569,9 @@ impl BtfAssets {
                 // Cross-fade: while the chosen level's texel is within the last `lod_fade`
                 // fraction of the bound, the next finer level fades in over it, so that the
                 // switch at the bound itself changes nothing.
-                let px = lod::projected_px(parts.texels.get(level) * scale, focal_px, z);
+                let px = lod::projected_px(parts.texels[level] * scale, focal_px, z);
                 let start = settings.lod_scale * (1.0 - settings.lod_fade.clamp(0.0, 1.0));
-                let finer = match level {
-                    Level::Tree => Some(Level::Branch),
-                    Level::Branch => Some(Level::Twig),
-                    Level::Twig => None,
-                };
+                let finer = level.finer();
                 let fade = match finer {
                     Some(_) if settings.lod_fade > 0.0 && px > start => {
                         ((px - start) / (settings.lod_scale - start).max(1e-6)).clamp(0.0, 1.0)
@@ -592,12 +583,11 @@ impl BtfAssets {
                     draws.push((f, fade));
                     out.stats.faded_trees += 1;
                 }
-                out.stats.trees_per_level[level_index(level)] += 1;
+                out.stats.trees_per_level[level] += 1;
                 let mut geometry = None;
                 for (level, opacity) in draws {
-                    let li = level_index(level);
                     let tint = if settings.show_lod {
-                        (LOD_COLOURS[li], BillboardMode::Tint)
+                        (LOD_COLOURS[level], BillboardMode::Tint)
                     } else if settings.show_shadow {
                         ([1.0; 3], BillboardMode::SunFactor)
                     } else {
@@ -606,11 +596,7 @@ impl BtfAssets {
                             BillboardMode::Images,
                         )
                     };
-                    let mut emit = |part: Mat4,
-                                    set: &SetInfo,
-                                    lvl: usize,
-                                    shade: Shade,
-                                    stats: &mut BtfStats| {
+                    let mut emit = |part: Mat4, lvl: Level, shade: Shade, stats: &mut BtfStats| {
                         let shade = if settings.vcm_sky {
                             shade
                         } else {
@@ -619,7 +605,7 @@ impl BtfAssets {
                         self.push(
                             &mut scratch,
                             m * part,
-                            set,
+                            &parts.sets[lvl],
                             cam,
                             forward,
                             to_sun,
@@ -632,7 +618,7 @@ impl BtfAssets {
                             stats,
                         );
                     };
-                    let shading = vcm.map(|v| v.for_tree(t as usize, sp, &m, &parts.levels));
+                    let shading = vcm.map(|v| v.for_tree(t as usize, sp, &m, &parts.frames));
                     let trunk_twig = |k: usize, tw: &Mat4| {
                         shading.as_ref().map_or(Shade::NONE, |s| {
                             s.trunk_twig(parts.branch_twigs.len() + k, tw)
@@ -641,17 +627,17 @@ impl BtfAssets {
                     match level {
                         Level::Tree => {
                             let shade = shading.as_ref().map_or(Shade::NONE, |s| s.tree());
-                            emit(Mat4::IDENTITY, &parts.sets[2], 2, shade, &mut out.stats)
+                            emit(Mat4::IDENTITY, Level::Tree, shade, &mut out.stats)
                         }
                         Level::Branch => {
                             geometry = geometry.max(Some(1));
                             for (i, b) in parts.branches.iter().enumerate() {
                                 let shade =
                                     shading.as_ref().map_or(Shade::NONE, |s| s.branch(i, b));
-                                emit(*b, &parts.sets[1], 1, shade, &mut out.stats);
+                                emit(*b, Level::Branch, shade, &mut out.stats);
                             }
                             for (k, tw) in parts.trunk_twigs.iter().enumerate() {
-                                emit(*tw, &parts.sets[0], 0, trunk_twig(k, tw), &mut out.stats);
+                                emit(*tw, Level::Twig, trunk_twig(k, tw), &mut out.stats);
                             }
                         }
                         Level::Twig => {
@@ -662,8 +648,7 @@ impl BtfAssets {
                                         s.branch_twigs(i, b, &parts.branch_twigs, |j, shade| {
                                             emit(
                                                 *b * parts.branch_twigs[j],
-                                                &parts.sets[0],
-                                                0,
+                                                Level::Twig,
                                                 shade,
                                                 &mut out.stats,
                                             )
@@ -673,8 +658,7 @@ impl BtfAssets {
                                         for tw in &parts.branch_twigs {
                                             emit(
                                                 *b * *tw,
-                                                &parts.sets[0],
-                                                0,
+                                                Level::Twig,
                                                 Shade::NONE,
                                                 &mut out.stats,
                                             );
@@ -683,7 +667,7 @@ impl BtfAssets {
                                 }
                             }
                             for (k, tw) in parts.trunk_twigs.iter().enumerate() {
-                                emit(*tw, &parts.sets[0], 0, trunk_twig(k, tw), &mut out.stats);
+                                emit(*tw, Level::Twig, trunk_twig(k, tw), &mut out.stats);
                             }
                         }
                     }
@@ -738,7 +722,7 @@ impl BtfAssets {
         settings: &BtfSettings,
         tint: ([f32; 3], BillboardMode),
         opacity: f32,
-        level: usize,
+        level: Level,
         shade: &Shade,
         stats: &mut BtfStats,
     ) {
@@ -853,7 +837,7 @@ impl BtfAssets {
             if !(scale > 0.0 && scale.is_finite()) {
                 continue;
             }
-            let set = &parts.sets[2];
+            let set = &parts.sets.tree;
             let rot = Mat3::from_mat4(m) * (1.0 / scale);
             let to_object = rot.transpose();
             let v_obj = to_object * to_sun;

@@ -1,0 +1,240 @@
+//! The parameter blocks of a scene that the model generators take: the terrain, the species
+//! entries, the forest placement and the bake sampling, with their defaults and their
+//! checks. The scene loader deserialises a scene file into these and locates their errors in
+//! the file; nothing here knows about files.
+
+use serde::{Deserialize, Serialize};
+
+use super::species::{SpeciesParams, preset};
+use super::{FieldError, ModelError, check};
+
+/// Largest number of trees.
+pub const MAX_TREES: u32 = 100_000;
+/// Largest number of species.
+pub const MAX_SPECIES: usize = 64;
+/// Terrain resolution limits (vertices per side).
+pub const TERRAIN_RESOLUTION: (u32, u32) = (2, 4097);
+
+/// `[bake]`: the sampling of the BTF image sets.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct BakeParams {
+    /// View directions per image set: 6, 18, 66 or 258 (default 18).
+    pub views: u32,
+    /// Light directions per view: 6, 18, 66 or 258 (default 6).
+    pub lights: u32,
+    /// Image side in texels: 32, 64 or 128 (default 64).
+    pub resolution: u32,
+    /// Supersampling per side when rendering the images (1..=8, default 4): alpha is coverage.
+    pub supersample: u32,
+}
+
+impl Default for BakeParams {
+    fn default() -> Self {
+        Self {
+            views: 18,
+            lights: 6,
+            resolution: 64,
+            supersample: 4,
+        }
+    }
+}
+
+/// Direction counts the bake accepts (octahedron subdivisions).
+pub const BAKE_DIRECTIONS: [u32; 4] = [6, 18, 66, 258];
+/// Image sides the bake accepts.
+pub const BAKE_RESOLUTIONS: [u32; 3] = [32, 64, 128];
+
+impl BakeParams {
+    pub fn check(&self) -> Result<(), FieldError> {
+        for (key, v) in [("views", self.views), ("lights", self.lights)] {
+            if !BAKE_DIRECTIONS.contains(&v) {
+                return Err(FieldError::new(key, "must be one of 6, 18, 66, 258").with_found(v));
+            }
+        }
+        if !BAKE_RESOLUTIONS.contains(&self.resolution) {
+            return Err(FieldError::new("resolution", "must be one of 32, 64, 128")
+                .with_found(self.resolution));
+        }
+        check::range_u32("supersample", self.supersample, 1, 8)?;
+        Ok(())
+    }
+}
+
+fn default_feature_size() -> f32 {
+    400.0
+}
+fn default_octaves() -> u32 {
+    5
+}
+fn default_roughness() -> f32 {
+    0.5
+}
+fn default_tint_variation() -> f32 {
+    0.15
+}
+
+/// `[terrain]`: a square heightfield centred on the origin.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TerrainParams {
+    /// Side length (m).
+    pub size: f32,
+    /// Grid vertices per side (2..=4097).
+    pub resolution: u32,
+    /// Noise seed.
+    pub seed: u64,
+    /// Height difference between the lowest and highest point (m); heights run 0..relief.
+    pub relief: f32,
+    /// Wavelength of the largest hills (m). Optional, default 400.
+    #[serde(default = "default_feature_size")]
+    pub feature_size: f32,
+    /// Noise octaves (1..=12). Optional, default 5.
+    #[serde(default = "default_octaves")]
+    pub octaves: u32,
+    /// Amplitude ratio between successive octaves (0..=1; higher is rougher). Optional,
+    /// default 0.5.
+    #[serde(default = "default_roughness")]
+    pub roughness: f32,
+}
+
+impl Default for TerrainParams {
+    fn default() -> Self {
+        TerrainParams {
+            size: 1000.0,
+            resolution: 257,
+            seed: 1,
+            relief: 60.0,
+            feature_size: default_feature_size(),
+            octaves: default_octaves(),
+            roughness: default_roughness(),
+        }
+    }
+}
+
+impl TerrainParams {
+    /// Checks every field; the error names the field relative to `[terrain]`.
+    pub fn check(&self) -> Result<(), FieldError> {
+        check::positive("size", self.size)?;
+        check::range("size", self.size, 0.0, 100_000.0)?;
+        let (lo, hi) = TERRAIN_RESOLUTION;
+        check::range_u32("resolution", self.resolution, lo, hi)?;
+        check::range("relief", self.relief, 0.0, 10_000.0)?;
+        check::range("feature_size", self.feature_size, 1.0, 1_000_000.0)?;
+        check::range_u32("octaves", self.octaves, 1, 12)?;
+        check::range("roughness", self.roughness, 0.0, 1.0)?;
+        Ok(())
+    }
+}
+
+/// `[[species]]`: one species, from a preset or with its own parameters.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SpeciesEntry {
+    /// Name shown in the UI and messages (unique in the scene).
+    pub name: String,
+    /// A built-in preset (`fir` or `broadleaf`); exactly one of `preset` and `params`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preset: Option<String>,
+    /// Full species parameters (`[species.params]`); exactly one of `preset` and `params`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub params: Option<SpeciesParams>,
+    /// Seed of the species generator.
+    pub seed: u64,
+}
+
+impl SpeciesEntry {
+    /// The species parameters: the inline `params`, or the preset's.
+    pub fn try_params(&self) -> Result<SpeciesParams, ModelError> {
+        match (&self.preset, &self.params) {
+            (None, Some(p)) => Ok(p.clone()),
+            (Some(name), None) => preset(name).ok_or_else(|| ModelError::UnknownPreset {
+                name: self.name.clone(),
+                preset: name.clone(),
+            }),
+            _ => Err(ModelError::AmbiguousSpecies {
+                name: self.name.clone(),
+            }),
+        }
+    }
+}
+
+/// `[forest]`: how the trees are placed.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ForestParams {
+    /// Number of trees (0..=100000).
+    pub count: u32,
+    /// Placement seed.
+    pub seed: u64,
+    /// Minimum distance between two trunks (m).
+    pub min_spacing: f32,
+    /// One weight per species (relative, >= 0).
+    pub mix: Vec<f32>,
+    /// Smallest tree scale.
+    pub scale_min: f32,
+    /// Largest tree scale.
+    pub scale_max: f32,
+    /// Rotate each tree randomly about the vertical.
+    pub random_yaw: bool,
+    /// Per-tree foliage tint variation (0..=1). Optional, default 0.15.
+    #[serde(default = "default_tint_variation")]
+    pub tint_variation: f32,
+}
+
+impl Default for ForestParams {
+    fn default() -> Self {
+        ForestParams {
+            count: 1000,
+            seed: 1,
+            min_spacing: 6.0,
+            mix: vec![0.6, 0.4],
+            scale_min: 0.8,
+            scale_max: 1.2,
+            random_yaw: true,
+            tint_variation: default_tint_variation(),
+        }
+    }
+}
+
+impl ForestParams {
+    /// Checks every field for a scene of `species_count` species; the error names the
+    /// field relative to `[forest]`.
+    pub fn check(&self, species_count: usize) -> Result<(), FieldError> {
+        check::range_u32("count", self.count, 0, MAX_TREES)?;
+        if self.count > 0 && species_count == 0 {
+            return Err(FieldError::new("count", "there are no species to plant"));
+        }
+        check::positive("min_spacing", self.min_spacing)?;
+        check::range("min_spacing", self.min_spacing, 0.0, 10_000.0)?;
+        if self.mix.len() != species_count {
+            return Err(FieldError::new(
+                "mix",
+                format!(
+                    "needs one weight per species ({species_count} species), found {} weight{}",
+                    self.mix.len(),
+                    if self.mix.len() == 1 { "" } else { "s" }
+                ),
+            ));
+        }
+        for (i, w) in self.mix.iter().enumerate() {
+            check::range(&format!("mix[{i}]"), *w, 0.0, 1e6)?;
+        }
+        if self.count > 0 && self.mix.iter().sum::<f32>() <= 0.0 {
+            return Err(FieldError::new("mix", "at least one weight must be > 0"));
+        }
+        check::positive("scale_min", self.scale_min)?;
+        check::range("scale_min", self.scale_min, 0.0, 100.0)?;
+        check::positive("scale_max", self.scale_max)?;
+        check::range("scale_max", self.scale_max, 0.0, 100.0)?;
+        if self.scale_min > self.scale_max {
+            return Err(FieldError::new(
+                "scale_min",
+                format!("must be <= scale_max ({})", self.scale_max),
+            )
+            .with_found(self.scale_min));
+        }
+        check::range("tint_variation", self.tint_variation, 0.0, 1.0)?;
+        Ok(())
+    }
+}
