@@ -111,7 +111,7 @@ fn imports_point_one_way() {
     let mut files = Vec::new();
     rust_files(root, &root.join("src"), &mut files);
     assert!(
-        files.iter().any(|(rel, _)| rel == "src/render/btf.rs")
+        files.iter().any(|(rel, _)| rel == "src/render/mod.rs")
             && files.iter().any(|(rel, _)| rel == "src/model/world.rs"),
         "the walk finds the sources: {files:?}"
     );
