@@ -7,6 +7,7 @@ pub mod btf;
 pub mod camera;
 pub mod context;
 pub mod frame;
+pub mod measure;
 mod pipelines;
 pub mod shaders;
 pub mod shading;
