@@ -9,6 +9,7 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use glam::Vec3;
 
+use canopy::bake::report::BakeReport;
 use canopy::model::World;
 use canopy::render::btf::PlaneMode;
 use canopy::render::measure::{self, FrameReport, MeasureOptions};
@@ -402,106 +403,39 @@ fn bake(
 ) -> anyhow::Result<()> {
     let scene = load_scene(scene_path)?;
     let world = World::build(&scene).map_err(canopy::Error::from)?;
-    let pref = if cpu {
-        AdapterPreference::Cpu
-    } else {
-        AdapterPreference::Default
-    };
-    let ctx = GpuContext::headless(pref)?;
-    let settings = canopy::bake::cache::settings_of(&scene);
+    let ctx = GpuContext::headless(adapter(cpu))?;
     let path = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| canopy::bake::cache::cache_path(&scene));
-    let bar = indicatif::ProgressBar::new(canopy::bake::step_count(&settings, &world));
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    let t0 = Instant::now();
-    let (baked, times) = canopy::bake::bake(
-        &ctx,
-        &world,
-        &settings,
-        canopy::bake::cache::scene_hash(&scene),
-        &mut |p| {
-            bar.set_position(p.done);
-            bar.set_message(p.what.clone());
-        },
-    )?;
+    let bar = progress_bar(0, BAKE_BAR);
+    let baked = canopy::bake::bake_to(&path, &ctx, &scene, &world, &mut |p| show(&bar, p));
     bar.finish_and_clear();
-    let seconds = t0.elapsed().as_secs_f64();
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|source| canopy::Error::Io {
-            path: dir.to_path_buf(),
-            source,
-        })?;
-    }
-    canopy::format::write_atomic(&path, &baked).map_err(canopy::Error::from)?;
-    let size = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
-    let sets: Vec<_> = baked
-        .btf
-        .iter()
-        .map(|s| {
-            serde_json::json!({
-                "species": world.species.get(s.species as usize).map(|t| t.name.clone()).unwrap_or_default(),
-                "level": canopy::bake::level_name(s.level),
-                "bytes": s.direct.len() + s.ambient.len(),
-                "radius_m": s.radius,
-                "texel_m": s.texel_size,
-            })
-        })
-        .collect();
+    let (baked, times) = baked?;
+    let r = BakeReport::new(&path, &baked, &times, &world);
     if json {
-        println!(
-            "{}",
-            serde_json::json!({
-                "out": path.display().to_string(),
-                "file_bytes": size,
-                "btf_bytes": baked.btf_bytes(),
-                "vcm_bytes": baked.vcm_bytes(),
-                "vcm_sets": baked.vcm.len(),
-                "vcm_resolution": settings.vcm_resolution,
-                "seconds": seconds,
-                "btf_seconds": times.btf_seconds,
-                "vcm_seconds": times.vcm_seconds,
-                "views": settings.views,
-                "lights": settings.lights,
-                "resolution": settings.resolution,
-                "supersample": settings.supersample,
-                "sets": sets,
-            })
-        );
+        println!("{}", serde_json::to_string(&r).context("encoding JSON")?);
     } else {
         println!(
-            "baked {} image sets ({} views x {} lights + {} sky images, {}x{} texels) in {seconds:.1} s",
-            baked.btf.len(),
-            settings.views,
-            settings.lights,
-            settings.views,
-            settings.resolution,
-            settings.resolution
+            "baked {} image sets ({} views x {} lights + {} sky images, {}x{} texels) in {:.1} s",
+            r.sets.len(),
+            r.views,
+            r.lights,
+            r.views,
+            r.resolution,
+            r.resolution,
+            r.seconds
         );
         println!(
             "  btf {:.1} s; {} visibility cube map sets (8 corners x 6 faces x {}² each), {} bytes, {:.1} s",
-            times.btf_seconds,
-            baked.vcm.len(),
-            settings.vcm_resolution,
-            baked.vcm_bytes(),
-            times.vcm_seconds
+            r.btf_seconds, r.vcm_sets, r.vcm_resolution, r.vcm_bytes, r.vcm_seconds
         );
-        for s in &sets {
+        for s in &r.sets {
             println!(
-                "  {:<10} {:<12} {:>9} bytes, radius {:.2} m, texel {:.3} m",
-                s["species"].as_str().unwrap_or("?"),
-                s["level"].as_str().unwrap_or("?"),
-                s["bytes"],
-                s["radius_m"].as_f64().unwrap_or(0.0),
-                s["texel_m"].as_f64().unwrap_or(0.0)
+                "  {:<10} {:<12} {} bytes, radius {:.2} m, texel {:.3} m",
+                s.species, s.level, s.bytes, s.radius_m, s.texel_m
             );
         }
-        println!("wrote {} ({size} bytes)", path.display());
+        println!("wrote {} ({} bytes)", r.out, r.file_bytes);
     }
     Ok(())
 }
