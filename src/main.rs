@@ -11,6 +11,7 @@ use glam::Vec3;
 
 use canopy::bake::report::BakeReport;
 use canopy::model::World;
+use canopy::model::summary::WorldSummary;
 use canopy::render::btf::PlaneMode;
 use canopy::render::measure::{self, FrameReport, MeasureOptions};
 use canopy::render::{AdapterPreference, Camera, FrameDesc, GpuContext, Method, Renderer};
@@ -468,63 +469,26 @@ fn info(scene: Option<&Path>, json: bool) -> anyhow::Result<()> {
     let scene = load_scene(scene)?;
     let t0 = Instant::now();
     let world = World::build(&scene).map_err(canopy::Error::from)?;
-    let build_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let species: Vec<_> = world
-        .species
-        .iter()
-        .map(|t| {
-            let tri = t.triangle_counts();
-            let parts = t.counts();
-            let trees = world
-                .forest
-                .instances
-                .iter()
-                .filter(|i| {
-                    world
-                        .species
-                        .get(i.species as usize)
-                        .is_some_and(|s| s.name == t.name)
-                })
-                .count();
-            serde_json::json!({
-                "name": t.name,
-                "trees": trees,
-                "triangles": { "twig": tri.twig, "main_branch": tri.branch, "tree": tri.tree },
-                "main_branches": parts.main_branches,
-                "twigs": parts.twigs,
-                "leaves": parts.foliage,
-                "height_m": t.tree_bounds.max.y - t.tree_bounds.min.y,
-            })
-        })
-        .collect();
-    let report = serde_json::json!({
-        "trees": world.forest.instances.len(),
-        "terrain": { "size_m": world.terrain.size, "resolution": world.terrain.resolution },
-        "species": species,
-        "build_ms": build_ms,
-    });
+    let r = WorldSummary::new(&world, t0.elapsed().as_secs_f64() * 1e3);
     if json {
-        println!("{report}");
+        println!("{}", serde_json::to_string(&r).context("encoding JSON")?);
     } else {
         println!(
-            "{} trees on a {} m terrain ({}x{} heights), built in {build_ms:.0} ms",
-            world.forest.instances.len(),
-            world.terrain.size,
-            world.terrain.resolution,
-            world.terrain.resolution
+            "{} trees on a {} m terrain ({}x{} heights), built in {:.0} ms",
+            r.trees, r.terrain.size_m, r.terrain.resolution, r.terrain.resolution, r.build_ms
         );
-        for s in report["species"].as_array().into_iter().flatten() {
+        for s in &r.species {
             println!(
-                "  {:<10} {:>5} trees; triangles: twig {}, main branch {}, tree {}; {} main branches, {} twigs, {} leaves/needles, {:.1} m tall",
-                s["name"].as_str().unwrap_or("?"),
-                s["trees"],
-                s["triangles"]["twig"],
-                s["triangles"]["main_branch"],
-                s["triangles"]["tree"],
-                s["main_branches"],
-                s["twigs"],
-                s["leaves"],
-                s["height_m"].as_f64().unwrap_or(0.0)
+                "  {:<10} {} trees; triangles: twig {}, main branch {}, tree {}; {} main branches, {} twigs, {} leaves/needles, {:.1} m tall",
+                s.name,
+                s.trees,
+                s.triangles.twig,
+                s.triangles.main_branch,
+                s.triangles.tree,
+                s.main_branches,
+                s.twigs,
+                s.leaves,
+                s.height_m
             );
         }
     }

@@ -9,6 +9,7 @@ pub mod forest;
 pub mod mesh;
 pub mod rng;
 pub mod species;
+pub mod summary;
 pub mod terrain;
 pub mod tree;
 pub mod world;
