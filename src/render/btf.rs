@@ -169,7 +169,7 @@ impl BillboardGpu {
     /// Fills the VCM fields from `shade`, for an object of `bounds` whose billboard frame is
     /// `set`.
     fn shade(mut self, shade: &Shade, set: &SetInfo) -> Self {
-        let points = crate::vcm::sample_box(&set.bounds);
+        let points = set.bounds;
         let ext = (points.max - points.min).max(Vec3::splat(1e-6));
         let origin = (set.center - points.min) / ext;
         let scale = Vec3::splat(set.radius) / ext;
