@@ -9,8 +9,10 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand};
 use glam::Vec3;
 
-use canopy::model::World;
+use canopy::bake::report::BakeReport;
+use canopy::model::summary::WorldSummary;
 use canopy::render::btf::PlaneMode;
+use canopy::render::measure::{self, FrameReport, MeasureOptions};
 use canopy::render::{AdapterPreference, Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 
@@ -305,19 +307,6 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         frame.sun.azimuth_deg = az;
         frame.sun.elevation_deg = el;
     }
-    let (w, h) = args.size;
-    canopy::render::target::check_size(
-        w.saturating_mul(args.supersample),
-        h.saturating_mul(args.supersample),
-        None,
-    )?;
-    let pref = if args.cpu {
-        AdapterPreference::Cpu
-    } else {
-        AdapterPreference::Default
-    };
-    let ctx = GpuContext::headless(pref)?;
-    let mut renderer = Renderer::new(&ctx, &world)?;
     frame.btf = canopy::render::btf::BtfSettings {
         lod_scale: args.lod_scale,
         weight_threshold: args.weight_threshold,
@@ -328,145 +317,82 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         show_shadow: args.show_shadow,
         vcm_sky: args.vcm_sky,
     };
+    let (w, h) = args.size;
+    canopy::render::target::check_size(
+        w.saturating_mul(args.supersample),
+        h.saturating_mul(args.supersample),
+        None,
+    )?;
+    let ctx = GpuContext::headless(adapter(args.cpu))?;
+    let mut renderer = Renderer::new(&ctx, &world)?;
     if args.method == Method::Btf {
-        let (baked, _) = bake_with_progress(&ctx, &scene, &world)?;
-        renderer.attach_btf(&ctx, &baked, &world)?;
+        let bar = progress_bar(0, BAKE_BAR);
+        let baked = canopy::bake::load_or_bake(&ctx, &scene, &world, &mut |p| show(&bar, p));
+        bar.finish_and_clear();
+        renderer.attach_btf(&ctx, &baked?.0, &world)?;
     }
 
-    let progress = indicatif::ProgressBar::new(u64::from(args.frames) + 1);
-    progress.set_style(
-        indicatif::ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} frames ({elapsed})")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    let opts = MeasureOptions {
+        frames: args.frames,
+        supersample: args.supersample,
+    };
+    let bar = progress_bar(
+        u64::from(args.frames) + 1,
+        "{msg} [{bar:30}] {pos}/{len} frames ({elapsed})",
     );
-    progress.set_message(format!("rendering {w}x{h} with {}", args.method.name()));
-    // The first frame builds pipelines and is not timed; the image comes from the last.
-    let mut image = None;
-    let mut stats = None;
-    let mut times = Vec::new();
-    for i in 0..=args.frames {
-        let t0 = Instant::now();
-        let (img, s) = renderer.render_image(&ctx, &frame, w, h, args.supersample)?;
-        let wall = t0.elapsed().as_secs_f64() * 1e3;
-        if i > 0 {
-            times.push(s.gpu_ms.unwrap_or(wall));
-        }
-        image = Some(img);
-        stats = Some(s);
-        progress.inc(1);
-    }
-    // The cost of one sun move on the warm renderer: the sun turns by half a degree for
-    // one more frame (not saved), then by another half degree as if dragged (the ground
-    // shadow maps at their preview size). Only the btf method has sun-dependent state.
-    let mut sun_update_ms = None;
-    let mut sun_update_drag_ms = None;
-    let mut ground_map_sizes = None;
-    let mut sun_update_gpu = (None, None);
-    if args.method == Method::Btf {
-        let mut moved = frame;
-        moved.sun.azimuth_deg += 0.5;
-        let (_, full) = renderer.render_image(&ctx, &moved, w, h, args.supersample)?;
-        let full_gpu = renderer
-            .last_sun_update_gpu_ms()
-            .filter(|_| full.sun_update);
-        moved.sun.azimuth_deg += 0.5;
-        moved.sun_held = true;
-        let (_, held) = renderer.render_image(&ctx, &moved, w, h, args.supersample)?;
-        let held_gpu = renderer
-            .last_sun_update_gpu_ms()
-            .filter(|_| held.sun_update);
-        sun_update_ms = full.sun_update_ms;
-        sun_update_drag_ms = held.sun_update_ms;
-        sun_update_gpu = (full_gpu, held_gpu);
-        ground_map_sizes = full.ground_map_size.zip(held.ground_map_size);
-    }
-    progress.finish_and_clear();
-    let (Some(image), Some(stats)) = (image, stats) else {
-        anyhow::bail!("no frame was rendered");
-    };
-    canopy::imageio::save_png(&args.out, &image)?;
-    times.sort_by(f64::total_cmp);
-    let frame_ms = times[times.len() / 2];
-    let source = if stats.gpu_ms.is_some() {
-        "gpu-timestamps"
-    } else {
-        "cpu-wall-clock"
-    };
+    bar.set_message(format!("rendering {w}x{h} with {}", args.method.name()));
+    let m =
+        measure::measure_frame_with(&mut renderer, &ctx, &frame, w, h, &opts, &mut || bar.inc(1));
+    bar.finish_and_clear();
+    let m = m?;
+    canopy::imageio::save_png(&args.out, &m.image)?;
     if args.json {
-        let json = serde_json::json!({
-            "method": args.method.name(),
-            "width": w,
-            "height": h,
-            "supersample": args.supersample,
-            "frame_ms": frame_ms,
-            "frame_ms_source": source,
-            "frames_timed": times.len(),
-            "trees_drawn": stats.trees_drawn,
-            "triangles": stats.triangles,
-            "shadow_casters": stats.shadow_casters,
-            "shadow_triangles": stats.shadow_triangles,
-            "draw_calls": stats.draw_calls,
-            "adapter": ctx.adapter_name(),
-            "out": args.out.display().to_string(),
-        });
-        let mut json = json;
-        if let Some(b) = &stats.btf {
-            json["billboards"] = serde_json::json!(b.billboards);
-            json["trees_per_level"] = serde_json::json!(b.trees_per_level);
-            json["faded_trees"] = serde_json::json!(b.faded_trees);
-            json["lod_fade"] = serde_json::json!(args.lod_fade);
-            json["images_per_billboard"] = serde_json::json!(b.images_per_billboard());
-            json["fetches_saved"] = serde_json::json!(b.fetches_saved);
-            json["btf_bytes"] = serde_json::json!(renderer.btf_bytes());
-            json["vcm"] = serde_json::json!(b.vcm);
-            json["vcm_sky"] = serde_json::json!(b.vcm && args.vcm_sky);
-            json["vcm_bytes"] = serde_json::json!(renderer.vcm_bytes());
-            json["vcm_resolution"] = serde_json::json!(renderer.vcm_resolution());
-            json["sun_update_ms"] = serde_json::json!(sun_update_ms);
-            json["sun_update_drag_ms"] = serde_json::json!(sun_update_drag_ms);
-            json["sun_update_gpu_ms"] = serde_json::json!(sun_update_gpu.0);
-            json["sun_update_drag_gpu_ms"] = serde_json::json!(sun_update_gpu.1);
-            json["ground_map_size"] = serde_json::json!(ground_map_sizes.map(|s| s.0));
-            json["ground_map_drag_size"] = serde_json::json!(ground_map_sizes.map(|s| s.1));
-            json["ground_shadows"] = serde_json::json!(args.ground_shadows);
-            json["lod_scale"] = serde_json::json!(args.lod_scale);
-            json["weight_threshold"] = serde_json::json!(args.weight_threshold);
-            json["planes"] = serde_json::json!(args.planes.name());
-        }
-        println!("{json}");
+        let mut report = FrameReport::new(&m, &frame, &opts, &renderer, &ctx);
+        report.out = Some(args.out.display().to_string());
+        println!(
+            "{}",
+            serde_json::to_string(&report).context("encoding JSON")?
+        );
     } else {
         println!(
-            "wrote {} ({w}x{h}, {}): {frame_ms:.2} ms/frame ({source}, median of {}), {} trees, {} triangles, on {}",
+            "wrote {} ({w}x{h}, {}): {:.2} ms/frame ({}, median of {}), {} trees, {} triangles, on {}",
             args.out.display(),
             args.method.name(),
-            times.len(),
-            stats.trees_drawn,
-            stats.triangles,
+            m.frame_ms,
+            m.source.name(),
+            m.frames_timed,
+            m.stats.trees_drawn,
+            m.stats.triangles,
             ctx.adapter_name()
         );
     }
     Ok(())
 }
 
-/// The scene's bake from the cache, or baked now with a progress bar on the terminal.
-fn bake_with_progress(
-    ctx: &GpuContext,
-    scene: &Scene,
-    world: &World,
-) -> anyhow::Result<(canopy::format::Baked, canopy::bake::Source)> {
-    let bar = indicatif::ProgressBar::new(0);
+const BAKE_BAR: &str = "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)";
+
+fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(len);
     bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        indicatif::ProgressStyle::with_template(template)
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
-    let result = canopy::bake::load_or_bake(ctx, scene, world, &mut |p| {
-        bar.set_length(p.total);
-        bar.set_position(p.done);
-        bar.set_message(p.what.clone());
-    });
-    bar.finish_and_clear();
-    Ok(result?)
+    bar
+}
+
+/// Shows a bake's progress on `bar`.
+fn show(bar: &indicatif::ProgressBar, p: &canopy::bake::Progress) {
+    bar.set_length(p.total);
+    bar.set_position(p.done);
+    bar.set_message(p.what.clone());
+}
+
+fn adapter(cpu: bool) -> AdapterPreference {
+    if cpu {
+        AdapterPreference::Cpu
+    } else {
+        AdapterPreference::Default
+    }
 }
 
 fn bake(
@@ -477,106 +403,39 @@ fn bake(
 ) -> anyhow::Result<()> {
     let scene = load_scene(scene_path)?;
     let world = scene.build_world().map_err(canopy::Error::from)?;
-    let pref = if cpu {
-        AdapterPreference::Cpu
-    } else {
-        AdapterPreference::Default
-    };
-    let ctx = GpuContext::headless(pref)?;
-    let settings = canopy::bake::cache::settings_of(&scene);
+    let ctx = GpuContext::headless(adapter(cpu))?;
     let path = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| canopy::bake::cache::cache_path(&scene));
-    let bar = indicatif::ProgressBar::new(canopy::bake::step_count(&settings, &world));
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    let t0 = Instant::now();
-    let (baked, times) = canopy::bake::bake(
-        &ctx,
-        &world,
-        &settings,
-        canopy::bake::cache::scene_hash(&scene),
-        &mut |p| {
-            bar.set_position(p.done);
-            bar.set_message(p.what.clone());
-        },
-    )?;
+    let bar = progress_bar(0, BAKE_BAR);
+    let baked = canopy::bake::bake_to(&path, &ctx, &scene, &world, &mut |p| show(&bar, p));
     bar.finish_and_clear();
-    let seconds = t0.elapsed().as_secs_f64();
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|source| canopy::Error::Io {
-            path: dir.to_path_buf(),
-            source,
-        })?;
-    }
-    canopy::format::write_atomic(&path, &baked).map_err(canopy::Error::from)?;
-    let size = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
-    let sets: Vec<_> = baked
-        .btf
-        .iter()
-        .map(|s| {
-            serde_json::json!({
-                "species": world.species.get(s.species as usize).map(|t| t.name.clone()).unwrap_or_default(),
-                "level": s.level.name(),
-                "bytes": s.direct.len() + s.ambient.len(),
-                "radius_m": s.radius,
-                "texel_m": s.texel_size,
-            })
-        })
-        .collect();
+    let (baked, times) = baked?;
+    let r = BakeReport::new(&path, &baked, &times, &world);
     if json {
-        println!(
-            "{}",
-            serde_json::json!({
-                "out": path.display().to_string(),
-                "file_bytes": size,
-                "btf_bytes": baked.btf_bytes(),
-                "vcm_bytes": baked.vcm_bytes(),
-                "vcm_sets": baked.vcm.len(),
-                "vcm_resolution": settings.vcm_resolution,
-                "seconds": seconds,
-                "btf_seconds": times.btf_seconds,
-                "vcm_seconds": times.vcm_seconds,
-                "views": settings.views,
-                "lights": settings.lights,
-                "resolution": settings.resolution,
-                "supersample": settings.supersample,
-                "sets": sets,
-            })
-        );
+        println!("{}", serde_json::to_string(&r).context("encoding JSON")?);
     } else {
         println!(
-            "baked {} image sets ({} views x {} lights + {} sky images, {}x{} texels) in {seconds:.1} s",
-            baked.btf.len(),
-            settings.views,
-            settings.lights,
-            settings.views,
-            settings.resolution,
-            settings.resolution
+            "baked {} image sets ({} views x {} lights + {} sky images, {}x{} texels) in {:.1} s",
+            r.sets.len(),
+            r.views,
+            r.lights,
+            r.views,
+            r.resolution,
+            r.resolution,
+            r.seconds
         );
         println!(
             "  btf {:.1} s; {} visibility cube map sets (8 corners x 6 faces x {}² each), {} bytes, {:.1} s",
-            times.btf_seconds,
-            baked.vcm.len(),
-            settings.vcm_resolution,
-            baked.vcm_bytes(),
-            times.vcm_seconds
+            r.btf_seconds, r.vcm_sets, r.vcm_resolution, r.vcm_bytes, r.vcm_seconds
         );
-        for s in &sets {
+        for s in &r.sets {
             println!(
-                "  {:<10} {:<12} {:>9} bytes, radius {:.2} m, texel {:.3} m",
-                s["species"].as_str().unwrap_or("?"),
-                s["level"].as_str().unwrap_or("?"),
-                s["bytes"],
-                s["radius_m"].as_f64().unwrap_or(0.0),
-                s["texel_m"].as_f64().unwrap_or(0.0)
+                "  {:<10} {:<12} {} bytes, radius {:.2} m, texel {:.3} m",
+                s.species, s.level, s.bytes, s.radius_m, s.texel_m
             );
         }
-        println!("wrote {} ({size} bytes)", path.display());
+        println!("wrote {} ({} bytes)", r.out, r.file_bytes);
     }
     Ok(())
 }
@@ -609,63 +468,26 @@ fn info(scene: Option<&Path>, json: bool) -> anyhow::Result<()> {
     let scene = load_scene(scene)?;
     let t0 = Instant::now();
     let world = scene.build_world().map_err(canopy::Error::from)?;
-    let build_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let species: Vec<_> = world
-        .species
-        .iter()
-        .map(|t| {
-            let tri = t.triangle_counts();
-            let parts = t.counts();
-            let trees = world
-                .forest
-                .instances
-                .iter()
-                .filter(|i| {
-                    world
-                        .species
-                        .get(i.species as usize)
-                        .is_some_and(|s| s.name == t.name)
-                })
-                .count();
-            serde_json::json!({
-                "name": t.name,
-                "trees": trees,
-                "triangles": { "twig": tri.twig, "main_branch": tri.branch, "tree": tri.tree },
-                "main_branches": parts.main_branches,
-                "twigs": parts.twigs,
-                "leaves": parts.foliage,
-                "height_m": t.tree_bounds.max.y - t.tree_bounds.min.y,
-            })
-        })
-        .collect();
-    let report = serde_json::json!({
-        "trees": world.forest.instances.len(),
-        "terrain": { "size_m": world.terrain.size, "resolution": world.terrain.resolution },
-        "species": species,
-        "build_ms": build_ms,
-    });
+    let r = WorldSummary::new(&world, t0.elapsed().as_secs_f64() * 1e3);
     if json {
-        println!("{report}");
+        println!("{}", serde_json::to_string(&r).context("encoding JSON")?);
     } else {
         println!(
-            "{} trees on a {} m terrain ({}x{} heights), built in {build_ms:.0} ms",
-            world.forest.instances.len(),
-            world.terrain.size,
-            world.terrain.resolution,
-            world.terrain.resolution
+            "{} trees on a {} m terrain ({}x{} heights), built in {:.0} ms",
+            r.trees, r.terrain.size_m, r.terrain.resolution, r.terrain.resolution, r.build_ms
         );
-        for s in report["species"].as_array().into_iter().flatten() {
+        for s in &r.species {
             println!(
-                "  {:<10} {:>5} trees; triangles: twig {}, main branch {}, tree {}; {} main branches, {} twigs, {} leaves/needles, {:.1} m tall",
-                s["name"].as_str().unwrap_or("?"),
-                s["trees"],
-                s["triangles"]["twig"],
-                s["triangles"]["main_branch"],
-                s["triangles"]["tree"],
-                s["main_branches"],
-                s["twigs"],
-                s["leaves"],
-                s["height_m"].as_f64().unwrap_or(0.0)
+                "  {:<10} {} trees; triangles: twig {}, main branch {}, tree {}; {} main branches, {} twigs, {} leaves/needles, {:.1} m tall",
+                s.name,
+                s.trees,
+                s.triangles.twig,
+                s.triangles.main_branch,
+                s.triangles.tree,
+                s.main_branches,
+                s.twigs,
+                s.leaves,
+                s.height_m
             );
         }
     }

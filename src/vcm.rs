@@ -23,7 +23,9 @@ use crate::model::mesh::Aabb;
 
 /// Faces of a cube map.
 pub const FACES: usize = 6;
-/// Cube maps per object, one at each corner of its bounding box.
+/// Cube maps per object, one at each corner of its bounding box (points outside it take the
+/// value of its nearest face). The box is not inset: cube maps at its octants' centres
+/// measured farther from the geometry on the dense test stand than at its corners.
 pub const CORNERS: usize = 8;
 
 /// The axis, sign and the two in-face axes of face `f`.
@@ -89,26 +91,6 @@ pub fn sample(map: &[u8], res: u32, dir: Vec3) -> f32 {
     let top = at(i0, j0) + (at(i1, j0) - at(i0, j0)) * u;
     let bottom = at(i0, j1) + (at(i1, j1) - at(i0, j1)) * u;
     top + (bottom - top) * v
-}
-
-/// How far inside an object's bounding box its 8 cube maps sit, as a fraction of the box's
-/// size from each side: 0 puts them at the box's corners, as in the thesis; 0.25 would put
-/// them at the corners of the box of half the size (the centres of its 8 octants). The
-/// thesis calls the corners a compromise, not a constraint of the model. Corners lie in the
-/// air beside a crown, so a narrower neighbour straight towards the sun is missed by every
-/// corner's ray; octant centres catch it, but on the dense test stand they measured farther
-/// from the geometry ground truth (mean FLIP 0.1627 against 0.1597 at the corners and
-/// 0.1611 without VCMs), so the corners stay.
-pub const INSET: f32 = 0.0;
-
-/// The box whose corners carry an object's cube maps: `b` shrunk by [`INSET`] on each side.
-/// Points outside it take the value of its nearest face (clamped interpolation).
-pub fn sample_box(b: &Aabb) -> Aabb {
-    let e = (b.max - b.min) * INSET;
-    Aabb {
-        min: b.min + e,
-        max: b.max - e,
-    }
 }
 
 /// Corner `k` (0..8) of a box.

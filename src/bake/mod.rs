@@ -6,6 +6,7 @@
 //! object of every level (`vcm`), drawn from the BTF images' alpha.
 
 pub mod cache;
+pub mod report;
 pub mod vcm;
 
 use glam::{Mat4, Vec3};
@@ -91,9 +92,11 @@ pub fn step_count(settings: &BakeSettings, world: &World) -> u64 {
     image_count(settings, world.species.len()) + vcm::object_count(world)
 }
 
-/// How long each part of a bake took.
+/// How long a bake and each of its parts took.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct BakeTimes {
+    /// The whole bake.
+    pub seconds: f64,
     pub btf_seconds: f64,
     pub vcm_seconds: f64,
 }
@@ -127,6 +130,7 @@ pub fn bake(
         },
     )?;
     let times = BakeTimes {
+        seconds: t0.elapsed().as_secs_f64(),
         btf_seconds,
         vcm_seconds: t1.elapsed().as_secs_f64(),
     };
@@ -283,13 +287,38 @@ pub fn load_or_bake_at(
     let settings = cache::settings_of(scene);
     let (baked, _) = bake(ctx, world, &settings, cache::scene_hash(scene), progress)?;
     // A cache that cannot be written costs a re-bake next time, not this run.
-    if let Some(dir) = path.parent() {
-        let _ = std::fs::create_dir_all(dir);
-    }
-    if let Err(e) = crate::format::write_atomic(&path, &baked) {
+    if let Err(e) = store(&path, &baked) {
         log::warn!("could not cache the bake at {}: {e}", path.display());
     }
     Ok((baked, Source::Baked { replaced }))
+}
+
+/// Bakes `scene` now, whatever the cache holds, and writes it to `path` as
+/// [`load_or_bake_at`] writes the cache (atomically, its folder created first), except that
+/// a file that cannot be written is an error here.
+pub fn bake_to(
+    path: &std::path::Path,
+    ctx: &GpuContext,
+    scene: &crate::scene::Scene,
+    world: &World,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<(Baked, BakeTimes)> {
+    let settings = cache::settings_of(scene);
+    let (baked, times) = bake(ctx, world, &settings, cache::scene_hash(scene), progress)?;
+    store(path, &baked)?;
+    Ok((baked, times))
+}
+
+/// Writes `baked` to `path` atomically, creating its folder first.
+fn store(path: &std::path::Path, baked: &Baked) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+    }
+    crate::format::write_atomic(path, baked)?;
+    Ok(())
 }
 
 #[cfg(test)]

@@ -1,5 +1,5 @@
-//! The VCM bake: visibility cube maps at the 8 corners of every object's sample box (its
-//! bounding box shrunk by [`crate::vcm::INSET`]) at every level, each against the objects of its own level only (Meyer 2001, §6.1.2):
+//! The VCM bake: visibility cube maps at the 8 corners of every object's bounding box at
+//! every level, each against the objects of its own level only (Meyer 2001, §6.1.2):
 //! - a twig against the sibling twigs of the reference main branch (species data; the
 //!   trunk's own leader twigs against each other);
 //! - a main branch against the sibling main branches of the reference tree (species data);
@@ -23,7 +23,7 @@ use crate::format::{BtfImageSet, VcmSet};
 use crate::model::mesh::Aabb;
 use crate::model::{Level, PerLevel, World};
 use crate::sphere::{Blend, DirectionSet, billboard_axes};
-use crate::vcm::{CORNERS, CubeRaster, Horizon, Occluder, corner, sample_box};
+use crate::vcm::{CORNERS, CubeRaster, Horizon, Occluder, corner};
 use crate::{Error, Result};
 
 /// Trees whose bounding sphere lies farther than this (m) from a tree's corner are not drawn
@@ -235,9 +235,8 @@ fn bake_corners(
     let res = raster.resolution() as usize;
     let mut opacity = Vec::with_capacity(CORNERS * 6 * res * res);
     let mut mean = [0.0; CORNERS];
-    let points = sample_box(bounds);
     for (k, mean) in mean.iter_mut().enumerate() {
-        let mut eye = m.transform_point3(corner(&points, k));
+        let mut eye = m.transform_point3(corner(bounds, k));
         raster.clear();
         if let Some(t) = terrain {
             eye.y = eye.y.max(t.height_at(eye.x, eye.z) + GROUND_CLEARANCE);

@@ -11,6 +11,7 @@ pub mod mesh;
 pub mod params;
 pub mod rng;
 pub mod species;
+pub mod summary;
 pub mod terrain;
 pub mod tree;
 pub mod world;

@@ -15,6 +15,7 @@ pub mod context;
 pub mod frame;
 mod frame_bindings;
 pub mod ground;
+pub mod measure;
 pub mod method;
 mod pipelines;
 pub mod shaders;

@@ -78,7 +78,7 @@ impl Shade {
 type Factors = ([f32; CORNERS], [f32; CORNERS]);
 
 fn at(f: &Factors, bounds: &Aabb, p: Vec3) -> (f32, f32) {
-    let u = vcm::box_coords(&vcm::sample_box(bounds), p);
+    let u = vcm::box_coords(bounds, p);
     (vcm::trilinear(&f.0, u), vcm::trilinear(&f.1, u))
 }
 

@@ -226,7 +226,7 @@ impl BillboardGpu {
     /// Fills the VCM fields from `shade`, for an object of `bounds` whose billboard frame is
     /// `set`.
     fn shade(mut self, shade: &Shade, set: &SetInfo) -> Self {
-        let points = crate::vcm::sample_box(&set.bounds);
+        let points = set.bounds;
         let ext = (points.max - points.min).max(Vec3::splat(1e-6));
         self.vcm_box_origin = ((set.center - points.min) / ext).to_array();
         self.vcm_box_scale = (Vec3::splat(set.radius) / ext).to_array();

@@ -1,0 +1,82 @@
+//! What a bake made, as `canopy bake` prints it (and `--json` serializes it).
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use super::BakeTimes;
+use crate::format::Baked;
+use crate::model::World;
+
+/// A bake written to a file.
+#[derive(Clone, Debug, Serialize)]
+pub struct BakeReport {
+    pub out: String,
+    /// Size of the written file.
+    pub file_bytes: u64,
+    pub btf_bytes: u64,
+    pub vcm_bytes: u64,
+    /// Visibility cube map sets (one per object).
+    pub vcm_sets: usize,
+    pub vcm_resolution: u32,
+    pub seconds: f64,
+    pub btf_seconds: f64,
+    pub vcm_seconds: f64,
+    pub views: u32,
+    pub lights: u32,
+    pub resolution: u32,
+    pub supersample: u32,
+    /// One per BTF image set.
+    pub sets: Vec<SetReport>,
+}
+
+/// One BTF image set of a [`BakeReport`].
+#[derive(Clone, Debug, Serialize)]
+pub struct SetReport {
+    pub species: String,
+    pub level: &'static str,
+    /// Bytes of its images (direct and sky-lit).
+    pub bytes: usize,
+    /// Its billboard's radius.
+    pub radius_m: f32,
+    /// Its largest texel.
+    pub texel_m: f32,
+}
+
+impl BakeReport {
+    /// The report of `baked`, a bake of `world` that took `times`, written to `path`.
+    pub fn new(path: &Path, baked: &Baked, times: &BakeTimes, world: &World) -> Self {
+        let settings = &baked.settings;
+        let sets = baked
+            .btf
+            .iter()
+            .map(|s| SetReport {
+                species: world
+                    .species
+                    .get(s.species as usize)
+                    .map(|t| t.name.clone())
+                    .unwrap_or_default(),
+                level: s.level.name(),
+                bytes: s.direct.len() + s.ambient.len(),
+                radius_m: s.radius,
+                texel_m: s.texel_size,
+            })
+            .collect();
+        Self {
+            out: path.display().to_string(),
+            file_bytes: std::fs::metadata(path).map(|m| m.len()).unwrap_or(0),
+            btf_bytes: baked.btf_bytes(),
+            vcm_bytes: baked.vcm_bytes(),
+            vcm_sets: baked.vcm.len(),
+            vcm_resolution: settings.vcm_resolution,
+            seconds: times.seconds,
+            btf_seconds: times.btf_seconds,
+            vcm_seconds: times.vcm_seconds,
+            views: settings.views,
+            lights: settings.lights,
+            resolution: settings.resolution,
+            supersample: settings.supersample,
+            sets,
+        }
+    }
+}

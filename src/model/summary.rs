@@ -1,0 +1,96 @@
+//! A world in numbers, as `canopy info` prints it: the trees, the terrain and, per species,
+//! the triangles of each level and the parts of one tree.
+
+use serde::Serialize;
+
+use super::World;
+
+/// What a world holds.
+#[derive(Clone, Debug, Serialize)]
+pub struct WorldSummary {
+    /// Placed trees.
+    pub trees: usize,
+    pub terrain: TerrainSummary,
+    /// One per species, in the scene's order.
+    pub species: Vec<SpeciesSummary>,
+    /// How long building the world took (ms).
+    pub build_ms: f64,
+}
+
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct TerrainSummary {
+    /// Side length.
+    pub size_m: f32,
+    /// Heights per side.
+    pub resolution: u32,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SpeciesSummary {
+    pub name: String,
+    /// Placed trees of this species (by name).
+    pub trees: usize,
+    /// Triangles per level, each level with its children.
+    pub triangles: LevelTriangles,
+    pub main_branches: u64,
+    /// Twigs in one tree.
+    pub twigs: u64,
+    /// Leaves or needles in one tree.
+    pub leaves: u64,
+    /// Height of the prototype's bounding box.
+    pub height_m: f32,
+}
+
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct LevelTriangles {
+    pub twig: u64,
+    pub main_branch: u64,
+    pub tree: u64,
+}
+
+impl WorldSummary {
+    /// The summary of `world`, which took `build_ms` to build.
+    pub fn new(world: &World, build_ms: f64) -> Self {
+        let species = world
+            .species
+            .iter()
+            .map(|t| {
+                let tri = t.triangle_counts();
+                let parts = t.counts();
+                let trees = world
+                    .forest
+                    .instances
+                    .iter()
+                    .filter(|i| {
+                        world
+                            .species
+                            .get(i.species as usize)
+                            .is_some_and(|s| s.name == t.name)
+                    })
+                    .count();
+                SpeciesSummary {
+                    name: t.name.clone(),
+                    trees,
+                    triangles: LevelTriangles {
+                        twig: tri.twig,
+                        main_branch: tri.branch,
+                        tree: tri.tree,
+                    },
+                    main_branches: parts.main_branches,
+                    twigs: parts.twigs,
+                    leaves: parts.foliage,
+                    height_m: t.tree_bounds.max.y - t.tree_bounds.min.y,
+                }
+            })
+            .collect();
+        Self {
+            trees: world.forest.instances.len(),
+            terrain: TerrainSummary {
+                size_m: world.terrain.size,
+                resolution: world.terrain.resolution,
+            },
+            species,
+            build_ms,
+        }
+    }
+}

@@ -1,0 +1,304 @@
+//! Measuring a frame the way `canopy render` reports it: one untimed warm-up frame (it builds
+//! the pipelines), then a number of timed frames whose median is the frame time, then, for
+//! the methods with sun-dependent state, the cost of a sun move. [`FrameReport`] is what
+//! `render --json` prints; the bench measures its frames with the same code.
+
+use image::RgbaImage;
+use serde::{Serialize, Serializer};
+
+use super::btf::BtfStats;
+use super::{FrameDesc, FrameStats, GpuContext, Method, Renderer};
+use crate::Result;
+
+/// Degrees the sun turns for each of the sun-move frames.
+pub const SUN_STEP_DEG: f32 = 0.5;
+
+/// How to measure a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MeasureOptions {
+    /// Timed frames after the warm-up (at least 1); the median is reported.
+    pub frames: u32,
+    /// Render this many times larger on each side and average down.
+    pub supersample: u32,
+}
+
+impl Default for MeasureOptions {
+    fn default() -> Self {
+        Self {
+            frames: 5,
+            supersample: 1,
+        }
+    }
+}
+
+/// Where a frame time comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum TimeSource {
+    /// GPU timestamp queries around the frame.
+    #[serde(rename = "gpu-timestamps")]
+    GpuTimestamps,
+    /// The wall clock around the blocking render and read-back (no timestamp queries).
+    #[serde(rename = "cpu-wall-clock")]
+    CpuWallClock,
+}
+
+impl TimeSource {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::GpuTimestamps => "gpu-timestamps",
+            Self::CpuWallClock => "cpu-wall-clock",
+        }
+    }
+}
+
+/// The cost of one sun move on a warm renderer: the sun turned by [`SUN_STEP_DEG`] and let
+/// go (full-size ground maps), then by as much again while held (preview-size maps, as
+/// while dragged). Times are absent where the frame rebuilt nothing or the adapter has no
+/// timestamp queries.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct SunUpdate {
+    /// CPU side of the move (VCM reads) plus the ground map pass, in ms.
+    #[serde(rename = "sun_update_ms")]
+    pub ms: Option<f64>,
+    /// The same while the sun is held.
+    #[serde(rename = "sun_update_drag_ms")]
+    pub drag_ms: Option<f64>,
+    /// GPU time of the ground map pass, from timestamp queries.
+    #[serde(rename = "sun_update_gpu_ms")]
+    pub gpu_ms: Option<f64>,
+    /// The same while the sun is held.
+    #[serde(rename = "sun_update_drag_gpu_ms")]
+    pub drag_gpu_ms: Option<f64>,
+    /// Side of the ground shadow maps after the move (present when both frames had them).
+    pub ground_map_size: Option<u32>,
+    /// The same while the sun is held.
+    pub ground_map_drag_size: Option<u32>,
+}
+
+/// One measured frame.
+#[derive(Clone, Debug)]
+pub struct FrameMeasurement {
+    /// The image of the last timed frame (at the asked size, after supersampling).
+    pub image: RgbaImage,
+    /// The statistics of the last timed frame.
+    pub stats: FrameStats,
+    /// Median time of the timed frames (ms).
+    pub frame_ms: f64,
+    pub source: TimeSource,
+    /// Frames the median is taken over.
+    pub frames_timed: usize,
+    /// The cost of a sun move, for the methods with sun-dependent state (`btf`).
+    pub sun_update: Option<SunUpdate>,
+}
+
+/// Measures `frame` at `width` x `height`: see the module's documentation.
+pub fn measure_frame(
+    renderer: &mut Renderer,
+    ctx: &GpuContext,
+    frame: &FrameDesc,
+    width: u32,
+    height: u32,
+    opts: &MeasureOptions,
+) -> Result<FrameMeasurement> {
+    measure_frame_with(renderer, ctx, frame, width, height, opts, &mut || {})
+}
+
+/// [`measure_frame`], calling `on_frame` after the warm-up and after each timed frame
+/// (`opts.frames + 1` calls, for a progress bar).
+pub fn measure_frame_with(
+    renderer: &mut Renderer,
+    ctx: &GpuContext,
+    frame: &FrameDesc,
+    width: u32,
+    height: u32,
+    opts: &MeasureOptions,
+    on_frame: &mut dyn FnMut(),
+) -> Result<FrameMeasurement> {
+    let ss = opts.supersample;
+    // The first frame builds pipelines and is not timed; the image comes from the last.
+    let (mut image, mut stats) = renderer.render_image(ctx, frame, width, height, ss)?;
+    on_frame();
+    let mut times = Vec::with_capacity(opts.frames as usize);
+    for _ in 0..opts.frames.max(1) {
+        let t0 = std::time::Instant::now();
+        let (img, s) = renderer.render_image(ctx, frame, width, height, ss)?;
+        let wall = t0.elapsed().as_secs_f64() * 1e3;
+        times.push(s.gpu_ms.unwrap_or(wall));
+        image = img;
+        stats = s;
+        on_frame();
+    }
+    // Only the btf method has sun-dependent state.
+    let sun_update = if frame.method == Method::Btf {
+        Some(measure_sun_update(renderer, ctx, frame, width, height, ss)?)
+    } else {
+        None
+    };
+    times.sort_by(f64::total_cmp);
+    Ok(FrameMeasurement {
+        image,
+        frame_ms: times[times.len() / 2],
+        source: if stats.gpu_ms.is_some() {
+            TimeSource::GpuTimestamps
+        } else {
+            TimeSource::CpuWallClock
+        },
+        frames_timed: times.len(),
+        stats,
+        sun_update,
+    })
+}
+
+/// Two more frames of `frame` (not kept) with the sun turned: see [`SunUpdate`].
+fn measure_sun_update(
+    renderer: &mut Renderer,
+    ctx: &GpuContext,
+    frame: &FrameDesc,
+    width: u32,
+    height: u32,
+    supersample: u32,
+) -> Result<SunUpdate> {
+    let mut moved = *frame;
+    moved.sun.azimuth_deg += SUN_STEP_DEG;
+    let (_, full) = renderer.render_image(ctx, &moved, width, height, supersample)?;
+    let gpu_ms = renderer
+        .last_sun_update_gpu_ms()
+        .filter(|_| full.sun_update);
+    moved.sun.azimuth_deg += SUN_STEP_DEG;
+    moved.sun_held = true;
+    let (_, held) = renderer.render_image(ctx, &moved, width, height, supersample)?;
+    let drag_gpu_ms = renderer
+        .last_sun_update_gpu_ms()
+        .filter(|_| held.sun_update);
+    let sizes = full.ground_map_size.zip(held.ground_map_size);
+    Ok(SunUpdate {
+        ms: full.sun_update_ms,
+        drag_ms: held.sun_update_ms,
+        gpu_ms,
+        drag_gpu_ms,
+        ground_map_size: sizes.map(|s| s.0),
+        ground_map_drag_size: sizes.map(|s| s.1),
+    })
+}
+
+/// A measured frame as `render --json` prints it.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameReport {
+    pub method: &'static str,
+    pub width: u32,
+    pub height: u32,
+    pub supersample: u32,
+    pub frame_ms: f64,
+    pub frame_ms_source: TimeSource,
+    pub frames_timed: usize,
+    /// The frame's counts (trees, triangles, shadow casters and triangles, draw calls).
+    #[serde(flatten, serialize_with = "frame_counts")]
+    pub stats: FrameStats,
+    pub adapter: String,
+    /// Where the image was written, if it was.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub out: Option<String>,
+    /// What the `btf` method did and with which settings (absent for other methods).
+    #[serde(flatten)]
+    pub btf: Option<BtfReport>,
+}
+
+/// The `btf` part of a [`FrameReport`].
+#[derive(Clone, Debug, Serialize)]
+pub struct BtfReport {
+    /// Billboards and trees per level, fades, image fetches, VCM shading.
+    #[serde(flatten, serialize_with = "btf_counts")]
+    pub stats: BtfStats,
+    pub lod_scale: f32,
+    pub weight_threshold: f32,
+    pub planes: &'static str,
+    pub lod_fade: f32,
+    pub ground_shadows: bool,
+    /// The sky light was weighted by the cube maps too (VCM shading on and `vcm_sky`).
+    pub vcm_sky: bool,
+    pub btf_bytes: u64,
+    pub vcm_bytes: u64,
+    pub vcm_resolution: Option<u32>,
+    #[serde(flatten)]
+    pub sun_update: SunUpdate,
+}
+
+impl FrameReport {
+    /// The report of `m`, a measurement of `frame` with `opts` by `renderer` on `ctx`.
+    pub fn new(
+        m: &FrameMeasurement,
+        frame: &FrameDesc,
+        opts: &MeasureOptions,
+        renderer: &Renderer,
+        ctx: &GpuContext,
+    ) -> Self {
+        let btf = m.stats.btf.map(|stats| BtfReport {
+            stats,
+            lod_scale: frame.btf.lod_scale,
+            weight_threshold: frame.btf.weight_threshold,
+            planes: frame.btf.planes.name(),
+            lod_fade: frame.btf.lod_fade,
+            ground_shadows: frame.ground_shadows,
+            vcm_sky: stats.vcm && frame.btf.vcm_sky,
+            btf_bytes: renderer.btf_bytes(),
+            vcm_bytes: renderer.vcm_bytes(),
+            vcm_resolution: renderer.vcm_resolution(),
+            sun_update: m.sun_update.unwrap_or_default(),
+        });
+        Self {
+            method: frame.method.name(),
+            width: m.image.width(),
+            height: m.image.height(),
+            supersample: opts.supersample,
+            frame_ms: m.frame_ms,
+            frame_ms_source: m.source,
+            frames_timed: m.frames_timed,
+            stats: m.stats,
+            adapter: ctx.adapter_name(),
+            out: None,
+            btf,
+        }
+    }
+}
+
+/// The keys of [`FrameStats`] that a report shows.
+fn frame_counts<S: Serializer>(s: &FrameStats, ser: S) -> Result<S::Ok, S::Error> {
+    #[derive(Serialize)]
+    struct Counts {
+        trees_drawn: u32,
+        triangles: u64,
+        shadow_casters: u32,
+        shadow_triangles: u64,
+        draw_calls: u32,
+    }
+    Counts {
+        trees_drawn: s.trees_drawn,
+        triangles: s.triangles,
+        shadow_casters: s.shadow_casters,
+        shadow_triangles: s.shadow_triangles,
+        draw_calls: s.draw_calls,
+    }
+    .serialize(ser)
+}
+
+/// The keys of [`BtfStats`] that a report shows, per-level counts by level name.
+fn btf_counts<S: Serializer>(b: &BtfStats, ser: S) -> Result<S::Ok, S::Error> {
+    #[derive(Serialize)]
+    struct Counts {
+        billboards: crate::model::PerLevel<u32>,
+        trees_per_level: crate::model::PerLevel<u32>,
+        faded_trees: u32,
+        images_per_billboard: f64,
+        fetches_saved: u64,
+        vcm: bool,
+    }
+    Counts {
+        billboards: b.billboards,
+        trees_per_level: b.trees_per_level,
+        faded_trees: b.faded_trees,
+        images_per_billboard: b.images_per_billboard(),
+        fetches_saved: b.fetches_saved,
+        vcm: b.vcm,
+    }
+    .serialize(ser)
+}
