@@ -12,6 +12,8 @@ use crate::Result;
 pub struct FrameBindings {
     pub cascades: CascadeMaps,
     pub bind_group: wgpu::BindGroup,
+    /// It binds the ground maps (not their placeholders).
+    pub ground_maps: bool,
 }
 
 impl FrameBindings {
@@ -58,6 +60,7 @@ impl FrameBindings {
         Self {
             cascades,
             bind_group,
+            ground_maps: !ground.is_placeholder(),
         }
     }
 }

@@ -84,6 +84,11 @@ impl GroundTextures {
         })
     }
 
+    /// Whether these are the 1x1 placeholders.
+    pub fn is_placeholder(&self) -> bool {
+        self.capacity == 1
+    }
+
     /// The 1x1 textures bound while no method has asked for the maps.
     pub fn placeholder(ctx: &GpuContext) -> Result<Self> {
         Self::new(ctx, 1)

@@ -199,7 +199,7 @@ impl Renderer {
         if self
             .bindings
             .as_ref()
-            .is_some_and(|b| b.cascades.size == size)
+            .is_some_and(|b| b.cascades.size == size && b.ground_maps == self.ground.is_some())
         {
             return Ok(());
         }
@@ -267,7 +267,6 @@ impl Renderer {
         let terrain_depth_on = ground_on && frame.shadows.enabled;
         if ground_on && self.ground.is_none() {
             self.ground = Some(GroundMaps::new(ctx, &self.layouts)?);
-            self.bindings = None;
         }
         self.ensure_depth(ctx, width, height)?;
         self.ensure_bindings(ctx, frame.shadows.map_size)?;
