@@ -45,6 +45,46 @@ fn baked() -> &'static canopy::format::Baked {
     })
 }
 
+/// Where the trees are in `trees` (an image of `frame` at `size`): the pixels that differ
+/// from the same view, as geometry 2x supersampled, of the scene with no trees. Leaves
+/// `frame` on the geometry method.
+fn trees_mask(
+    ctx: &GpuContext,
+    scene: &Scene,
+    frame: &mut FrameDesc,
+    trees: &image::RgbaImage,
+    (w, h): (u32, u32),
+) -> Vec<bool> {
+    let mut bare_scene = scene.clone();
+    bare_scene.forest.count = 0;
+    let bare_world = bare_scene.build_world().unwrap();
+    let mut bare = Renderer::new(ctx, &bare_world).unwrap();
+    frame.method = Method::Geometry;
+    let (ground, _) = bare.render_image(ctx, frame, w, h, 2).unwrap();
+    let mask: Vec<bool> = trees
+        .pixels()
+        .zip(ground.pixels())
+        .map(|(a, b)| a.0.iter().zip(b.0.iter()).any(|(x, y)| x.abs_diff(*y) > 4))
+        .collect();
+    let covered = mask.iter().filter(|&&m| m).count();
+    assert!(covered > 300, "trees cover only {covered} pixels");
+    mask
+}
+
+/// Mean FLIP of `b` against `a` over the pixels of `mask`.
+fn masked_flip(a: &image::RgbaImage, b: &image::RgbaImage, mask: &[bool]) -> f32 {
+    let r = canopy::metrics::flip(&rgb(a), &rgb(b)).unwrap();
+    let covered = mask.iter().filter(|&&m| m).count();
+    let sum: f64 = r
+        .errors
+        .iter()
+        .zip(mask)
+        .filter(|(_, m)| **m)
+        .map(|(e, _)| f64::from(*e))
+        .sum();
+    (sum / covered.max(1) as f64) as f32
+}
+
 /// A renderer with the stand's bake attached.
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
     let scene = btf_scene();
@@ -97,30 +137,9 @@ fn btf_matches_geometry_where_the_tree_level_is_valid() {
     // Judge the trees, not the terrain around them: the mask is where the billboards drew
     // (the btf frame differs from the same view with no trees). Ground shadows are left out:
     // the btf method has none until visibility cube maps and alpha shadow maps exist.
-    let mut bare_scene = scene.clone();
-    bare_scene.forest.count = 0;
-    let bare_world = bare_scene.build_world().unwrap();
-    let mut bare = Renderer::new(&ctx, &bare_world).unwrap();
-    frame.method = Method::Geometry;
-    let (ground, _) = bare.render_image(&ctx, &frame, w, h, 2).unwrap();
-    let mask: Vec<bool> = btf
-        .pixels()
-        .zip(ground.pixels())
-        .map(|(a, b)| a.0.iter().zip(b.0.iter()).any(|(x, y)| x.abs_diff(*y) > 4))
-        .collect();
+    let mask = trees_mask(&ctx, &scene, &mut frame, &btf, (w, h));
     let covered = mask.iter().filter(|&&m| m).count();
-    assert!(covered > 300, "trees cover only {covered} pixels");
-    let masked_mean = |img: &image::RgbaImage| {
-        let r = canopy::metrics::flip(&rgb(&truth), &rgb(img)).unwrap();
-        let sum: f64 = r
-            .errors
-            .iter()
-            .zip(&mask)
-            .filter(|(_, m)| **m)
-            .map(|(e, _)| f64::from(*e))
-            .sum();
-        (sum / covered as f64) as f32
-    };
+    let masked_mean = |img: &image::RgbaImage| masked_flip(&truth, img, &mask);
     frame.method = Method::Btf;
     let err = masked_mean(&btf);
     eprintln!("btf vs geometry at the tree level, over {covered} tree pixels: mean FLIP {err:.4}");
@@ -341,35 +360,14 @@ fn crossed_planes_are_drawn_and_stay_near_the_ground_truth() {
     // One record per billboard in both modes; the crossed one bounds its three planes.
     assert_eq!(b1.total_billboards(), b3.total_billboards());
     assert!(b3.total_billboards() > 0);
-    let mut bare_scene = scene.clone();
-    bare_scene.forest.count = 0;
-    let bare_world = bare_scene.build_world().unwrap();
-    let mut bare = Renderer::new(&ctx, &bare_world).unwrap();
-    frame.method = Method::Geometry;
-    let (ground, _) = bare.render_image(&ctx, &frame, w, h, 2).unwrap();
-    let mask: Vec<bool> = truth
-        .pixels()
-        .zip(ground.pixels())
-        .map(|(a, b)| a.0.iter().zip(b.0.iter()).any(|(x, y)| x.abs_diff(*y) > 4))
-        .collect();
-    let covered = mask.iter().filter(|&&m| m).count();
-    assert!(covered > 300, "trees cover only {covered} pixels");
-    let masked = |a: &image::RgbaImage, b: &image::RgbaImage| {
-        let r = canopy::metrics::flip(&rgb(a), &rgb(b)).unwrap();
-        let sum: f64 = r
-            .errors
-            .iter()
-            .zip(&mask)
-            .filter(|(_, m)| **m)
-            .map(|(e, _)| f64::from(*e))
-            .sum();
-        (sum / covered as f64) as f32
-    };
+    let mask = trees_mask(&ctx, &scene, &mut frame, &truth, (w, h));
+    let masked = |a: &image::RgbaImage, b: &image::RgbaImage| masked_flip(a, b, &mask);
     let (e1, e3, between) = (
         masked(&truth, &single),
         masked(&truth, &crossed),
         masked(&single, &crossed),
     );
+    let covered = mask.iter().filter(|&&m| m).count();
     eprintln!(
         "over {covered} tree pixels: single {e1:.4}, crossed {e3:.4} against geometry; crossed against single {between:.4}"
     );
