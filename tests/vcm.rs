@@ -71,15 +71,24 @@ fn luminance(p: image::Rgba<u8>) -> f32 {
     0.2126 * lin(p[0]) + 0.7152 * lin(p[1]) + 0.0722 * lin(p[2])
 }
 
-/// Mean luminance of the first fir's foliage on its side away from the second fir (the
-/// pixels of its crown's half towards -z that differ from the background), seen from the
-/// west with the sun at `azimuth`, 25 degrees up.
-fn crown_luminance(ctx: &GpuContext, world: &World, azimuth: f32) -> f32 {
-    let (w, h) = (160u32, 160u32);
+/// Side of the crown views below, in pixels.
+const CROWN_VIEW_PX: u32 = 160;
+
+/// The first fir seen from the west with the sun at `azimuth`, 25 degrees up, drawn by
+/// `method`: the frame, the image and the same view without trees.
+fn crown_view(
+    ctx: &GpuContext,
+    world: &World,
+    azimuth: f32,
+    method: Method,
+) -> (FrameDesc, image::RgbaImage, image::RgbaImage) {
+    let (w, h) = (CROWN_VIEW_PX, CROWN_VIEW_PX);
     let mut renderer = Renderer::new(ctx, world).unwrap();
-    renderer.attach_btf(ctx, &bake_for(world), world).unwrap();
+    if method == Method::Btf {
+        renderer.attach_btf(ctx, &bake_for(world), world).unwrap();
+    }
     let mut frame = FrameDesc::from_scene(&lone_tree());
-    frame.method = Method::Btf;
+    frame.method = method;
     frame.fog_density = 0.0;
     frame.sun.azimuth_deg = azimuth;
     frame.sun.elevation_deg = 25.0;
@@ -88,9 +97,21 @@ fn crown_luminance(ctx: &GpuContext, world: &World, azimuth: f32) -> f32 {
     frame.sky.intensity = 0.15;
     frame.camera = Camera::look_at(Vec3::new(-32.0, 7.0, 0.0), Vec3::new(0.0, 7.0, 0.0), 40.0);
     let (img, stats) = renderer.render_image(ctx, &frame, w, h, 1).unwrap();
-    assert!(stats.btf.is_some_and(|b| b.vcm), "VCM shading is on");
+    if method == Method::Btf {
+        assert!(stats.btf.is_some_and(|b| b.vcm), "VCM shading is on");
+    }
     frame.trees = false;
     let (background, _) = renderer.render_image(ctx, &frame, w, h, 1).unwrap();
+    frame.trees = true;
+    (frame, img, background)
+}
+
+/// Mean luminance of the first fir's foliage on its side away from the second fir (the
+/// pixels of its crown's half towards -z that differ from the background), seen from the
+/// west with the sun at `azimuth`, 25 degrees up.
+fn crown_luminance(ctx: &GpuContext, world: &World, azimuth: f32) -> f32 {
+    let (w, h) = (CROWN_VIEW_PX, CROWN_VIEW_PX);
+    let (frame, img, background) = crown_view(ctx, world, azimuth, Method::Btf);
     let (x0, y0) = to_px(&frame, w, h, Vec3::new(0.0, 14.0, -4.5));
     let (x1, y1) = to_px(&frame, w, h, Vec3::new(0.0, 2.0, -0.5));
     let (mut sum, mut n) = (0.0, 0);
@@ -126,9 +147,10 @@ fn a_tree_behind_another_towards_the_sun_is_darker_and_not_with_the_sun_opposite
         "crown luminance, sun north: alone {north_alone:.4}, behind the other {north_pair:.4}; sun south: alone {south_alone:.4}, with the other behind {south_pair:.4}"
     );
     // Measured on lavapipe: 0.3531 alone, 0.3512 behind (-0.5%); sun opposite 0.3794 and
-    // 0.3790. (The geometry ground truth darkens the same pixels by 2.3%: the 8 corner
-    // cube maps see past a single crown straight towards the sun, only its edge.) Without
-    // VCM shading the two would be equal.
+    // 0.3790. Without VCM shading the two would be equal. (The geometry ground truth
+    // darkens the same pixels by 50%, not the 2.3% once written here: the 8 corner cube
+    // maps see past a single crown straight towards the sun, only its edge. The ignored
+    // test below holds btf to the truth.)
     let shaded = north_alone - north_pair;
     let opposite = (south_alone - south_pair).abs();
     assert!(
@@ -139,6 +161,117 @@ fn a_tree_behind_another_towards_the_sun_is_darker_and_not_with_the_sun_opposite
         opposite < 0.3 * shaded,
         "not shaded with the sun opposite: {south_pair} vs {south_alone} (the shaded case moved by {shaded})"
     );
+}
+
+/// How much the second fir darkens the first one's crown, drawn by `method`, with the sun
+/// north (behind the second): 1 - (mean luminance with the second fir) / (alone), over the
+/// same pixels, for two windows on the plane x = 0 through the first fir: its half away from
+/// the second fir (the window of the test above) and its whole crown. The pixels are those
+/// where the fir alone differs from the bare view and the second fir alone does not.
+fn darkening(ctx: &GpuContext, method: Method) -> [(f32, usize); 2] {
+    let (w, h) = (CROWN_VIEW_PX, CROWN_VIEW_PX);
+    let alone = firs_at(&[(Vec3::ZERO, 1.0)]);
+    let occluder = (Vec3::new(0.0, 0.0, 7.0), 1.6);
+    let pair = firs_at(&[(Vec3::ZERO, 1.0), occluder]);
+    let other = firs_at(&[occluder]);
+    let (frame, alone_img, bare) = crown_view(ctx, &alone, 0.0, method);
+    let (_, pair_img, _) = crown_view(ctx, &pair, 0.0, method);
+    let (_, other_img, _) = crown_view(ctx, &other, 0.0, method);
+    let fir = alone.species[0].tree_bounds;
+    let windows = [
+        (Vec3::new(0.0, 14.0, -4.5), Vec3::new(0.0, 2.0, -0.5)),
+        (
+            Vec3::new(0.0, fir.max.y, fir.min.z),
+            Vec3::new(0.0, 2.0, fir.max.z),
+        ),
+    ];
+    windows.map(|(a, b)| {
+        let (x0, y0) = to_px(&frame, w, h, a);
+        let (x1, y1) = to_px(&frame, w, h, b);
+        let (mut lit, mut shaded, mut n) = (0.0, 0.0, 0usize);
+        for y in y0.max(0)..y1.min(i64::from(h)) {
+            for x in x0.max(0)..x1.min(i64::from(w)) {
+                let at = |img: &image::RgbaImage| luminance(*img.get_pixel(x as u32, y as u32));
+                let tree = (at(&alone_img) - at(&bare)).abs() > 0.02;
+                let other_tree = (at(&other_img) - at(&bare)).abs() > 0.005;
+                if tree && !other_tree {
+                    lit += at(&alone_img);
+                    shaded += at(&pair_img);
+                    n += 1;
+                }
+            }
+        }
+        assert!(n > 50, "the crown covers {n} pixels of the window");
+        (1.0 - shaded / lit, n)
+    })
+}
+
+/// Darkening of the first fir by the second, by geometry (the truth) and by btf + VCM, for
+/// the two windows of [`darkening`], printed.
+fn darkening_against_truth(ctx: &GpuContext) -> [(f32, f32); 2] {
+    let truth = darkening(ctx, Method::Geometry);
+    let btf = darkening(ctx, Method::Btf);
+    let what = ["the half away from the other fir", "the whole crown"];
+    for k in 0..2 {
+        eprintln!(
+            "darkening of {} ({} / {} pixels): geometry {:.4}, btf + VCM {:.4}, ratio {:.3}",
+            what[k],
+            truth[k].1,
+            btf[k].1,
+            truth[k].0,
+            btf[k].0,
+            btf[k].0 / truth[k].0
+        );
+        // The truth itself must show the effect, or the ratio means nothing.
+        assert!(
+            truth[k].0 > 0.1,
+            "geometry darkens {} by only {}",
+            what[k],
+            truth[k].0
+        );
+    }
+    [0, 1].map(|k| (truth[k].0, btf[k].0))
+}
+
+/// What btf + VCM darkens, as a fraction of what geometry darkens over the same pixels, may
+/// not fall below this (half crown, whole crown). Measured on lavapipe (Mesa llvmpipe):
+/// geometry 0.5013 and 0.6100, btf + VCM 0.0041 and 0.0127: ratios 0.008 and 0.021; the
+/// floors are half of that. With VCM shading off the ratios are 0 (the test then fails).
+/// This guards what there is; the goal, about as much as the truth, is the ignored test
+/// below (issue 14).
+const DARKENING_FLOOR: [f32; 2] = [0.004, 0.01];
+
+#[test]
+fn btf_with_vcm_darkens_a_tree_behind_another_a_measured_fraction_of_geometry() {
+    let ctx = gpu();
+    for (k, (truth, btf)) in darkening_against_truth(&ctx).into_iter().enumerate() {
+        let ratio = btf / truth;
+        assert!(
+            ratio >= DARKENING_FLOOR[k] && ratio <= 1.5,
+            "window {k}: btf + VCM darkens by {btf:.4}, geometry by {truth:.4}: ratio {ratio:.4} outside {}..=1.5",
+            DARKENING_FLOOR[k]
+        );
+    }
+}
+
+/// btf + VCM's darkening of a tree behind another should be within this ratio of the
+/// geometry ground truth's over the same pixels: what "about as much as the truth" should
+/// mean (no measurement set it).
+const DARKENING_RATIO: (f32, f32) = (0.5, 1.5);
+
+#[test]
+#[ignore = "btf + VCM darkens a fir behind another 50 to 120x less than geometry: 0.0041 vs \
+            0.5013 (half crown, ratio 0.008), 0.0127 vs 0.6100 (whole crown, ratio 0.021) on \
+            lavapipe; the corner cube maps' rays towards the sun pass beside the other crown"]
+fn btf_with_vcm_darkens_a_tree_behind_another_about_as_much_as_geometry() {
+    let ctx = gpu();
+    for (k, (truth, btf)) in darkening_against_truth(&ctx).into_iter().enumerate() {
+        let ratio = btf / truth;
+        assert!(
+            (DARKENING_RATIO.0..=DARKENING_RATIO.1).contains(&ratio),
+            "window {k}: btf + VCM darkens by {btf:.4}, geometry by {truth:.4}: ratio {ratio:.3} outside {DARKENING_RATIO:?}"
+        );
+    }
 }
 
 /// The dense stand of tests/data and its bake (BTF + VCMs), made once per process.

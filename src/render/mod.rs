@@ -19,7 +19,6 @@ pub mod measure;
 pub mod method;
 mod pipelines;
 pub mod shaders;
-pub mod shading;
 pub mod shadow;
 pub mod target;
 pub mod timing;

@@ -12,8 +12,8 @@ mod common;
 use std::sync::OnceLock;
 
 use canopy::bake;
-use canopy::format::{Baked, Level};
-use canopy::model::World;
+use canopy::format::Baked;
+use canopy::model::{Level, PerLevel, World};
 use canopy::render::btf::LOD_COLOURS;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
@@ -69,16 +69,17 @@ const VISIBLE_CHANGE: f32 = 0.02;
 
 /// Of the `covered` pixels the tree changed visibly (returned second), the fraction each
 /// LOD colour explains best, within the tolerance.
-fn lod_fractions(covered: &[(usize, Vec3, Vec3)]) -> ([f32; 3], usize) {
-    let mut n = [0usize; 3];
+fn lod_fractions(covered: &[(usize, Vec3, Vec3)]) -> (PerLevel<f32>, usize) {
+    let mut n = PerLevel::<usize>::default();
     let mut judged = 0;
     for &(_, p, b) in covered {
         if (p - b).length() <= VISIBLE_CHANGE {
             continue;
         }
         judged += 1;
-        let (k, err) = (0..3)
+        let (k, err) = Level::ALL
             .map(|k| (k, unmix(p, b, Vec3::from(LOD_COLOURS[k])).1))
+            .into_iter()
             .min_by(|x, y| x.1.total_cmp(&y.1))
             .unwrap();
         if err < UNMIX_TOLERANCE {
@@ -102,7 +103,7 @@ fn stand_btf() -> &'static Baked {
     BAKED.get_or_init(|| {
         let ctx = gpu();
         let scene = btf_scene();
-        let world = World::build(&scene).unwrap();
+        let world = scene.build_world().unwrap();
         let settings = bake::cache::settings_of(&scene);
         bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap()
     })
@@ -121,7 +122,7 @@ const LOD_MAX_OTHER_COLOUR: f32 = 0.02;
 fn show_lod_colours_a_lone_tree_by_the_level_it_is_drawn_at() {
     let ctx = gpu();
     let scene = btf_scene();
-    let stand = World::build(&scene).unwrap();
+    let stand = scene.build_world().unwrap();
     let (w, h) = (96u32, 96u32);
     let fov = 40.0;
     let focal = Camera::look_at(Vec3::ZERO, Vec3::Z, fov).focal_px(h);
@@ -178,12 +179,8 @@ fn show_lod_colours_a_lone_tree_by_the_level_it_is_drawn_at() {
             // The second measurement: the same view in the tree's own colours.
             frame.btf.show_lod = false;
             let (plain, _) = shot(&frame);
-            let li = match level {
-                Level::Twig => 0,
-                Level::Branch => 1,
-                Level::Tree => 2,
-            };
-            let mut want = [0; 3];
+            let li = level;
+            let mut want = PerLevel::default();
             want[li] = 1;
             assert_eq!(
                 stats.btf.unwrap().trees_per_level,
@@ -204,11 +201,12 @@ fn show_lod_colours_a_lone_tree_by_the_level_it_is_drawn_at() {
                 "{name} at the {level:?} level: only {:.3} of its pixels in the level's colour ({f:?})",
                 f[li]
             );
-            for (j, fj) in f.iter().enumerate() {
+            for j in Level::ALL {
+                let fj = &f[j];
                 if j != li {
                     assert!(
                         *fj <= LOD_MAX_OTHER_COLOUR,
-                        "{name} at the {level:?} level: {fj:.3} of its pixels in level {j}'s colour ({f:?})"
+                        "{name} at the {level:?} level: {fj:.3} of its pixels in the {j:?} level's colour ({f:?})"
                     );
                 }
             }
@@ -234,7 +232,7 @@ fn fir_btf() -> &'static Baked {
     BAKED.get_or_init(|| {
         let ctx = gpu();
         let scene = lone_tree();
-        let world = World::build(&scene).unwrap();
+        let world = scene.build_world().unwrap();
         let settings = bake::cache::settings_of(&scene);
         bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap()
     })
@@ -242,7 +240,7 @@ fn fir_btf() -> &'static Baked {
 
 /// A world of firs at `positions` (with their scales) on the lone tree's flat ground.
 fn firs_at(trees: &[(Vec3, f32)]) -> World {
-    let mut world = World::build(&lone_tree()).unwrap();
+    let mut world = lone_tree().build_world().unwrap();
     let tree = world.forest.instances[0];
     world.forest.instances = trees
         .iter()
@@ -340,7 +338,7 @@ struct Shots {
     on: RgbaImage,
     off: RgbaImage,
     plain: RgbaImage,
-    trees_per_level: [u32; 3],
+    trees_per_level: PerLevel<u32>,
 }
 
 fn shots(ctx: &GpuContext, renderer: &mut Renderer, frame: &FrameDesc, w: u32, h: u32) -> Shots {
@@ -411,12 +409,8 @@ fn show_shadow_draws_the_sun_factor_in_grey_darker_behind_another_tree() {
         frame.camera = Camera::look_at(centre + Vec3::new(0.0, z, 0.001), centre, fov);
         let [a, b] = &mut renderers;
         let views = [shots(&ctx, a, &frame, w, h), shots(&ctx, b, &frame, w, h)];
-        let li = match level {
-            Level::Twig => 0,
-            Level::Branch => 1,
-            Level::Tree => 2,
-        };
-        let mut want = [0; 3];
+        let li = level;
+        let mut want = PerLevel::default();
         want[li] = 1;
         assert_eq!(views[0].trees_per_level, want, "{level:?} at {z:.1} m");
         // (The taller second fir, nearer to the camera for its size, may be at a finer

@@ -1,0 +1,543 @@
+//! The `btf` method: every tree as BTF billboards of its chosen level (Meyer, Neyret, Poulin
+//! 2001). Per frame, on the CPU ([`prepare`]): choose each visible tree's level by the texel
+//! criterion, expand it into billboards (the tree; its main branches; or its twigs, at their
+//! instance transforms), find each billboard's view and light directions in its object frame
+//! and the 3 nearest samples of each with their weights, cull small weights, sort back to
+//! front. On the GPU (this file): one instanced draw samples a single texture array holding
+//! every image set.
+
+mod billboard;
+pub mod prepare;
+mod settings;
+pub mod shading;
+
+use std::collections::HashMap;
+
+use glam::Vec3;
+
+pub use billboard::{BillboardGpu, BillboardMode};
+pub use prepare::{BtfFrame, BtfScene, LevelChoice, PrepareView, choose_level};
+pub use settings::{BtfSettings, BtfStats, LOD_COLOURS, PlaneMode};
+
+use crate::format::Baked;
+use crate::lod::LevelTexels;
+use crate::model::World;
+use crate::render::GpuContext;
+use crate::render::camera::Frustum;
+use crate::render::frame::FrameStats;
+use crate::render::pipelines::ColorPipelines;
+use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
+use crate::{Error, Result};
+
+/// The BTF image sets on the GPU and the per-frame billboard buffer.
+pub struct BtfAssets {
+    scene: BtfScene,
+    _texture: wgpu::Texture,
+    texture_view: wgpu::TextureView,
+    sampler: wgpu::Sampler,
+    view_axes: wgpu::Buffer,
+    layout: wgpu::BindGroupLayout,
+    billboards: wgpu::Buffer,
+    capacity: usize,
+    max_capacity: usize,
+    bind_group: wgpu::BindGroup,
+    pipelines: HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
+    opacity_pipeline: Option<wgpu::RenderPipeline>,
+    sun_billboards: wgpu::Buffer,
+    sun_capacity: usize,
+    sun_bind_group: wgpu::BindGroup,
+    /// Bytes of the texture array, mipmaps included.
+    pub bytes: u64,
+}
+
+impl BtfAssets {
+    pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
+        let scene = BtfScene::new(baked, world)?;
+        let res = scene.resolution();
+        let layers = scene.layer_count();
+        let max_layers = u64::from(ctx.device.limits().max_texture_array_layers);
+        if layers > max_layers {
+            return Err(Error::BadInput(format!(
+                "the BTF needs {layers} texture layers but this GPU allows {max_layers}; bake with fewer views or lights"
+            )));
+        }
+        let mips = res.max(1).ilog2() + 1;
+        let texture = ctx.checked("allocating the BTF texture array", || {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("btf images"),
+                size: wgpu::Extent3d {
+                    width: res,
+                    height: res,
+                    depth_or_array_layers: layers.max(1) as u32,
+                },
+                mip_level_count: mips,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            })
+        })?;
+        let image_bytes = (res * res * 4) as usize;
+        let mut bytes = 0u64;
+        for (base, set) in scene.image_sets(baked) {
+            let images = set
+                .direct
+                .chunks_exact(image_bytes)
+                .chain(set.ambient.chunks_exact(image_bytes));
+            for (i, img) in images.enumerate() {
+                bytes += upload_layer(ctx, &texture, base + i as u32, res, img, mips);
+            }
+        }
+        let texture_view = texture.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("btf"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let axes = scene.view_axes();
+        let view_axes = wgpu::util::DeviceExt::create_buffer_init(
+            &ctx.device,
+            &wgpu::util::BufferInitDescriptor {
+                label: Some("btf view axes"),
+                contents: bytemuck::cast_slice(&axes),
+                usage: wgpu::BufferUsages::STORAGE,
+            },
+        );
+        let layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("btf"),
+                entries: &[
+                    storage_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
+                    storage_entry(1, wgpu::ShaderStages::FRAGMENT),
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 2,
+                        visibility: wgpu::ShaderStages::FRAGMENT,
+                        ty: wgpu::BindingType::Texture {
+                            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                            view_dimension: wgpu::TextureViewDimension::D2Array,
+                            multisampled: false,
+                        },
+                        count: None,
+                    },
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 3,
+                        visibility: wgpu::ShaderStages::FRAGMENT,
+                        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                        count: None,
+                    },
+                ],
+            });
+        let stride = std::mem::size_of::<BillboardGpu>();
+        let limits = ctx.device.limits();
+        let max_capacity = (limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size)
+            / stride as u64) as usize;
+        let capacity = 1024.min(max_capacity);
+        let billboards = billboard_buffer(ctx, capacity);
+        let bind_group = make_bind_group(
+            ctx,
+            &layout,
+            &billboards,
+            &view_axes,
+            &texture_view,
+            &sampler,
+        );
+        let sun_capacity = world.forest.instances.len().clamp(1, max_capacity);
+        let sun_billboards = billboard_buffer(ctx, sun_capacity);
+        let sun_bind_group = make_bind_group(
+            ctx,
+            &layout,
+            &sun_billboards,
+            &view_axes,
+            &texture_view,
+            &sampler,
+        );
+        Ok(Self {
+            scene,
+            _texture: texture,
+            texture_view,
+            sampler,
+            view_axes,
+            layout,
+            billboards,
+            capacity,
+            max_capacity,
+            bind_group,
+            pipelines: HashMap::new(),
+            opacity_pipeline: None,
+            sun_billboards,
+            sun_capacity,
+            sun_bind_group,
+            bytes,
+        })
+    }
+
+    /// Reads every tree's cube maps in the sun's direction if it moved; true if it did.
+    pub fn update_sun(&mut self, to_sun: Vec3) -> bool {
+        self.scene.update_sun(to_sun)
+    }
+
+    /// Bytes of visibility cube maps held in main memory.
+    pub fn vcm_bytes(&self) -> u64 {
+        self.scene.vcm_bytes()
+    }
+
+    /// Face resolution of the visibility cube maps (None without them).
+    pub fn vcm_resolution(&self) -> Option<u32> {
+        self.scene.vcm_resolution()
+    }
+
+    /// What the method knows of the scene on the CPU.
+    pub fn scene(&self) -> &BtfScene {
+        &self.scene
+    }
+
+    /// Chooses levels, builds and sorts the billboards ([`BtfScene::prepare`]) and uploads
+    /// them.
+    #[allow(clippy::too_many_arguments)]
+    pub fn prepare(
+        &mut self,
+        ctx: &GpuContext,
+        world: &WorldGpu,
+        visible: &[Vec<u32>],
+        camera: &crate::render::Camera,
+        focal_px: f32,
+        to_sun: Vec3,
+        frustum: &Frustum,
+        settings: &BtfSettings,
+    ) -> BtfFrame {
+        let view = PrepareView {
+            camera,
+            focal_px,
+            to_sun,
+            frustum,
+        };
+        let mut out =
+            self.scene
+                .prepare(&world.tree_data, visible, &view, settings, self.max_capacity);
+        let records = std::mem::take(&mut out.records);
+        if records.len() > self.capacity {
+            self.capacity = (records.len() * 3 / 2).min(self.max_capacity);
+            self.billboards = billboard_buffer(ctx, self.capacity);
+            self.bind_group = make_bind_group(
+                ctx,
+                &self.layout,
+                &self.billboards,
+                &self.view_axes,
+                &self.texture_view,
+                &self.sampler,
+            );
+        }
+        if !records.is_empty() {
+            ctx.queue
+                .write_buffer(&self.billboards, 0, bytemuck::cast_slice(&records));
+        }
+        out
+    }
+
+    /// The frame's draws in the main pass: the trunks (and limbs) of the trees drawn at the
+    /// finer levels as geometry (`runs`: trunk only, then trunk and limbs; the terrain with
+    /// the first when asked), then every billboard in one instanced draw, back to front.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn draw_main(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        world: &WorldGpu,
+        runs: &[Vec<TreeRun>],
+        pipes: &ColorPipelines,
+        pipeline: Option<&wgpu::RenderPipeline>,
+        bf: &BtfFrame,
+        terrain: bool,
+        stats: &mut FrameStats,
+    ) {
+        let (t0, _, c0) = world.draw(pass, &runs[0], Some(pipes), terrain, &[PartKind::Trunk]);
+        let (t1, _, c1) = world.draw(
+            pass,
+            &runs[1],
+            Some(pipes),
+            false,
+            &[PartKind::Trunk, PartKind::Limbs],
+        );
+        stats.triangles = t0 + t1 + 2 * u64::from(bf.billboards);
+        stats.trees_drawn = bf.stats.trees_per_level.iter().sum();
+        stats.draw_calls += c0 + c1;
+        if let Some(pipeline) = pipeline
+            && bf.billboards > 0
+        {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(1, &self.bind_group, &[]);
+            pass.draw(0..6, 0..bf.billboards);
+            stats.draw_calls += 1;
+        }
+        stats.btf = Some(bf.stats);
+    }
+
+    /// Every tree's tree-level billboard as the sun sees it (for the ground alpha shadow
+    /// map). Returns how many were uploaded.
+    pub fn prepare_sun(&mut self, ctx: &GpuContext, world: &WorldGpu, to_sun: Vec3) -> u32 {
+        let out = self.scene.sun_billboards(
+            &world.tree_data,
+            &world.tree_species,
+            to_sun,
+            self.sun_capacity,
+        );
+        if !out.is_empty() {
+            ctx.queue
+                .write_buffer(&self.sun_billboards, 0, bytemuck::cast_slice(&out));
+        }
+        out.len() as u32
+    }
+
+    /// The opacity pipeline of the ground alpha shadow map.
+    pub fn opacity_pipeline(
+        &mut self,
+        device: &wgpu::Device,
+        light_frame_layout: &wgpu::BindGroupLayout,
+    ) -> &wgpu::RenderPipeline {
+        let layout = &self.layout;
+        self.opacity_pipeline
+            .get_or_insert_with(|| build_opacity_pipeline(device, light_frame_layout, layout))
+    }
+
+    pub fn sun_bind_group(&self) -> &wgpu::BindGroup {
+        &self.sun_bind_group
+    }
+
+    pub fn pipeline(
+        &mut self,
+        device: &wgpu::Device,
+        frame_layout: &wgpu::BindGroupLayout,
+        format: wgpu::TextureFormat,
+    ) -> &wgpu::RenderPipeline {
+        let layout = &self.layout;
+        self.pipelines
+            .entry(format)
+            .or_insert_with(|| build_pipeline(device, frame_layout, layout, format))
+    }
+
+    pub fn bind_group(&self) -> &wgpu::BindGroup {
+        &self.bind_group
+    }
+
+    /// Texel sizes of one species' levels, for tests and tools.
+    pub fn texel_sizes(&self, species: usize) -> Option<LevelTexels> {
+        self.scene.texel_sizes(species)
+    }
+}
+
+fn storage_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn billboard_buffer(ctx: &GpuContext, capacity: usize) -> wgpu::Buffer {
+    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("btf billboards"),
+        size: (capacity.max(1) * std::mem::size_of::<BillboardGpu>()) as u64,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+fn make_bind_group(
+    ctx: &GpuContext,
+    layout: &wgpu::BindGroupLayout,
+    billboards: &wgpu::Buffer,
+    view_axes: &wgpu::Buffer,
+    view: &wgpu::TextureView,
+    sampler: &wgpu::Sampler,
+) -> wgpu::BindGroup {
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("btf"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: billboards.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: view_axes.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::TextureView(view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::Sampler(sampler),
+            },
+        ],
+    })
+}
+
+/// Uploads one image and its mip chain (box-filtered in linear light) to `layer`.
+/// Returns the bytes uploaded.
+fn upload_layer(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    layer: u32,
+    res: u32,
+    rgba: &[u8],
+    mips: u32,
+) -> u64 {
+    let Some(mut img) = image::RgbaImage::from_raw(res, res, rgba.to_vec()) else {
+        return 0;
+    };
+    let mut bytes = 0u64;
+    for level in 0..mips {
+        let (w, h) = img.dimensions();
+        ctx.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture,
+                mip_level: level,
+                origin: wgpu::Origin3d {
+                    x: 0,
+                    y: 0,
+                    z: layer,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            img.as_raw(),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(4 * w),
+                rows_per_image: Some(h),
+            },
+            wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+        );
+        bytes += u64::from(4 * w * h);
+        if w > 1 {
+            img = crate::render::target::downsample(&img, 2);
+        }
+    }
+    bytes
+}
+
+fn build_opacity_pipeline(
+    device: &wgpu::Device,
+    frame_layout: &wgpu::BindGroupLayout,
+    btf_layout: &wgpu::BindGroupLayout,
+) -> wgpu::RenderPipeline {
+    // dst = dst * (1 - alpha): transmittance multiplies.
+    let transmit = wgpu::BlendComponent {
+        src_factor: wgpu::BlendFactor::Zero,
+        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+        operation: wgpu::BlendOperation::Add,
+    };
+    billboard_pipeline(
+        device,
+        [frame_layout, btf_layout],
+        ("ground_map.wgsl", crate::render::shaders::ground_map()),
+        "fs_opacity",
+        crate::render::GROUND_FORMAT,
+        transmit,
+        (crate::render::SHADOW_FORMAT, wgpu::CompareFunction::Less),
+    )
+}
+
+fn build_pipeline(
+    device: &wgpu::Device,
+    frame_layout: &wgpu::BindGroupLayout,
+    btf_layout: &wgpu::BindGroupLayout,
+    format: wgpu::TextureFormat,
+) -> wgpu::RenderPipeline {
+    // Premultiplied "over": T = M + (1 - M_alpha) T0.
+    let over = wgpu::BlendComponent {
+        src_factor: wgpu::BlendFactor::One,
+        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+        operation: wgpu::BlendOperation::Add,
+    };
+    // Reversed Z in the main view.
+    billboard_pipeline(
+        device,
+        [frame_layout, btf_layout],
+        ("btf.wgsl", crate::render::shaders::btf()),
+        "fs_billboard",
+        format,
+        over,
+        (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
+    )
+}
+
+/// A pipeline drawing the billboards of `billboard.wgsl` with `fragment` of the module
+/// `source` (named, source), blended by `blend`,
+/// depth-tested (never written) against `depth`.
+fn billboard_pipeline(
+    device: &wgpu::Device,
+    layouts: [&wgpu::BindGroupLayout; 2],
+    source: (&str, String),
+    fragment: &str,
+    format: wgpu::TextureFormat,
+    blend: wgpu::BlendComponent,
+    depth: (wgpu::TextureFormat, wgpu::CompareFunction),
+) -> wgpu::RenderPipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(source.0),
+        source: wgpu::ShaderSource::Wgsl(source.1.into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(fragment),
+        bind_group_layouts: &[Some(layouts[0]), Some(layouts[1])],
+        immediate_size: 0,
+    });
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(fragment),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_billboard"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: depth.0,
+            depth_write_enabled: Some(false),
+            depth_compare: Some(depth.1),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some(fragment),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format,
+                blend: Some(wgpu::BlendState {
+                    color: blend,
+                    alpha: blend,
+                }),
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}

@@ -1,0 +1,802 @@
+//! The `btf` method's CPU work, without a GPU. [`BtfScene`] is what the method knows of the
+//! scene (per species: each level's image set and billboard frame, the part transforms a
+//! tree expands into, the texel sizes; the view and light direction sets; the VCM shading).
+//! [`BtfScene::prepare`] turns a frame's visible trees into billboard records: it chooses
+//! each tree's level by the texel criterion (with the cross-fade band), expands it into the
+//! billboards of that level, finds each billboard's view and light directions in its object
+//! frame with their 3 nearest samples, culls small weights, adds the VCM factors and sorts
+//! everything back to front.
+
+use std::collections::HashMap;
+
+use glam::{Mat3, Mat4, Vec3};
+
+use super::billboard::{BillboardGpu, BillboardMode, NO_SHADE, SetInfo};
+use super::settings::{BtfSettings, BtfStats, LOD_COLOURS, PlaneMode};
+use super::shading::{ObjectFrame, Shade, VcmShading};
+use crate::format::{Baked, BtfImageSet};
+use crate::lod::{self, LevelTexels};
+use crate::model::mesh::Aabb;
+use crate::model::{Level, PerLevel, World};
+use crate::render::camera::{Camera, Frustum};
+use crate::render::world_gpu::TreeGpu;
+use crate::sphere::{DirectionSet, billboard_axes};
+use crate::{Error, Result};
+
+/// Per species: the part transforms that finer levels expand a tree into.
+struct SpeciesParts {
+    branches: Vec<Mat4>,
+    /// Twigs of the reference main branch, in the branch frame.
+    branch_twigs: Vec<Mat4>,
+    trunk_twigs: Vec<Mat4>,
+    sets: PerLevel<SetInfo>,
+    texels: LevelTexels,
+    bounds: Aabb,
+    /// The sets' bounds and billboard centres, for the VCM shading.
+    frames: PerLevel<ObjectFrame>,
+}
+
+/// What the `btf` method knows of a scene on the CPU.
+pub struct BtfScene {
+    species: Vec<SpeciesParts>,
+    views: DirectionSet,
+    lights: DirectionSet,
+    vcm: Option<VcmShading>,
+    /// Indices into the baked image sets, species by species, each finest level first: the
+    /// order of the sets in the texture array.
+    order: Vec<usize>,
+    /// Texture layers per image set: views x lights direct images, then views sky images.
+    layers_per_set: u32,
+    resolution: u32,
+}
+
+/// Where the camera and sun are for [`BtfScene::prepare`].
+#[derive(Clone, Copy)]
+pub struct PrepareView<'a> {
+    pub camera: &'a Camera,
+    /// Focal length in pixels (the texel criterion's scale).
+    pub focal_px: f32,
+    /// Unit direction to the sun.
+    pub to_sun: Vec3,
+    pub frustum: &'a Frustum,
+}
+
+/// One frame's billboards and the trees the `btf` method draws partly as geometry.
+pub struct BtfFrame {
+    /// Per species: trees at the main-branch level (their trunk is geometry).
+    pub trunk_only: Vec<Vec<u32>>,
+    /// Per species: trees at the twig level (trunk and limbs are geometry).
+    pub trunk_and_limbs: Vec<Vec<u32>>,
+    /// The billboard records, back to front.
+    pub records: Vec<BillboardGpu>,
+    /// Billboards drawn (`records.len()` until the records are handed to the GPU).
+    pub billboards: u32,
+    pub stats: BtfStats,
+}
+
+/// The level a tree is drawn at, and the finer level fading in over it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LevelChoice {
+    /// The coarsest level whose texels project below the LOD scale.
+    pub level: Level,
+    /// The next finer level and its opacity, inside the cross-fade band before the bound.
+    pub fading_in: Option<(Level, f32)>,
+}
+
+impl LevelChoice {
+    /// The levels to draw with their opacities (they sum to 1).
+    pub fn draws(self) -> impl Iterator<Item = (Level, f32)> {
+        let fade = self.fading_in.map_or(0.0, |(_, f)| f);
+        std::iter::once((self.level, 1.0 - fade)).chain(self.fading_in)
+    }
+}
+
+/// Chooses the level of a tree of `scale` whose centre is `z` from the eye. While the chosen
+/// level's texel is within the last `lod_fade` fraction of the bound, the next finer level
+/// fades in over it, so that the switch at the bound itself changes nothing.
+pub fn choose_level(
+    texels: &LevelTexels,
+    scale: f32,
+    focal_px: f32,
+    z: f32,
+    settings: &BtfSettings,
+) -> LevelChoice {
+    let level = lod::choose(texels, scale, focal_px, z, settings.lod_scale);
+    let px = lod::projected_px(texels[level] * scale, focal_px, z);
+    let start = settings.lod_scale * (1.0 - settings.lod_fade.clamp(0.0, 1.0));
+    let fading_in = match level.finer() {
+        Some(finer) if settings.lod_fade > 0.0 && px > start => {
+            let fade = ((px - start) / (settings.lod_scale - start).max(1e-6)).clamp(0.0, 1.0);
+            (fade > 0.0).then_some((finer, fade))
+        }
+        _ => None,
+    };
+    LevelChoice { level, fading_in }
+}
+
+impl BtfScene {
+    /// Checks that the bake fits the scene (every species has its three levels, every set
+    /// the file's sizes) and gathers the billboard frames and part transforms.
+    pub fn new(baked: &Baked, world: &World) -> Result<Self> {
+        let bad = |m: String| {
+            Error::BadInput(format!(
+                "baked BTF data does not fit the scene: {m}; re-bake with `canopy bake`"
+            ))
+        };
+        let s = &baked.settings;
+        let views = DirectionSet::with_count(s.views as usize).map_err(|e| bad(e.to_string()))?;
+        let lights = DirectionSet::with_count(s.lights as usize).map_err(|e| bad(e.to_string()))?;
+        let mut index: HashMap<(u32, Level), usize> = HashMap::new();
+        for (i, set) in baked.btf.iter().enumerate() {
+            if set.views != s.views || set.lights != s.lights || set.resolution != s.resolution {
+                return Err(bad(format!(
+                    "image set {i} has other sizes than the file's settings"
+                )));
+            }
+            index.insert((set.species, set.level), i);
+        }
+        let layers_per_set = s.views * s.lights + s.views;
+        let mut order = Vec::new();
+        let mut species = Vec::new();
+        for (sp, tree) in world.species.iter().enumerate() {
+            let level_bounds = PerLevel {
+                twig: tree.twig_bounds,
+                branch: tree.branch_bounds,
+                tree: tree.tree_bounds,
+            };
+            let mut sets = level_bounds.map(|bounds| SetInfo {
+                layer_base: 0,
+                center: Vec3::ZERO,
+                radius: 1.0,
+                bounds,
+            });
+            let mut texels = LevelTexels::default();
+            for level in Level::ALL {
+                let i = index.get(&(sp as u32, level)).copied().ok_or_else(|| {
+                    bad(format!("species {sp} level {} is missing", level.index()))
+                })?;
+                let set = &baked.btf[i];
+                sets[level] = SetInfo {
+                    layer_base: order.len() as u32 * layers_per_set,
+                    center: Vec3::from(set.center),
+                    radius: set.radius,
+                    bounds: level_bounds[level],
+                };
+                texels[level] = set.texel_size;
+                order.push(i);
+            }
+            species.push(SpeciesParts {
+                branches: tree.tree_branches.clone(),
+                branch_twigs: tree.branch_twigs.clone(),
+                trunk_twigs: tree.tree_twigs.clone(),
+                frames: sets.map(|s| ObjectFrame {
+                    bounds: s.bounds,
+                    center: s.center,
+                }),
+                sets,
+                texels,
+                bounds: tree.tree_bounds,
+            });
+        }
+        Ok(Self {
+            species,
+            views,
+            lights,
+            vcm: VcmShading::new(baked, world)?,
+            order,
+            layers_per_set,
+            resolution: s.resolution,
+        })
+    }
+
+    /// Texture layers every image set together needs.
+    pub fn layer_count(&self) -> u64 {
+        u64::from(self.layers_per_set) * self.order.len() as u64
+    }
+
+    /// Side of every image, in texels.
+    pub fn resolution(&self) -> u32 {
+        self.resolution
+    }
+
+    /// Each image set with its first texture layer, in layer order.
+    pub fn image_sets<'a>(&self, baked: &'a Baked) -> impl Iterator<Item = (u32, &'a BtfImageSet)> {
+        let per_set = self.layers_per_set;
+        self.order
+            .iter()
+            .enumerate()
+            .filter_map(move |(k, &i)| Some((k as u32 * per_set, baked.btf.get(i)?)))
+    }
+
+    /// Each view sample's billboard axes in its object frame (right, up; w = 0), as the
+    /// shader's view-axes buffer holds them.
+    pub fn view_axes(&self) -> Vec<[f32; 4]> {
+        self.views
+            .directions()
+            .iter()
+            .flat_map(|&v| {
+                let (r, u) = billboard_axes(v);
+                [r.extend(0.0).to_array(), u.extend(0.0).to_array()]
+            })
+            .collect()
+    }
+
+    /// Reads every tree's cube maps in the sun's direction if it moved; true if it did.
+    pub fn update_sun(&mut self, to_sun: Vec3) -> bool {
+        self.vcm.as_mut().is_some_and(|v| v.set_sun(to_sun))
+    }
+
+    /// Bytes of visibility cube maps held in main memory.
+    pub fn vcm_bytes(&self) -> u64 {
+        self.vcm.as_ref().map_or(0, |v| v.bytes)
+    }
+
+    /// Face resolution of the visibility cube maps (None without them).
+    pub fn vcm_resolution(&self) -> Option<u32> {
+        self.vcm.as_ref().map(|v| v.resolution())
+    }
+
+    /// Texel sizes of one species' levels.
+    pub fn texel_sizes(&self, species: usize) -> Option<LevelTexels> {
+        self.species.get(species).map(|s| s.texels)
+    }
+
+    /// The billboards of the trees in `visible` (per species, indices into `trees`), back to
+    /// front; past `max_billboards` the farthest are dropped (and counted).
+    pub fn prepare(
+        &self,
+        trees: &[TreeGpu],
+        visible: &[Vec<u32>],
+        view: &PrepareView,
+        settings: &BtfSettings,
+        max_billboards: usize,
+    ) -> BtfFrame {
+        let mut stats = BtfStats::default();
+        let mut trunk_only = vec![Vec::new(); self.species.len()];
+        let mut trunk_and_limbs = vec![Vec::new(); self.species.len()];
+        let mut sorted: Vec<(f32, BillboardGpu)> = Vec::new();
+        let vcm = self.vcm.as_ref().filter(|_| settings.vcm);
+        stats.vcm = vcm.is_some();
+        let cam = view.camera.position;
+        for (sp, list) in visible.iter().enumerate() {
+            let Some(parts) = self.species.get(sp) else {
+                continue;
+            };
+            for &t in list {
+                let Some(data) = trees.get(t as usize) else {
+                    continue;
+                };
+                let m = Mat4::from_cols_array_2d(&data.model);
+                let scale = m.x_axis.truncate().length();
+                let z = (m.transform_point3(parts.bounds.center()) - cam).length();
+                let choice = choose_level(&parts.texels, scale, view.focal_px, z, settings);
+                stats.trees_per_level[choice.level] += 1;
+                if choice.fading_in.is_some() {
+                    stats.faded_trees += 1;
+                }
+                let shading = vcm.map(|v| v.for_tree(t as usize, sp, &m, &parts.frames));
+                let mut pusher = Pusher {
+                    scene: self,
+                    view,
+                    settings,
+                    out: &mut sorted,
+                    stats: &mut stats,
+                    tint: ([data.tint[0], data.tint[1], data.tint[2]], BillboardMode::Images),
+                    opacity: 1.0,
+                };
+                for (level, opacity) in choice.draws() {
+                    pusher.opacity = opacity;
+                    if settings.show_lod {
+                        pusher.tint = (LOD_COLOURS[level], BillboardMode::Tint);
+                    } else if settings.show_shadow {
+                        pusher.tint = ([1.0; 3], BillboardMode::SunFactor);
+                    }
+                    expand(&mut pusher, parts, level, m, shading.as_ref());
+                }
+                // The finest level drawn decides which parts are geometry.
+                match choice.draws().map(|(l, _)| l).min_by_key(|l| l.index()) {
+                    Some(Level::Branch) => trunk_only[sp].push(t),
+                    Some(Level::Twig) => trunk_and_limbs[sp].push(t),
+                    _ => {}
+                }
+            }
+        }
+        // Back to front; keep the nearest ones when there are too many: they matter most.
+        sorted.sort_by(|a, b| b.0.total_cmp(&a.0));
+        if sorted.len() > max_billboards {
+            stats.dropped = (sorted.len() - max_billboards) as u32;
+            sorted.drain(..sorted.len() - max_billboards);
+        }
+        let records: Vec<BillboardGpu> = sorted.into_iter().map(|(_, b)| b).collect();
+        BtfFrame {
+            trunk_only,
+            trunk_and_limbs,
+            billboards: records.len() as u32,
+            records,
+            stats,
+        }
+    }
+
+    /// Every tree's tree-level billboard as the sun sees it (for the ground alpha shadow
+    /// map), at most `max` of them. `tree_species[i]` is the species of `trees[i]`.
+    pub fn sun_billboards(
+        &self,
+        trees: &[TreeGpu],
+        tree_species: &[u32],
+        to_sun: Vec3,
+        max: usize,
+    ) -> Vec<BillboardGpu> {
+        let mut out = Vec::with_capacity(trees.len().min(max));
+        for (data, &sp) in trees.iter().zip(tree_species) {
+            if out.len() >= max {
+                break;
+            }
+            let Some(parts) = self.species.get(sp as usize) else {
+                continue;
+            };
+            let m = Mat4::from_cols_array_2d(&data.model);
+            let scale = m.x_axis.truncate().length();
+            if !(scale > 0.0 && scale.is_finite()) {
+                continue;
+            }
+            let set = &parts.sets.tree;
+            let rot = Mat3::from_mat4(m) * (1.0 / scale);
+            let v_obj = rot.transpose() * to_sun;
+            let vb = self.views.blend(v_obj);
+            let (r, u) = billboard_axes(v_obj);
+            out.push(BillboardGpu {
+                center: m.transform_point3(set.center).to_array(),
+                radius: set.radius * scale,
+                plane_right: (rot * r).normalize_or(Vec3::X).to_array(),
+                plane_up: (rot * u).normalize_or(Vec3::Y).to_array(),
+                obj_right: r.to_array(),
+                obj_up: u.to_array(),
+                view_index: vb.index,
+                layer_base: set.layer_base,
+                light_count: self.lights.len() as u32,
+                view_weight: vb.weight,
+                view_count: self.views.len() as u32,
+                tint: [1.0; 3],
+                ..NO_SHADE
+            });
+        }
+        out
+    }
+}
+
+/// Expands one tree (model matrix `m`) at `level` into its billboards: the tree; its main
+/// branches and the twigs on its trunk; or every twig, on the branches and on the trunk.
+fn expand(
+    p: &mut Pusher,
+    parts: &SpeciesParts,
+    level: Level,
+    m: Mat4,
+    shading: Option<&super::shading::TreeShading>,
+) {
+    let trunk_twigs = |p: &mut Pusher| {
+        for (k, tw) in parts.trunk_twigs.iter().enumerate() {
+            let shade = shading.map_or(Shade::NONE, |s| {
+                s.trunk_twig(parts.branch_twigs.len() + k, tw)
+            });
+            p.push(m * *tw, &parts.sets.twig, Level::Twig, shade);
+        }
+    };
+    match level {
+        Level::Tree => {
+            let shade = shading.map_or(Shade::NONE, |s| s.tree());
+            p.push(m, &parts.sets.tree, Level::Tree, shade);
+        }
+        Level::Branch => {
+            for (i, b) in parts.branches.iter().enumerate() {
+                let shade = shading.map_or(Shade::NONE, |s| s.branch(i, b));
+                p.push(m * *b, &parts.sets.branch, Level::Branch, shade);
+            }
+            trunk_twigs(p);
+        }
+        Level::Twig => {
+            for (i, b) in parts.branches.iter().enumerate() {
+                match shading {
+                    Some(s) => s.branch_twigs(i, b, &parts.branch_twigs, |j, shade| {
+                        p.push(
+                            m * (*b * parts.branch_twigs[j]),
+                            &parts.sets.twig,
+                            Level::Twig,
+                            shade,
+                        )
+                    }),
+                    None => {
+                        for tw in &parts.branch_twigs {
+                            p.push(m * (*b * *tw), &parts.sets.twig, Level::Twig, Shade::NONE);
+                        }
+                    }
+                }
+            }
+            trunk_twigs(p);
+        }
+    }
+}
+
+/// Builds the billboard records of one tree's parts.
+struct Pusher<'a, 'v> {
+    scene: &'a BtfScene,
+    view: &'a PrepareView<'v>,
+    settings: &'a BtfSettings,
+    out: &'a mut Vec<(f32, BillboardGpu)>,
+    stats: &'a mut BtfStats,
+    tint: ([f32; 3], BillboardMode),
+    /// Opacity of the whole billboard (the cross-fade).
+    opacity: f32,
+}
+
+impl Pusher<'_, '_> {
+    /// One billboard of image set `set` at world transform `m`, unless it is outside the
+    /// view: its view and light samples with culled weights, its VCM factors, its depth.
+    fn push(&mut self, m: Mat4, set: &SetInfo, level: Level, shade: Shade) {
+        let scale = m.x_axis.truncate().length();
+        if !(scale > 0.0 && scale.is_finite()) {
+            return;
+        }
+        let center = m.transform_point3(set.center);
+        let radius = set.radius * scale;
+        let sphere_box = Aabb {
+            min: center - Vec3::splat(radius),
+            max: center + Vec3::splat(radius),
+        };
+        if !self.view.frustum.intersects(&sphere_box) {
+            return;
+        }
+        let shade = if self.settings.vcm_sky {
+            shade
+        } else {
+            shade.without_sky()
+        };
+        let cam = self.view.camera.position;
+        let rot = Mat3::from_mat4(m) * (1.0 / scale);
+        let to_object = rot.transpose();
+        let v_obj = to_object * (cam - center).normalize_or(Vec3::Y);
+        let l_obj = to_object * self.view.to_sun;
+        let scene = self.scene;
+        let mut vb = scene.views.blend(v_obj);
+        vb.cull(self.settings.weight_threshold);
+        let mut lb = scene.lights.blend(l_obj);
+        lb.cull(self.settings.weight_threshold);
+        let lights_used = lb.weight.iter().filter(|&&w| w > 0.0).count() as u64;
+        let views_used = vb.weight.iter().filter(|&&w| w > 0.0).count() as u64;
+        let fetches = views_used * (lights_used + 1);
+        self.stats.images_sampled += fetches;
+        self.stats.fetches_saved += 12 - fetches.min(12);
+        self.stats.billboards[level] += 1;
+        let depth = (center - cam).dot(self.view.camera.forward());
+        // The quad faces the eye in both modes; with crossed planes it only bounds the
+        // three planes, one facing each sampled view, which the fragment shader intersects.
+        let (r, u) = billboard_axes(v_obj);
+        let record = BillboardGpu {
+            center: center.to_array(),
+            radius,
+            plane_right: (rot * r).normalize_or(Vec3::X).to_array(),
+            planes: match self.settings.planes {
+                PlaneMode::Single => 1,
+                PlaneMode::Crossed => 3,
+            },
+            plane_up: (rot * u).normalize_or(Vec3::Y).to_array(),
+            opacity: self.opacity,
+            obj_right: r.to_array(),
+            obj_up: u.to_array(),
+            view_index: vb.index,
+            layer_base: set.layer_base,
+            light_index: lb.index,
+            light_count: scene.lights.len() as u32,
+            view_weight: vb.weight,
+            view_count: scene.views.len() as u32,
+            light_weight: lb.weight,
+            tint: self.tint.0,
+            mode: self.tint.1 as u32,
+            ..NO_SHADE
+        }
+        .shade(&shade, set);
+        self.out.push((depth, record));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const BRANCHES: usize = 4;
+    const BRANCH_TWIGS: usize = 5;
+    const TRUNK_TWIGS: usize = 2;
+    /// Texel sizes (m): the tree level is valid beyond 0.1·f/s, the branch level beyond
+    /// 0.02·f/s (s the LOD scale).
+    const TEXELS: LevelTexels = PerLevel {
+        twig: 0.004,
+        branch: 0.02,
+        tree: 0.1,
+    };
+    const FOCAL: f32 = 500.0;
+
+    fn aabb(min: [f32; 3], max: [f32; 3]) -> Aabb {
+        Aabb {
+            min: Vec3::from(min),
+            max: Vec3::from(max),
+        }
+    }
+
+    /// One species of 4 main branches of 5 twigs each and 2 twigs on the trunk; 18 view and
+    /// 18 light samples; no cube maps.
+    fn scene() -> BtfScene {
+        let bounds = PerLevel {
+            twig: aabb([-0.2, -0.2, 0.0], [0.2, 0.2, 0.4]),
+            branch: aabb([-0.5, -0.5, 0.0], [0.5, 0.5, 3.0]),
+            tree: aabb([-3.0, 0.0, -3.0], [3.0, 10.0, 3.0]),
+        };
+        let per_set = 18 * 18 + 18;
+        let sets = PerLevel::from_fn(|l| SetInfo {
+            layer_base: l.index() as u32 * per_set,
+            center: bounds[l].center(),
+            radius: (bounds[l].max - bounds[l].min).length() / 2.0,
+            bounds: bounds[l],
+        });
+        let branches = (0..BRANCHES)
+            .map(|i| {
+                Mat4::from_translation(Vec3::new(0.0, 3.0 + i as f32 * 1.5, 0.0))
+                    * Mat4::from_rotation_y(i as f32 * 1.6)
+                    * Mat4::from_rotation_x(1.2)
+            })
+            .collect();
+        let branch_twigs = (0..BRANCH_TWIGS)
+            .map(|j| Mat4::from_translation(Vec3::new(0.0, 0.0, 0.5 + j as f32 * 0.5)))
+            .collect();
+        let trunk_twigs = (0..TRUNK_TWIGS)
+            .map(|k| Mat4::from_translation(Vec3::new(0.3, 1.0 + k as f32, 0.0)))
+            .collect();
+        BtfScene {
+            species: vec![SpeciesParts {
+                branches,
+                branch_twigs,
+                trunk_twigs,
+                frames: sets.map(|s| ObjectFrame {
+                    bounds: s.bounds,
+                    center: s.center,
+                }),
+                sets,
+                texels: TEXELS,
+                bounds: bounds.tree,
+            }],
+            views: DirectionSet::with_count(18).unwrap(),
+            lights: DirectionSet::with_count(18).unwrap(),
+            vcm: None,
+            order: vec![0, 1, 2],
+            layers_per_set: per_set,
+            resolution: 16,
+        }
+    }
+
+    fn tree_at(x: f32, z: f32, yaw: f32) -> TreeGpu {
+        let m = Mat4::from_translation(Vec3::new(x, 0.0, z)) * Mat4::from_rotation_y(yaw);
+        TreeGpu {
+            model: m.to_cols_array_2d(),
+            tint: [0.9, 1.0, 0.8, 1.0],
+        }
+    }
+
+    /// Prepares `trees`, all visible, seen from `eye` looking at the origin's tree centre.
+    fn run(trees: &[TreeGpu], eye: Vec3, settings: &BtfSettings) -> (BtfFrame, Camera) {
+        let camera = Camera::look_at(eye, Vec3::new(0.0, 5.0, 0.0), 60.0);
+        let frustum = camera.frustum(16.0 / 9.0);
+        let view = PrepareView {
+            camera: &camera,
+            focal_px: FOCAL,
+            to_sun: Vec3::new(0.3, 0.8, 0.2).normalize(),
+            frustum: &frustum,
+        };
+        let visible = vec![(0..trees.len() as u32).collect::<Vec<_>>()];
+        let frame = scene().prepare(trees, &visible, &view, settings, usize::MAX);
+        (frame, camera)
+    }
+
+    fn no_fade() -> BtfSettings {
+        BtfSettings {
+            lod_fade: 0.0,
+            ..BtfSettings::default()
+        }
+    }
+
+    #[test]
+    fn the_level_is_the_coarsest_whose_texels_project_below_the_scale() {
+        let s = no_fade();
+        // Tree level valid beyond 0.1 * 500 / 1 = 50 m, branch level beyond 10 m.
+        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 51.0, &s).level, Level::Tree);
+        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 49.0, &s).level, Level::Branch);
+        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 11.0, &s).level, Level::Branch);
+        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 9.0, &s).level, Level::Twig);
+        // Up close nothing is valid: the twig level, blurred.
+        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 0.5, &s).level, Level::Twig);
+        // A tree twice as large has texels twice as large: the bound moves out to 100 m.
+        assert_eq!(choose_level(&TEXELS, 2.0, FOCAL, 90.0, &s).level, Level::Branch);
+        // A LOD scale of 2 accepts texels of 2 px: the bound moves in to 25 m.
+        let coarse = BtfSettings {
+            lod_scale: 2.0,
+            ..s
+        };
+        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 30.0, &coarse).level, Level::Tree);
+        assert!(choose_level(&TEXELS, 1.0, FOCAL, 30.0, &s).fading_in.is_none());
+    }
+
+    #[test]
+    fn inside_the_fade_band_the_finer_level_fades_in_and_opacities_sum_to_one() {
+        let s = BtfSettings {
+            lod_fade: 0.2,
+            ..BtfSettings::default()
+        };
+        // The tree level's texel is 0.8 px at 62.5 m, the band's start; 1 px at 50 m.
+        let outside = choose_level(&TEXELS, 1.0, FOCAL, 70.0, &s);
+        assert_eq!(outside.fading_in, None);
+        let half = choose_level(&TEXELS, 1.0, FOCAL, 0.1 * FOCAL / 0.9, &s);
+        assert_eq!(half.level, Level::Tree);
+        let (finer, fade) = half.fading_in.expect("inside the band");
+        assert_eq!(finer, Level::Branch);
+        assert!((fade - 0.5).abs() < 1e-4, "fade {fade}");
+        let total: f32 = half.draws().map(|(_, o)| o).sum();
+        assert!((total - 1.0).abs() < 1e-6);
+        // Just before the bound the finer level is almost opaque: the switch changes little.
+        let edge = choose_level(&TEXELS, 1.0, FOCAL, 50.01, &s);
+        assert!(edge.fading_in.unwrap().1 > 0.99);
+        // The twig level has nothing finer to fade to.
+        let twig = choose_level(&TEXELS, 1.0, FOCAL, 9.0, &s);
+        assert_eq!((twig.level, twig.fading_in), (Level::Twig, None));
+    }
+
+    #[test]
+    fn each_level_expands_into_its_billboards_and_geometry_lists() {
+        let s = no_fade();
+        let trees = [tree_at(0.0, 0.0, 0.3)];
+        let cases = [
+            (Vec3::new(0.0, 5.0, 80.0), Level::Tree, 1),
+            (Vec3::new(0.0, 5.0, 30.0), Level::Branch, BRANCHES + TRUNK_TWIGS),
+            (
+                Vec3::new(0.0, 5.0, 8.0),
+                Level::Twig,
+                BRANCHES * BRANCH_TWIGS + TRUNK_TWIGS,
+            ),
+        ];
+        for (eye, level, count) in cases {
+            let (f, _) = run(&trees, eye, &s);
+            assert_eq!(f.stats.trees_per_level[level], 1, "{level:?}");
+            assert_eq!(f.records.len(), count, "{level:?}");
+            assert_eq!(f.stats.total_billboards() as usize, count);
+            let twigs = f.stats.billboards.twig as usize;
+            match level {
+                Level::Tree => {
+                    assert_eq!(f.stats.billboards.tree, 1);
+                    assert!(f.trunk_only[0].is_empty() && f.trunk_and_limbs[0].is_empty());
+                }
+                Level::Branch => {
+                    assert_eq!((f.stats.billboards.branch as usize, twigs), (BRANCHES, TRUNK_TWIGS));
+                    assert_eq!((f.trunk_only[0].len(), f.trunk_and_limbs[0].len()), (1, 0));
+                }
+                Level::Twig => {
+                    assert_eq!(twigs, count);
+                    assert_eq!((f.trunk_only[0].len(), f.trunk_and_limbs[0].len()), (0, 1));
+                }
+            }
+            // Every record points into its level's image set.
+            let per_set = 18 * 18 + 18;
+            for r in &f.records {
+                assert!(r.layer_base % per_set == 0 && r.layer_base / per_set <= 2);
+            }
+        }
+    }
+
+    #[test]
+    fn a_fading_tree_draws_both_levels_with_complementary_opacity() {
+        let s = BtfSettings {
+            lod_fade: 0.2,
+            ..BtfSettings::default()
+        };
+        // The tree's centre at 55.5 m: inside the tree level's band.
+        let trees = [tree_at(0.0, 0.0, 0.0)];
+        let (f, _) = run(&trees, Vec3::new(0.0, 5.0, 55.5), &s);
+        assert_eq!(f.stats.faded_trees, 1);
+        assert_eq!(f.records.len(), 1 + BRANCHES + TRUNK_TWIGS);
+        let tree: Vec<f32> = f
+            .records
+            .iter()
+            .filter(|r| r.layer_base == 2 * (18 * 18 + 18))
+            .map(|r| r.opacity)
+            .collect();
+        let finer: Vec<f32> = f
+            .records
+            .iter()
+            .filter(|r| r.layer_base != 2 * (18 * 18 + 18))
+            .map(|r| r.opacity)
+            .collect();
+        assert_eq!(tree.len(), 1);
+        assert!(finer.iter().all(|&o| (o + tree[0] - 1.0).abs() < 1e-6));
+        assert!(tree[0] > 0.0 && tree[0] < 1.0);
+        // The trunk is geometry while the branch level shows.
+        assert_eq!(f.trunk_only[0], vec![0]);
+    }
+
+    #[test]
+    fn weight_culling_drops_small_weights_and_renormalises() {
+        // A crowd of trees at many angles, so that the blends vary.
+        let trees: Vec<TreeGpu> = (0..40)
+            .map(|i| tree_at((i % 8) as f32 * 9.0 - 30.0, -(i / 8) as f32 * 9.0, i as f32))
+            .collect();
+        let eye = Vec3::new(0.0, 30.0, 120.0);
+        let (all, _) = run(&trees, eye, &no_fade());
+        let threshold = 0.3;
+        let culled_settings = BtfSettings {
+            weight_threshold: threshold,
+            ..no_fade()
+        };
+        let (culled, _) = run(&trees, eye, &culled_settings);
+        assert_eq!(all.records.len(), culled.records.len());
+        let mut dropped = 0;
+        for r in &culled.records {
+            for w in [r.view_weight, r.light_weight] {
+                let sum: f32 = w.iter().sum();
+                assert!((sum - 1.0).abs() < 1e-5, "weights {w:?} sum to {sum}");
+                let largest = w.iter().copied().fold(0.0, f32::max);
+                for x in w {
+                    assert!(x == 0.0 || x >= threshold || x == largest, "kept {x} in {w:?}");
+                    dropped += usize::from(x == 0.0);
+                }
+            }
+        }
+        assert!(dropped > 0, "a threshold of {threshold} dropped nothing");
+        assert!(culled.stats.images_sampled < all.stats.images_sampled);
+        assert!(culled.stats.fetches_saved > all.stats.fetches_saved);
+        // Images sampled plus those saved is 12 per billboard.
+        let n = culled.records.len() as u64;
+        assert_eq!(culled.stats.images_sampled + culled.stats.fetches_saved, 12 * n);
+    }
+
+    #[test]
+    fn billboards_come_back_to_front_and_the_farthest_are_dropped_first() {
+        let trees: Vec<TreeGpu> = (0..30)
+            .map(|i| tree_at((i % 5) as f32 * 7.0 - 14.0, -(i / 5) as f32 * 7.0, i as f32))
+            .collect();
+        let eye = Vec3::new(0.0, 6.0, 25.0);
+        let (f, camera) = run(&trees, eye, &no_fade());
+        let depth = |r: &BillboardGpu| (Vec3::from(r.center) - eye).dot(camera.forward());
+        assert!(f.records.len() > 30, "expected a mix of levels");
+        assert!(f.records.windows(2).all(|w| depth(&w[0]) >= depth(&w[1])));
+        // Capped: the nearest survive.
+        let camera2 = Camera::look_at(eye, Vec3::new(0.0, 5.0, 0.0), 60.0);
+        let frustum = camera2.frustum(16.0 / 9.0);
+        let view = PrepareView {
+            camera: &camera2,
+            focal_px: FOCAL,
+            to_sun: Vec3::Y,
+            frustum: &frustum,
+        };
+        let visible = vec![(0..trees.len() as u32).collect::<Vec<_>>()];
+        let cap = 10;
+        let capped = scene().prepare(&trees, &visible, &view, &no_fade(), cap);
+        assert_eq!(capped.records.len(), cap);
+        assert_eq!(capped.stats.dropped as usize, f.records.len() - cap);
+        let nearest: Vec<f32> = f.records[f.records.len() - cap..].iter().map(depth).collect();
+        let kept: Vec<f32> = capped.records.iter().map(depth).collect();
+        assert_eq!(nearest, kept);
+    }
+
+    #[test]
+    fn trees_outside_the_view_make_no_billboards_and_overlays_tint_by_level() {
+        let trees = [tree_at(0.0, 0.0, 0.0), tree_at(0.0, 400.0, 0.0)];
+        // The second tree is behind the camera.
+        let s = BtfSettings {
+            show_lod: true,
+            ..no_fade()
+        };
+        let (f, _) = run(&trees, Vec3::new(0.0, 5.0, 30.0), &s);
+        assert_eq!(f.records.len(), BRANCHES + TRUNK_TWIGS);
+        // The overlay colours a tree by the level it is drawn at: the twigs on the trunk of
+        // a tree at the main-branch level show the main-branch colour.
+        assert_eq!(f.stats.billboards.twig as usize, TRUNK_TWIGS);
+        for r in &f.records {
+            assert_eq!(r.mode, BillboardMode::Tint as u32);
+            assert_eq!(r.tint, LOD_COLOURS[Level::Branch]);
+        }
+    }
+}

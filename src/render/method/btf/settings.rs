@@ -1,0 +1,111 @@
+//! The knobs of the `btf` method and what it reports per frame.
+
+use crate::model::PerLevel;
+
+/// How each billboard is drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PlaneMode {
+    /// One plane facing the eye; each view's image is reprojected onto it along its view.
+    #[default]
+    Single,
+    /// Three planes, each view's image on the plane facing its own sampled view, summed
+    /// with the views' weights where the eye's ray meets each (annex A's weighted sum).
+    Crossed,
+}
+
+impl PlaneMode {
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "single" => Some(Self::Single),
+            "crossed" => Some(Self::Crossed),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Single => "single",
+            Self::Crossed => "crossed",
+        }
+    }
+}
+
+/// The knobs of the `btf` method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BtfSettings {
+    /// A level is valid while its largest texel projects below this many pixels.
+    pub lod_scale: f32,
+    /// Images whose weight is below this are skipped and the others renormalised.
+    pub weight_threshold: f32,
+    pub planes: PlaneMode,
+    /// Colour each billboard by its level instead of its images.
+    pub show_lod: bool,
+    /// Width of the cross-fade band before a level's bound, as a fraction of the bound
+    /// (0 = switch abruptly).
+    pub lod_fade: f32,
+    /// Shade the billboards with the visibility cube maps (when the bake has them).
+    pub vcm: bool,
+    /// Draw each billboard's VCM sun factor (b·c·d) in grey instead of its images.
+    pub show_shadow: bool,
+    /// Weight the sky term by the cube maps' mean visibility (off: the cube maps shade the
+    /// sun term only, as if the sky were never hidden).
+    pub vcm_sky: bool,
+}
+
+impl Default for BtfSettings {
+    fn default() -> Self {
+        Self {
+            lod_scale: 1.0,
+            weight_threshold: 0.0,
+            planes: PlaneMode::Single,
+            show_lod: false,
+            lod_fade: 0.2,
+            vcm: true,
+            show_shadow: false,
+            vcm_sky: true,
+        }
+    }
+}
+
+/// What the `btf` method did in one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct BtfStats {
+    /// Billboards drawn per level.
+    pub billboards: PerLevel<u32>,
+    /// Trees drawn at each level (by the coarser level while fading).
+    pub trees_per_level: PerLevel<u32>,
+    /// Trees drawn at two levels at once, cross-fading.
+    pub faded_trees: u32,
+    /// Image fetches per fragment summed over billboards (views x (lights + ambient)).
+    pub images_sampled: u64,
+    /// Fetches skipped by image-weight culling, against 3 x (3 + 1) = 12 per billboard.
+    pub fetches_saved: u64,
+    /// Billboards left out because the instance buffer would pass the GPU's limit.
+    pub dropped: u32,
+    /// The billboards were shaded by visibility cube maps.
+    pub vcm: bool,
+}
+
+impl BtfStats {
+    pub fn total_billboards(&self) -> u32 {
+        self.billboards.iter().sum()
+    }
+
+    /// Images sampled per billboard, on average.
+    pub fn images_per_billboard(&self) -> f64 {
+        let n = self.total_billboards();
+        if n == 0 {
+            0.0
+        } else {
+            self.images_sampled as f64 / f64::from(n)
+        }
+    }
+}
+
+/// Colours of the 'show LOD level' overlay.
+pub const LOD_COLOURS: PerLevel<[f32; 3]> = PerLevel {
+    twig: [0.9, 0.2, 0.15],
+    branch: [0.95, 0.8, 0.1],
+    tree: [0.2, 0.45, 0.95],
+};
