@@ -222,9 +222,13 @@ impl BtfAssets {
             to_sun,
             frustum,
         };
-        let mut out =
-            self.scene
-                .prepare(&world.tree_data, visible, &view, settings, self.max_capacity);
+        let mut out = self.scene.prepare(
+            &world.tree_data,
+            visible,
+            &view,
+            settings,
+            self.max_capacity,
+        );
         let records = std::mem::take(&mut out.records);
         if records.len() > self.capacity {
             self.capacity = (records.len() * 3 / 2).min(self.max_capacity);

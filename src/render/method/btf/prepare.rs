@@ -281,7 +281,10 @@ impl BtfScene {
                     settings,
                     out: &mut sorted,
                     stats: &mut stats,
-                    tint: ([data.tint[0], data.tint[1], data.tint[2]], BillboardMode::Images),
+                    tint: (
+                        [data.tint[0], data.tint[1], data.tint[2]],
+                        BillboardMode::Images,
+                    ),
                     opacity: 1.0,
                 };
                 for (level, opacity) in choice.draws() {
@@ -605,21 +608,46 @@ mod tests {
     fn the_level_is_the_coarsest_whose_texels_project_below_the_scale() {
         let s = no_fade();
         // Tree level valid beyond 0.1 * 500 / 1 = 50 m, branch level beyond 10 m.
-        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 51.0, &s).level, Level::Tree);
-        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 49.0, &s).level, Level::Branch);
-        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 11.0, &s).level, Level::Branch);
-        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 9.0, &s).level, Level::Twig);
+        assert_eq!(
+            choose_level(&TEXELS, 1.0, FOCAL, 51.0, &s).level,
+            Level::Tree
+        );
+        assert_eq!(
+            choose_level(&TEXELS, 1.0, FOCAL, 49.0, &s).level,
+            Level::Branch
+        );
+        assert_eq!(
+            choose_level(&TEXELS, 1.0, FOCAL, 11.0, &s).level,
+            Level::Branch
+        );
+        assert_eq!(
+            choose_level(&TEXELS, 1.0, FOCAL, 9.0, &s).level,
+            Level::Twig
+        );
         // Up close nothing is valid: the twig level, blurred.
-        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 0.5, &s).level, Level::Twig);
+        assert_eq!(
+            choose_level(&TEXELS, 1.0, FOCAL, 0.5, &s).level,
+            Level::Twig
+        );
         // A tree twice as large has texels twice as large: the bound moves out to 100 m.
-        assert_eq!(choose_level(&TEXELS, 2.0, FOCAL, 90.0, &s).level, Level::Branch);
+        assert_eq!(
+            choose_level(&TEXELS, 2.0, FOCAL, 90.0, &s).level,
+            Level::Branch
+        );
         // A LOD scale of 2 accepts texels of 2 px: the bound moves in to 25 m.
         let coarse = BtfSettings {
             lod_scale: 2.0,
             ..s
         };
-        assert_eq!(choose_level(&TEXELS, 1.0, FOCAL, 30.0, &coarse).level, Level::Tree);
-        assert!(choose_level(&TEXELS, 1.0, FOCAL, 30.0, &s).fading_in.is_none());
+        assert_eq!(
+            choose_level(&TEXELS, 1.0, FOCAL, 30.0, &coarse).level,
+            Level::Tree
+        );
+        assert!(
+            choose_level(&TEXELS, 1.0, FOCAL, 30.0, &s)
+                .fading_in
+                .is_none()
+        );
     }
 
     #[test]
@@ -652,7 +680,11 @@ mod tests {
         let trees = [tree_at(0.0, 0.0, 0.3)];
         let cases = [
             (Vec3::new(0.0, 5.0, 80.0), Level::Tree, 1),
-            (Vec3::new(0.0, 5.0, 30.0), Level::Branch, BRANCHES + TRUNK_TWIGS),
+            (
+                Vec3::new(0.0, 5.0, 30.0),
+                Level::Branch,
+                BRANCHES + TRUNK_TWIGS,
+            ),
             (
                 Vec3::new(0.0, 5.0, 8.0),
                 Level::Twig,
@@ -671,7 +703,10 @@ mod tests {
                     assert!(f.trunk_only[0].is_empty() && f.trunk_and_limbs[0].is_empty());
                 }
                 Level::Branch => {
-                    assert_eq!((f.stats.billboards.branch as usize, twigs), (BRANCHES, TRUNK_TWIGS));
+                    assert_eq!(
+                        (f.stats.billboards.branch as usize, twigs),
+                        (BRANCHES, TRUNK_TWIGS)
+                    );
                     assert_eq!((f.trunk_only[0].len(), f.trunk_and_limbs[0].len()), (1, 0));
                 }
                 Level::Twig => {
@@ -739,7 +774,10 @@ mod tests {
                 assert!((sum - 1.0).abs() < 1e-5, "weights {w:?} sum to {sum}");
                 let largest = w.iter().copied().fold(0.0, f32::max);
                 for x in w {
-                    assert!(x == 0.0 || x >= threshold || x == largest, "kept {x} in {w:?}");
+                    assert!(
+                        x == 0.0 || x >= threshold || x == largest,
+                        "kept {x} in {w:?}"
+                    );
                     dropped += usize::from(x == 0.0);
                 }
             }
@@ -749,7 +787,10 @@ mod tests {
         assert!(culled.stats.fetches_saved > all.stats.fetches_saved);
         // Images sampled plus those saved is 12 per billboard.
         let n = culled.records.len() as u64;
-        assert_eq!(culled.stats.images_sampled + culled.stats.fetches_saved, 12 * n);
+        assert_eq!(
+            culled.stats.images_sampled + culled.stats.fetches_saved,
+            12 * n
+        );
     }
 
     #[test]
@@ -776,7 +817,10 @@ mod tests {
         let capped = scene().prepare(&trees, &visible, &view, &no_fade(), cap);
         assert_eq!(capped.records.len(), cap);
         assert_eq!(capped.stats.dropped as usize, f.records.len() - cap);
-        let nearest: Vec<f32> = f.records[f.records.len() - cap..].iter().map(depth).collect();
+        let nearest: Vec<f32> = f.records[f.records.len() - cap..]
+            .iter()
+            .map(depth)
+            .collect();
         let kept: Vec<f32> = capped.records.iter().map(depth).collect();
         assert_eq!(nearest, kept);
     }
