@@ -325,7 +325,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     )?;
     let ctx = GpuContext::headless(adapter(args.cpu))?;
     let mut renderer = Renderer::new(&ctx, &world)?;
-    if args.method == Method::Btf {
+    if args.method.needs_bake() {
         let bar = progress_bar(0, BAKE_BAR);
         let baked = canopy::bake::load_or_bake(&ctx, &scene, &world, &mut |p| show(&bar, p));
         bar.finish_and_clear();

@@ -380,3 +380,47 @@ fn crossed_planes_are_drawn_and_stay_near_the_ground_truth() {
         "crossed planes vs geometry: {e3}"
     );
 }
+
+/// The `billboard` floor against geometry over the trees' pixels, at the tree-level view of
+/// the first test. Measured on lavapipe (llvmpipe): see the test's output; the bound only
+/// says that it draws trees where geometry has them, not how well.
+#[test]
+fn billboard_draws_trees_where_geometry_has_them() {
+    let ctx = gpu();
+    let (scene, world, mut renderer) = setup(&ctx);
+    let mut frame = far_frame(&scene, 520.0);
+    frame.fog_density = 0.0;
+    frame.btf.vcm = false;
+    let (w, h) = (192, 192);
+    let (truth, _) = renderer.render_image(&ctx, &frame, w, h, 2).unwrap();
+    frame.method = Method::Billboard;
+    let (floor, stats) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
+    assert!(stats.btf.is_none(), "the btf knobs do not apply");
+    assert_eq!(stats.trees_drawn as usize, world.forest.instances.len());
+    frame.method = Method::Btf;
+    let (btf, _) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
+    let mask = trees_mask(&ctx, &scene, &mut frame, &truth, (w, h));
+    let floor_mask = trees_mask(&ctx, &scene, &mut frame, &floor, (w, h));
+    // Trees where geometry has them: most of the truth's tree pixels are covered.
+    let both = mask
+        .iter()
+        .zip(&floor_mask)
+        .filter(|(a, b)| **a && **b)
+        .count();
+    let truth_px = mask.iter().filter(|&&m| m).count();
+    let floor_px = floor_mask.iter().filter(|&&m| m).count();
+    let overlap = both as f32 / truth_px as f32;
+    let f_floor = masked_flip(&truth, &floor, &mask);
+    let f_btf = masked_flip(&truth, &btf, &mask);
+    eprintln!(
+        "billboard: {floor_px} tree pixels against geometry's {truth_px}, {overlap:.3} of geometry's covered; mean FLIP over the trees {f_floor:.4} (btf {f_btf:.4})"
+    );
+    assert!(
+        overlap > 0.5,
+        "the billboards cover {overlap} of the trees' pixels"
+    );
+    assert!(
+        (floor_px as f32) < 2.0 * truth_px as f32,
+        "the billboards cover {floor_px} pixels, geometry's trees {truth_px}"
+    );
+}

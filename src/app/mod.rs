@@ -99,7 +99,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
 /// on a software renderer.
 fn shown_frame(frame: &FrameDesc, has_btf: bool) -> FrameDesc {
     let mut shown = *frame;
-    if shown.method == Method::Btf && !has_btf {
+    if shown.method.needs_bake() && !has_btf {
         shown.method = Method::Geometry;
         shown.trees = false;
     }

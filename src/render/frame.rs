@@ -15,16 +15,24 @@ pub enum Method {
     Geometry,
     /// BTF billboards of the twig / main branch / tree hierarchy (needs a bake).
     Btf,
+    /// One camera-facing image per tree from a single baked view and light: the floor.
+    Billboard,
 }
 
 impl Method {
-    pub const ALL: &'static [Method] = &[Method::Geometry, Method::Btf];
+    pub const ALL: &'static [Method] = &[Method::Geometry, Method::Btf, Method::Billboard];
 
     pub fn name(self) -> &'static str {
         match self {
             Method::Geometry => "geometry",
             Method::Btf => "btf",
+            Method::Billboard => "billboard",
         }
+    }
+
+    /// The method draws baked images (and needs a bake).
+    pub fn needs_bake(self) -> bool {
+        matches!(self, Method::Btf | Method::Billboard)
     }
 
     pub fn parse(s: &str) -> Option<Method> {

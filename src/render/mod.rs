@@ -66,6 +66,8 @@ pub struct FrameTarget<'a> {
 enum Prepared {
     Geometry(GeometryFrame),
     Btf(btf::BtfFrame),
+    /// The `billboard` method's records (drawn like `btf`'s, with no parts as geometry).
+    Billboard(btf::BtfFrame),
 }
 
 /// Owns the GPU side of a world and the pipelines; created once, then asked for frames.
@@ -254,10 +256,11 @@ impl Renderer {
         }
         let studio = frame.stage == Stage::Studio;
         let is_btf = frame.method == Method::Btf;
-        if is_btf && self.btf.is_none() {
-            return Err(Error::BadInput(
-                "the btf method needs baked BTF images: run `canopy bake` (the viewer bakes on first use)".into(),
-            ));
+        if frame.method.needs_bake() && self.btf.is_none() {
+            return Err(Error::BadInput(format!(
+                "the {} method needs baked BTF images: run `canopy bake` (the viewer bakes on first use)",
+                frame.method.name()
+            )));
         }
         // The btf method's trees are not geometry, so their shadows on the ground come from
         // the alpha shadow map, and the terrain's own shadows from the terrain depth drawn
@@ -289,8 +292,8 @@ impl Renderer {
         let to_sun = frame.sun.direction();
         let mut sun_update_ms = 0.0;
         let mut sun_moved = false;
-        let prepared = match self.btf.as_mut().filter(|_| is_btf) {
-            Some(b) => {
+        let prepared = match (frame.method, self.btf.as_mut()) {
+            (Method::Btf, Some(b)) => {
                 if frame.btf.vcm && frame.trees {
                     let t0 = std::time::Instant::now();
                     if b.update_sun(to_sun) {
@@ -309,7 +312,24 @@ impl Renderer {
                     &frame.btf,
                 ))
             }
-            None => Prepared::Geometry(GeometryFrame::prepare(&self.world, frame, aspect, visible)),
+            (Method::Billboard, Some(b)) => {
+                let view = btf::PrepareView {
+                    camera: cam,
+                    focal_px: cam.focal_px(height),
+                    to_sun,
+                    frustum: &frustum,
+                };
+                let mut f = method::billboard::prepare(
+                    b.scene(),
+                    &self.world.tree_data,
+                    &visible,
+                    &view,
+                    b.max_billboards(),
+                );
+                b.upload(ctx, &std::mem::take(&mut f.records));
+                Prepared::Billboard(f)
+            }
+            _ => Prepared::Geometry(GeometryFrame::prepare(&self.world, frame, aspect, visible)),
         };
         let (runs, cascades, shadows_on) = match &prepared {
             Prepared::Geometry(g) => (
@@ -317,7 +337,7 @@ impl Renderer {
                 g.cascades,
                 g.shadows_on,
             ),
-            Prepared::Btf(b) => (
+            Prepared::Btf(b) | Prepared::Billboard(b) => (
                 self.world
                     .upload_lists(ctx, &[b.trunk_only.clone(), b.trunk_and_limbs.clone()]),
                 Cascades::none(),
@@ -381,7 +401,7 @@ impl Renderer {
             ..Default::default()
         };
         let btf_pipeline = match (&prepared, self.btf.as_mut()) {
-            (Prepared::Btf(_), Some(b)) => {
+            (Prepared::Btf(_) | Prepared::Billboard(_), Some(b)) => {
                 Some(b.pipeline(&ctx.device, &self.layouts.frame, format).clone())
             }
             _ => None,
@@ -489,6 +509,20 @@ impl Renderer {
                     !studio,
                     &mut stats,
                 ),
+                (Prepared::Billboard(bf), Some(b)) => {
+                    b.draw_main(
+                        &mut pass,
+                        &self.world,
+                        &runs,
+                        pipes,
+                        btf_pipeline.as_ref(),
+                        bf,
+                        !studio,
+                        &mut stats,
+                    );
+                    // The btf knobs do not apply.
+                    stats.btf = None;
+                }
                 _ => GeometryMethod::draw_main(
                     &mut pass,
                     &self.world,

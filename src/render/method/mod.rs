@@ -7,5 +7,6 @@
 //! Adding a method means a module here, an arm in `frame::Method` and its `Prepared` arm
 //! and draw call in `Renderer::render`.
 
+pub mod billboard;
 pub mod btf;
 pub mod geometry;

@@ -105,6 +105,9 @@ pub(super) const NO_SHADE: BillboardGpu = BillboardGpu {
 };
 
 impl BillboardGpu {
+    /// Every field zero and no VCM shading (all factors 1).
+    pub const UNSHADED: BillboardGpu = NO_SHADE;
+
     /// Fills the VCM fields from `shade`, for an object of `bounds` whose billboard frame is
     /// `set`.
     pub(super) fn shade(mut self, shade: &Shade, set: &SetInfo) -> Self {

@@ -230,22 +230,7 @@ impl BtfAssets {
             self.max_capacity,
         );
         let records = std::mem::take(&mut out.records);
-        if records.len() > self.capacity {
-            self.capacity = (records.len() * 3 / 2).min(self.max_capacity);
-            self.billboards = billboard_buffer(ctx, self.capacity);
-            self.bind_group = make_bind_group(
-                ctx,
-                &self.layout,
-                &self.billboards,
-                &self.view_axes,
-                &self.texture_view,
-                &self.sampler,
-            );
-        }
-        if !records.is_empty() {
-            ctx.queue
-                .write_buffer(&self.billboards, 0, bytemuck::cast_slice(&records));
-        }
+        self.upload(ctx, &records);
         out
     }
 
@@ -284,6 +269,32 @@ impl BtfAssets {
             stats.draw_calls += 1;
         }
         stats.btf = Some(bf.stats);
+    }
+
+    /// Uploads a frame's billboard records (back to front), growing the buffer if needed.
+    pub fn upload(&mut self, ctx: &GpuContext, records: &[BillboardGpu]) {
+        if records.len() > self.capacity {
+            self.capacity = (records.len() * 3 / 2).min(self.max_capacity);
+            self.billboards = billboard_buffer(ctx, self.capacity);
+            self.bind_group = make_bind_group(
+                ctx,
+                &self.layout,
+                &self.billboards,
+                &self.view_axes,
+                &self.texture_view,
+                &self.sampler,
+            );
+        }
+        let n = records.len().min(self.capacity);
+        if n > 0 {
+            ctx.queue
+                .write_buffer(&self.billboards, 0, bytemuck::cast_slice(&records[..n]));
+        }
+    }
+
+    /// Most billboards one frame can hold (the GPU's storage-buffer limit).
+    pub fn max_billboards(&self) -> usize {
+        self.max_capacity
     }
 
     /// Every tree's tree-level billboard as the sun sees it (for the ground alpha shadow

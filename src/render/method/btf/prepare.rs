@@ -221,6 +221,23 @@ impl BtfScene {
             .collect()
     }
 
+    /// The bake's view and light direction sets.
+    pub fn directions(&self) -> (&DirectionSet, &DirectionSet) {
+        (&self.views, &self.lights)
+    }
+
+    /// Species the scene holds.
+    pub fn species_count(&self) -> usize {
+        self.species.len()
+    }
+
+    /// One species' tree-level image set: its first texture layer, its billboard centre in
+    /// the tree frame and its radius.
+    pub fn tree_set(&self, species: usize) -> Option<(u32, Vec3, f32)> {
+        let s = &self.species.get(species)?.sets.tree;
+        Some((s.layer_base, s.center, s.radius))
+    }
+
     /// Reads every tree's cube maps in the sun's direction if it moved; true if it did.
     pub fn update_sun(&mut self, to_sun: Vec3) -> bool {
         self.vcm.as_mut().is_some_and(|v| v.set_sun(to_sun))
@@ -502,7 +519,7 @@ impl Pusher<'_, '_> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     const BRANCHES: usize = 4;
@@ -526,7 +543,7 @@ mod tests {
 
     /// One species of 4 main branches of 5 twigs each and 2 twigs on the trunk; 18 view and
     /// 18 light samples; no cube maps.
-    fn scene() -> BtfScene {
+    pub(crate) fn scene() -> BtfScene {
         let bounds = PerLevel {
             twig: aabb([-0.2, -0.2, 0.0], [0.2, 0.2, 0.4]),
             branch: aabb([-0.5, -0.5, 0.0], [0.5, 0.5, 3.0]),
