@@ -1,0 +1,10 @@
+//! The pure-CPU half of `canopy bench`: flights (keyframed cameras, suns and knobs), the
+//! temporal measures (flicker against the truth's own flicker, the worst pop), the Pareto
+//! front of cost against error, the key and store of the cached ground-truth frames, and
+//! the PNG charts. The GPU runner and the CLI build on these.
+
+pub mod pareto;
+pub mod temporal;
+
+pub use pareto::pareto_front;
+pub use temporal::{Flicker, Pop, flicker, flicker_excess};
