@@ -5,6 +5,8 @@
 
 pub mod pareto;
 pub mod temporal;
+pub mod truth_key;
 
 pub use pareto::pareto_front;
 pub use temporal::{Flicker, Pop, flicker, flicker_excess};
+pub use truth_key::{TRUTH_REVISION, TruthKey, TruthLookup, TruthRequest, scene_content};
