@@ -3,10 +3,12 @@
 //! front of cost against error, the key and store of the cached ground-truth frames, and
 //! the PNG charts. The GPU runner and the CLI build on these.
 
+pub mod flight;
 pub mod pareto;
 pub mod temporal;
 pub mod truth_key;
 
+pub use flight::{Flight, FlightContext, FlightFrame, FlightKey, Knobs, PathShape};
 pub use pareto::pareto_front;
 pub use temporal::{Flicker, Pop, flicker, flicker_excess};
 pub use truth_key::{TRUTH_REVISION, TruthKey, TruthLookup, TruthRequest, scene_content};
