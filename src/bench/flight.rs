@@ -630,15 +630,18 @@ fn overview(ctx: &FlightContext<'_>) -> Vec<Key> {
 
 /// Eye height of the walk above the ground (m).
 const EYE: f32 = 2.0;
+/// How far outside the forest's edge the walk starts (m).
+const WALK_OUTSIDE: f32 = 600.0;
 
-/// Low through the stand: from 300 m outside the forest's edge to its centre and on to
-/// halfway to the far edge, so every tree crosses every LOD distance on the way. Keys every
-/// few metres so the camera follows the ground.
+/// Low through the stand: from 600 m outside the forest's edge (beyond where a 20 m tree
+/// baked at 64 texels drops to its coarsest level in a 1080p view) to its centre and on to
+/// halfway to the far edge, so the near trees cross every LOD distance on the way. Keys
+/// every 10 m so the camera follows the ground.
 fn walk(ctx: &FlightContext<'_>) -> Vec<Key> {
     let r = ctx.half_size;
     let dir = Vec2::new(-0.6, 1.0).normalize();
-    let (start, end) = (-(r + 300.0), 0.5 * r);
-    let steps = (((end - start) / 10.0).ceil() as usize).clamp(8, 400);
+    let (start, end) = (-(r + WALK_OUTSIDE), 0.5 * r);
+    let steps = (((end - start) / 10.0).ceil() as usize).clamp(8, 1000);
     (0..=steps)
         .map(|i| {
             let s = start + (end - start) * i as f32 / steps as f32;
@@ -966,7 +969,7 @@ lod_scale = 3.0
         let frames = Flight::builtin("walk", &ctx).unwrap().frames(100);
         let from_centre =
             |f: &FlightFrame| Vec2::new(f.position.x, f.position.z).distance(ctx.centre);
-        assert!(from_centre(&frames[0]) > ctx.half_size + 250.0);
+        assert!(from_centre(&frames[0]) > ctx.half_size + 0.9 * WALK_OUTSIDE);
         assert!(from_centre(&frames[99]) < ctx.half_size);
         let low = frames
             .iter()
