@@ -247,15 +247,21 @@ pub fn speed_accuracy_chart(path: &Path, points: &[ChartPoint], size: (u32, u32)
                 .label(m.to_string())
                 .legend(move |(x, y)| Circle::new((x + 10, y), radius, c.filled()));
         }
-        let label_style = TextStyle::from(text(15.0)).color(&BLACK);
+        let label_px = text(15.0).1;
+        let label_style = TextStyle::from((FONT, label_px)).color(&BLACK);
         chart
             .draw_series(front.iter().map(|&i| {
+                // Labels of points in the right fifth go to their left, so they stay inside.
+                // (The embedded font is monospaced: a character is 0.6 em wide.)
+                let label = usable[i].label.clone();
+                let right = (coords[i].0 / x0).ln() / (x1 / x0).ln() > 0.8;
+                let dx = if right {
+                    -(radius + 3) - (0.6 * label_px * label.chars().count() as f64) as i32
+                } else {
+                    radius + 3
+                };
                 EmptyElement::at(coords[i])
-                    + Text::new(
-                        usable[i].label.clone(),
-                        (radius + 3, -radius - 14),
-                        label_style.clone(),
-                    )
+                    + Text::new(label, (dx, -radius - label_px as i32), label_style.clone())
             }))
             .map_err(e)?;
         chart
@@ -298,7 +304,7 @@ pub fn flight_chart(path: &Path, series: &[FlightSeries], size: (u32, u32)) -> R
     };
     let flip_max = finite_max(|s| &s.flip);
     let ms_max = finite_max(|s| &s.ms);
-    let top = |m: f64| if m > 0.0 { m * 1.1 } else { 1.0 };
+    let top = |m: f64, room: f64| if m > 0.0 { m * room } else { 1.0 };
     let (w, h) = size;
     let text = |px: f64| (FONT, (px * f64::from(h.min(w)) / 800.0).max(10.0));
 
@@ -307,10 +313,13 @@ pub fn flight_chart(path: &Path, series: &[FlightSeries], size: (u32, u32)) -> R
         let root = root.titled("Along the flight", text(28.0)).map_err(e)?;
         let (upper, lower) = root.split_vertically(root.dim_in_pixel().1 / 2);
         let panels: [(_, _, _, Values); 2] = [
-            (&upper, "FLIP against the truth", top(flip_max), |s| &s.flip),
-            (&lower, "frame time (ms)", top(ms_max), |s| &s.ms),
+            // Room above the lines for the legend.
+            (&upper, "FLIP against the truth", top(flip_max, 1.35), |s| {
+                &s.flip
+            }),
+            (&lower, "frame time (ms)", top(ms_max, 1.1), |s| &s.ms),
         ];
-        for (area, desc, ymax, get) in panels {
+        for (panel, (area, desc, ymax, get)) in panels.into_iter().enumerate() {
             let mut chart = ChartBuilder::on(area)
                 .margin(12)
                 .x_label_area_size((f64::from(h) * 0.06) as u32)
@@ -347,14 +356,17 @@ pub fn flight_chart(path: &Path, series: &[FlightSeries], size: (u32, u32)) -> R
                         )
                     });
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .label_font(text(15.0))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()
-                .map_err(e)?;
+            // One legend, over the top panel: the colours are the same below.
+            if panel == 0 {
+                chart
+                    .configure_series_labels()
+                    .position(SeriesLabelPosition::UpperRight)
+                    .label_font(text(15.0))
+                    .background_style(WHITE.mix(0.85))
+                    .border_style(BLACK)
+                    .draw()
+                    .map_err(e)?;
+            }
         }
         Ok(())
     })
@@ -367,7 +379,7 @@ mod tests {
     use std::path::PathBuf;
 
     fn out(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("canopy-chart-{}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!("canopy-chart-{name}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         dir.join(name)
     }
@@ -416,6 +428,7 @@ mod tests {
                 "{c:?} missing"
             );
         }
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
     }
 
     #[test]
@@ -443,6 +456,7 @@ mod tests {
                 "{c:?} missing"
             );
         }
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
     }
 
     #[test]
@@ -455,6 +469,7 @@ mod tests {
         assert!(e.to_string().contains("frame time"), "{e}");
         assert!(flight_chart(&path, &[], (400, 300)).is_err());
         assert!(!path.exists());
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
     }
 
     #[test]
