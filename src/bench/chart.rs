@@ -72,19 +72,17 @@ fn register_font() {
     });
 }
 
-fn check_size(path: &Path, (w, h): (u32, u32)) -> Result<()> {
-    if w < MIN_CHART_SIDE || h < MIN_CHART_SIDE || w > MAX_CHART_SIDE || h > MAX_CHART_SIDE {
-        return Err(Error::BadSize {
+fn check_size((w, h): (u32, u32)) -> Result<()> {
+    let side = MIN_CHART_SIDE..=MAX_CHART_SIDE;
+    if side.contains(&w) && side.contains(&h) {
+        Ok(())
+    } else {
+        Err(Error::BadSize {
             width: w,
             height: h,
             reason: "a chart side must be 200..=8192 pixels",
         })
-        .map_err(|e| {
-            log::debug!("chart {}: {e}", path.display());
-            e
-        });
     }
-    Ok(())
 }
 
 /// Draws with `draw` into an RGB buffer of `size` and writes it to `path` as a PNG,
@@ -96,7 +94,7 @@ fn render(
         &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
     ) -> std::result::Result<(), String>,
 ) -> Result<()> {
-    check_size(path, size)?;
+    check_size(size)?;
     register_font();
     let (w, h) = size;
     let mut rgb = vec![0u8; w as usize * h as usize * 3];
