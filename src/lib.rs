@@ -5,6 +5,7 @@
 
 pub mod app;
 pub mod bake;
+pub mod bench;
 pub mod error;
 pub mod format;
 pub mod imageio;

@@ -1,7 +1,8 @@
 //! The module layers point one way: `model` (with the small pure modules `sphere`, `lod`,
-//! `vcm`) → `scene` / `format` → `render` → `bake` → `app` / `main`. This test reads every
-//! source file under `src/` and fails, naming each offending file and line, when a file
-//! mentions a module above its own layer (in code, a path in a doc link or a comment alike).
+//! `vcm`) → `scene` / `format` → `render` → `bake` → `bench` → `app` / `main`. This test
+//! reads every source file under `src/` and fails, naming each offending file and line, when
+//! a file mentions a module above its own layer (in code, a path in a doc link or a comment
+//! alike).
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -39,8 +40,9 @@ fn forbidden(rel: &str) -> Vec<&'static str> {
         "crate::bake",
     ];
     let mut out = Vec::new();
-    if rel.starts_with("src/model/") || ["src/lod.rs", "src/sphere.rs", "src/vcm.rs"].contains(&rel)
-    {
+    let model = rel.starts_with("src/model/")
+        || ["src/lod.rs", "src/sphere.rs", "src/vcm.rs"].contains(&rel);
+    if model {
         out.extend(LOW);
     }
     if rel == "src/scene.rs" || rel == "src/format.rs" {
@@ -48,6 +50,15 @@ fn forbidden(rel: &str) -> Vec<&'static str> {
     }
     if rel.starts_with("src/render/") {
         out.push("crate::bake");
+    }
+    // The bench drives the render core and the bake; nothing it builds on may know it.
+    if model
+        || rel == "src/scene.rs"
+        || rel == "src/format.rs"
+        || rel.starts_with("src/render/")
+        || rel.starts_with("src/bake/")
+    {
+        out.push("crate::bench");
     }
     if !(rel.starts_with("src/app/") || rel == "src/main.rs") {
         out.push("crate::app");
@@ -141,7 +152,8 @@ fn imports_point_one_way() {
     }
     assert!(
         offences.is_empty(),
-        "{} import(s) point up the layers (model → scene/format → render → bake → app/main):\n{}",
+        "{} import(s) point up the layers \
+         (model → scene/format → render → bake → bench → app/main):\n{}",
         offences.len(),
         offences.join("\n")
     );
@@ -157,6 +169,21 @@ fn the_rules_catch_what_they_should() {
     assert!(forbidden("src/bake/mod.rs").contains(&"crate::app"));
     assert!(!forbidden("src/app/mod.rs").contains(&"crate::app"));
     assert!(!forbidden("src/main.rs").contains(&"crate::app"));
+    assert!(forbidden("src/bench/flight.rs").contains(&"crate::app"));
+    assert!(!forbidden("src/bench/flight.rs").contains(&"crate::render"));
+    for low in [
+        "src/render/frame.rs",
+        "src/render/method/btf.rs",
+        "src/model/world.rs",
+        "src/lod.rs",
+        "src/scene.rs",
+        "src/format.rs",
+        "src/bake/cache.rs",
+    ] {
+        assert!(forbidden(low).contains(&"crate::bench"), "{low}");
+    }
+    assert!(!forbidden("src/app/mod.rs").contains(&"crate::bench"));
+    assert!(!forbidden("src/main.rs").contains(&"crate::bench"));
     assert!(mentions("use crate::bake::billboard_axes;", "crate::bake"));
     assert!(mentions("crate::bake", "crate::bake"));
     assert!(!mentions("use crate::baker;", "crate::bake"));

@@ -1,0 +1,493 @@
+//! The bench's PNG charts, drawn with `plotters` into memory and written atomically: speed
+//! against accuracy (frame time on a log axis, mean FLIP, the Pareto front drawn and
+//! labelled) and the per-frame view along a flight (FLIP and frame time, one line per
+//! configuration). Text uses a font compiled into the binary (egui's Hack: plotters' glyph
+//! placement ignores side bearings, which a monospaced face hides), so charts look the same
+//! on every machine and need no system fonts.
+
+use std::path::Path;
+use std::sync::Once;
+
+use image::RgbaImage;
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+
+use super::pareto::pareto_front;
+use crate::{Error, Result};
+
+/// Chart size when the caller has no preference (pixels).
+pub const DEFAULT_CHART_SIZE: (u32, u32) = (1200, 800);
+/// Smallest chart side that still leaves room for axes and labels.
+pub const MIN_CHART_SIDE: u32 = 200;
+/// Largest chart side.
+pub const MAX_CHART_SIDE: u32 = 8192;
+
+/// One configuration on the speed/accuracy chart.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChartPoint {
+    /// The configuration, e.g. `btf lod=1.5`.
+    pub label: String,
+    /// Its method: points are coloured by it.
+    pub method: String,
+    /// Mean frame time (ms).
+    pub ms: f64,
+    /// Mean FLIP against the truth.
+    pub mean_flip: f64,
+}
+
+/// One configuration along a flight.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FlightSeries {
+    pub label: String,
+    /// FLIP against the truth per frame.
+    pub flip: Vec<f64>,
+    /// Frame time per frame (ms).
+    pub ms: Vec<f64>,
+}
+
+/// Colour-blind-safe colours (Okabe-Ito), then black.
+const PALETTE: [RGBColor; 8] = [
+    RGBColor(0, 114, 178),
+    RGBColor(213, 94, 0),
+    RGBColor(0, 158, 115),
+    RGBColor(204, 121, 167),
+    RGBColor(230, 159, 0),
+    RGBColor(86, 180, 233),
+    RGBColor(120, 120, 120),
+    RGBColor(0, 0, 0),
+];
+
+const FONT: &str = "sans-serif";
+
+/// Registers the embedded font as plotters' `sans-serif` (once per process).
+fn register_font() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        // The bytes are egui's own font, known to parse; a failure would only cost text.
+        let _ = plotters::style::register_font(
+            FONT,
+            FontStyle::Normal,
+            epaint_default_fonts::HACK_REGULAR,
+        );
+    });
+}
+
+fn check_size((w, h): (u32, u32)) -> Result<()> {
+    let side = MIN_CHART_SIDE..=MAX_CHART_SIDE;
+    if side.contains(&w) && side.contains(&h) {
+        Ok(())
+    } else {
+        Err(Error::BadSize {
+            width: w,
+            height: h,
+            reason: "a chart side must be 200..=8192 pixels",
+        })
+    }
+}
+
+/// Draws with `draw` into an RGB buffer of `size` and writes it to `path` as a PNG,
+/// atomically.
+fn render(
+    path: &Path,
+    size: (u32, u32),
+    draw: impl FnOnce(
+        &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    ) -> std::result::Result<(), String>,
+) -> Result<()> {
+    check_size(size)?;
+    register_font();
+    let (w, h) = size;
+    let mut rgb = vec![0u8; w as usize * h as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string()).and_then(|()| {
+            draw(&root)?;
+            root.present().map_err(|e| e.to_string())
+        })
+    }
+    .map_err(|reason| Error::WriteImage {
+        path: path.to_path_buf(),
+        reason: format!("drawing the chart failed: {reason}"),
+    })?;
+    let rgba = RgbaImage::from_fn(w, h, |x, y| {
+        let i = 3 * (y as usize * w as usize + x as usize);
+        image::Rgba([rgb[i], rgb[i + 1], rgb[i + 2], 255])
+    });
+    crate::imageio::save_png(path, &rgba)
+}
+
+/// Tick values for a log axis over `lo..hi`: 1-2-5 in each decade, or every integer
+/// multiple of the decade when that gives fewer than three.
+fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let decades = (lo.log10().floor() as i32)..=(hi.log10().ceil() as i32);
+    let ticks = |mults: &[f64]| -> Vec<f64> {
+        decades
+            .clone()
+            .flat_map(|e| mults.iter().map(move |m| m * 10f64.powi(e)))
+            .filter(|v| *v >= lo && *v <= hi)
+            .collect()
+    };
+    let coarse = ticks(&[1.0, 2.0, 5.0]);
+    if coarse.len() >= 3 {
+        coarse
+    } else {
+        ticks(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0])
+    }
+}
+
+/// A number as a tick label: no trailing zeros, no exponent for chart-sized values.
+fn tick_label(v: f64) -> String {
+    let s = format!("{v:.3}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    s.to_owned()
+}
+
+/// Frame time (log x) against mean FLIP (y): one point per configuration coloured by its
+/// method, a legend of the methods, the Pareto front as a line with its points labelled.
+/// Points without a positive, finite time or a finite FLIP are left out (the caption says
+/// how many).
+pub fn speed_accuracy_chart(path: &Path, points: &[ChartPoint], size: (u32, u32)) -> Result<()> {
+    let usable: Vec<&ChartPoint> = points
+        .iter()
+        .filter(|p| p.ms.is_finite() && p.ms > 0.0 && p.mean_flip.is_finite())
+        .collect();
+    if usable.is_empty() {
+        return Err(Error::BadInput(format!(
+            "speed/accuracy chart {}: none of the {} configurations has a positive frame time \
+             and a FLIP; measure at least one",
+            path.display(),
+            points.len()
+        )));
+    }
+    let (lo, hi) = usable.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), p| {
+        (lo.min(p.ms), hi.max(p.ms))
+    });
+    // At least a factor 4 wide, so the log axis has ticks to show.
+    let mid = (lo * hi).sqrt();
+    let half_ratio = (hi / lo).sqrt().max(2.0) * 1.25;
+    let (x0, x1) = (mid / half_ratio, mid * half_ratio);
+    let ymax = usable.iter().map(|p| p.mean_flip).fold(0.0, f64::max);
+    let y1 = if ymax > 0.0 { ymax * 1.15 } else { 0.1 };
+    let mut methods: Vec<&str> = Vec::new();
+    for p in &usable {
+        if !methods.contains(&p.method.as_str()) {
+            methods.push(&p.method);
+        }
+    }
+    let colour = |m: &str| {
+        let i = methods.iter().position(|x| *x == m).unwrap_or(0);
+        PALETTE[i % PALETTE.len()]
+    };
+    let coords: Vec<(f64, f64)> = usable.iter().map(|p| (p.ms, p.mean_flip)).collect();
+    let front = pareto_front(&coords);
+    let left_out = points.len() - usable.len();
+    let caption = if left_out == 0 {
+        "Speed against accuracy".to_owned()
+    } else {
+        format!("Speed against accuracy ({left_out} configuration(s) without a time left out)")
+    };
+    let (w, h) = size;
+    let text = |px: f64| (FONT, (px * f64::from(h.min(w)) / 800.0).max(10.0));
+
+    render(path, size, |root| {
+        let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+        let mut chart = ChartBuilder::on(root)
+            .caption(caption, text(30.0))
+            .margin(15)
+            .x_label_area_size((f64::from(h) * 0.08) as u32)
+            .y_label_area_size((f64::from(w) * 0.08) as u32)
+            .build_cartesian_2d(
+                (x0..x1).log_scale().with_key_points(log_ticks(x0, x1)),
+                0.0..y1,
+            )
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("frame time (ms, log scale)")
+            .y_desc("mean FLIP against the truth (lower is better)")
+            .x_label_formatter(&|v| tick_label(*v))
+            .y_label_formatter(&|v| format!("{v:.3}"))
+            // Light lines fall evenly between ticks, which on a log axis would mislead.
+            .x_max_light_lines(0)
+            .axis_desc_style(text(20.0))
+            .label_style(text(16.0))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(e)?;
+        let front_line: Vec<(f64, f64)> = front.iter().map(|&i| coords[i]).collect();
+        chart
+            .draw_series(LineSeries::new(
+                front_line,
+                ShapeStyle::from(&RGBColor(60, 60, 60)).stroke_width(2),
+            ))
+            .map_err(e)?
+            .label("Pareto front")
+            .legend(|(x, y)| {
+                PathElement::new(
+                    vec![(x, y), (x + 20, y)],
+                    ShapeStyle::from(&RGBColor(60, 60, 60)).stroke_width(2),
+                )
+            });
+        let radius = (f64::from(h.min(w)) / 130.0).max(3.0) as i32;
+        for m in &methods {
+            let c = colour(m);
+            let pts: Vec<(f64, f64)> = usable
+                .iter()
+                .filter(|p| p.method == *m)
+                .map(|p| (p.ms, p.mean_flip))
+                .collect();
+            chart
+                .draw_series(
+                    pts.into_iter()
+                        .map(|xy| Circle::new(xy, radius, ShapeStyle::from(&c).filled())),
+                )
+                .map_err(e)?
+                .label(m.to_string())
+                .legend(move |(x, y)| Circle::new((x + 10, y), radius, c.filled()));
+        }
+        let label_px = text(15.0).1;
+        let label_style = TextStyle::from((FONT, label_px)).color(&BLACK);
+        chart
+            .draw_series(front.iter().map(|&i| {
+                // Labels of points in the right fifth go to their left, so they stay inside.
+                // (The embedded font is monospaced: a character is 0.6 em wide.)
+                let label = usable[i].label.clone();
+                let right = (coords[i].0 / x0).ln() / (x1 / x0).ln() > 0.8;
+                let dx = if right {
+                    -(radius + 3) - (0.6 * label_px * label.chars().count() as f64) as i32
+                } else {
+                    radius + 3
+                };
+                EmptyElement::at(coords[i])
+                    + Text::new(label, (dx, -radius - label_px as i32), label_style.clone())
+            }))
+            .map_err(e)?;
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font(text(17.0))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(e)?;
+        Ok(())
+    })
+}
+
+/// What one panel of the flight chart shows of a series.
+type Values = fn(&FlightSeries) -> &Vec<f64>;
+
+/// Two panels along a flight, frame index across: FLIP against the truth per frame (top)
+/// and frame time per frame (bottom), one line per configuration with a legend. Values that
+/// are not finite are skipped.
+pub fn flight_chart(path: &Path, series: &[FlightSeries], size: (u32, u32)) -> Result<()> {
+    if series.is_empty() {
+        return Err(Error::BadInput(format!(
+            "flight chart {}: no configurations to draw",
+            path.display()
+        )));
+    }
+    let frames = series
+        .iter()
+        .map(|s| s.flip.len().max(s.ms.len()))
+        .max()
+        .unwrap_or(0)
+        .max(2);
+    let finite_max = |get: Values| {
+        series
+            .iter()
+            .flat_map(|s| get(s).iter().copied())
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max)
+    };
+    let flip_max = finite_max(|s| &s.flip);
+    let ms_max = finite_max(|s| &s.ms);
+    let top = |m: f64, room: f64| if m > 0.0 { m * room } else { 1.0 };
+    let (w, h) = size;
+    let text = |px: f64| (FONT, (px * f64::from(h.min(w)) / 800.0).max(10.0));
+
+    render(path, size, |root| {
+        let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+        let root = root.titled("Along the flight", text(28.0)).map_err(e)?;
+        let (upper, lower) = root.split_vertically(root.dim_in_pixel().1 / 2);
+        let panels: [(_, _, _, Values); 2] = [
+            // Room above the lines for the legend.
+            (&upper, "FLIP against the truth", top(flip_max, 1.35), |s| {
+                &s.flip
+            }),
+            (&lower, "frame time (ms)", top(ms_max, 1.1), |s| &s.ms),
+        ];
+        for (panel, (area, desc, ymax, get)) in panels.into_iter().enumerate() {
+            let mut chart = ChartBuilder::on(area)
+                .margin(12)
+                .x_label_area_size((f64::from(h) * 0.06) as u32)
+                .y_label_area_size((f64::from(w) * 0.08) as u32)
+                .build_cartesian_2d(0.0..(frames - 1) as f64, 0.0..ymax)
+                .map_err(e)?;
+            chart
+                .configure_mesh()
+                .x_desc("frame")
+                .y_desc(desc)
+                .x_label_formatter(&|v| format!("{v:.0}"))
+                .y_label_formatter(&|v| tick_label(*v))
+                .axis_desc_style(text(18.0))
+                .label_style(text(15.0))
+                .light_line_style(RGBColor(235, 235, 235))
+                .draw()
+                .map_err(e)?;
+            for (i, s) in series.iter().enumerate() {
+                let c = PALETTE[i % PALETTE.len()];
+                let pts: Vec<(f64, f64)> = get(s)
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, v)| v.is_finite())
+                    .map(|(k, v)| (k as f64, *v))
+                    .collect();
+                chart
+                    .draw_series(LineSeries::new(pts, ShapeStyle::from(&c).stroke_width(2)))
+                    .map_err(e)?
+                    .label(s.label.clone())
+                    .legend(move |(x, y)| {
+                        PathElement::new(
+                            vec![(x, y), (x + 20, y)],
+                            ShapeStyle::from(&c).stroke_width(2),
+                        )
+                    });
+            }
+            // One legend, over the top panel: the colours are the same below.
+            if panel == 0 {
+                chart
+                    .configure_series_labels()
+                    .position(SeriesLabelPosition::UpperRight)
+                    .label_font(text(15.0))
+                    .background_style(WHITE.mix(0.85))
+                    .border_style(BLACK)
+                    .draw()
+                    .map_err(e)?;
+            }
+        }
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashSet;
+    use std::path::PathBuf;
+
+    fn out(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("canopy-chart-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join(name)
+    }
+
+    fn point(label: &str, method: &str, ms: f64, mean_flip: f64) -> ChartPoint {
+        ChartPoint {
+            label: label.into(),
+            method: method.into(),
+            ms,
+            mean_flip,
+        }
+    }
+
+    fn sample_points() -> Vec<ChartPoint> {
+        vec![
+            point("geometry", "geometry", 42.0, 0.0),
+            point("btf lod=0.5", "btf", 9.5, 0.06),
+            point("btf lod=1", "btf", 6.0, 0.08),
+            point("btf lod=2", "btf", 4.1, 0.12),
+            point("btf lod=2 crossed", "btf", 5.0, 0.13),
+            point("billboard", "billboard", 1.2, 0.31),
+            point("texel d=16", "texel", 3.0, 0.2),
+            point("texel d=32", "texel", 7.0, 0.15),
+        ]
+    }
+
+    /// Decodes the PNG at `path` and returns its size and number of distinct colours.
+    fn inspect(path: &Path) -> ((u32, u32), usize) {
+        let img = image::open(path).unwrap().to_rgb8();
+        let colours: HashSet<[u8; 3]> = img.pixels().map(|p| p.0).collect();
+        (img.dimensions(), colours.len())
+    }
+
+    #[test]
+    fn the_speed_accuracy_chart_is_a_png_of_the_asked_size_with_colour() {
+        let path = out("speed.png");
+        speed_accuracy_chart(&path, &sample_points(), (900, 600)).unwrap();
+        let (dims, colours) = inspect(&path);
+        assert_eq!(dims, (900, 600));
+        assert!(colours > 20, "{colours} colours: blank or text-less");
+        // Each method's colour is there.
+        let img = image::open(&path).unwrap().to_rgb8();
+        for c in &PALETTE[..4] {
+            assert!(
+                img.pixels().any(|p| p.0 == [c.0, c.1, c.2]),
+                "{c:?} missing"
+            );
+        }
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
+    }
+
+    #[test]
+    fn the_flight_chart_is_a_png_of_the_asked_size_with_colour() {
+        let path = out("flight.png");
+        let series: Vec<FlightSeries> = (0..3)
+            .map(|i| FlightSeries {
+                label: format!("config {i}"),
+                flip: (0..60)
+                    .map(|k| 0.05 * (i + 1) as f64 + 0.02 * (k as f64 * 0.3).sin())
+                    .collect(),
+                ms: (0..60)
+                    .map(|k| 3.0 + i as f64 + (k % 7) as f64 * 0.1)
+                    .collect(),
+            })
+            .collect();
+        flight_chart(&path, &series, (800, 700)).unwrap();
+        let (dims, colours) = inspect(&path);
+        assert_eq!(dims, (800, 700));
+        assert!(colours > 20, "{colours} colours");
+        let img = image::open(&path).unwrap().to_rgb8();
+        for c in &PALETTE[..3] {
+            assert!(
+                img.pixels().any(|p| p.0 == [c.0, c.1, c.2]),
+                "{c:?} missing"
+            );
+        }
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
+    }
+
+    #[test]
+    fn charts_refuse_bad_sizes_and_empty_input() {
+        let path = out("bad.png");
+        let e = speed_accuracy_chart(&path, &sample_points(), (50, 600)).unwrap_err();
+        assert!(e.to_string().contains("50x600"), "{e}");
+        let e = speed_accuracy_chart(&path, &[point("x", "btf", f64::NAN, 0.1)], (400, 300))
+            .unwrap_err();
+        assert!(e.to_string().contains("frame time"), "{e}");
+        assert!(flight_chart(&path, &[], (400, 300)).is_err());
+        assert!(!path.exists());
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
+    }
+
+    #[test]
+    fn log_ticks_always_give_a_few_ticks() {
+        assert_eq!(
+            log_ticks(0.5, 60.0),
+            vec![0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0]
+        );
+        let narrow = log_ticks(3.1, 6.9);
+        assert_eq!(narrow, vec![4.0, 5.0, 6.0]);
+        assert_eq!(tick_label(0.5), "0.5");
+        assert_eq!(tick_label(20.0), "20");
+    }
+
+    #[test]
+    fn the_embedded_font_parses() {
+        register_font();
+        // Text measured with the registered family has a width: the font is there.
+        let style = TextStyle::from((FONT, 20.0));
+        let (w, _) = style.font.box_size("frame time").unwrap();
+        assert!(w > 50, "{w}");
+    }
+}

@@ -1,0 +1,16 @@
+//! The pure-CPU half of `canopy bench`: flights (keyframed cameras, suns and knobs), the
+//! temporal measures (flicker against the truth's own flicker, the worst pop), the Pareto
+//! front of cost against error, the key and store of the cached ground-truth frames, and
+//! the PNG charts. The GPU runner and the CLI build on these.
+
+pub mod chart;
+pub mod flight;
+pub mod pareto;
+pub mod temporal;
+pub mod truth_key;
+
+pub use chart::{ChartPoint, DEFAULT_CHART_SIZE, FlightSeries, flight_chart, speed_accuracy_chart};
+pub use flight::{Flight, FlightContext, FlightFrame, FlightKey, Knobs, PathShape};
+pub use pareto::pareto_front;
+pub use temporal::{Flicker, Pop, flicker, flicker_excess};
+pub use truth_key::{TRUTH_REVISION, TruthKey, TruthLookup, TruthRequest, scene_content};
