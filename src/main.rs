@@ -71,12 +71,53 @@ enum Command {
         #[arg(long)]
         diff: Option<PathBuf>,
     },
+    /// Speed against accuracy along a flight: every method (and every swept btf knob value)
+    /// timed and compared with the geometry ground truth, frame by frame; writes
+    /// results.csv, summary.json, chart.png, flight.png and each configuration's worst frame.
+    Bench(BenchArgs),
     /// Describe a scene: species, triangles per level, trees, terrain.
     Info {
         scene: Option<PathBuf>,
         #[arg(long)]
         json: bool,
     },
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// Scene file (TOML). Omit for the embedded default forest.
+    scene: Option<PathBuf>,
+    /// A built-in flight (overview, walk, approach, sunset, orbit) or a flight file (TOML).
+    #[arg(long, default_value = "walk")]
+    flight: String,
+    /// Methods to measure, comma-separated.
+    #[arg(long, value_delimiter = ',', value_parser = parse_method, default_value = "geometry,btf,billboard")]
+    methods: Vec<Method>,
+    /// Sweep a btf knob: KEY=V1,V2,... (lod_scale, weight_threshold, lod_fade, planes, vcm);
+    /// repeat for a grid.
+    #[arg(long, value_parser = parse_sweep)]
+    sweep: Vec<canopy::bench::run::Sweep>,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, value_parser = parse_size, default_value = "640x360")]
+    size: (u32, u32),
+    /// Frames of the flight (default: the flight's own).
+    #[arg(long)]
+    frames: Option<usize>,
+    /// Output folder.
+    #[arg(long, default_value = "bench-out")]
+    out: PathBuf,
+    /// Samples per pixel side of the ground truth.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=4))]
+    truth_supersample: u32,
+    /// Timed renders per frame and configuration (the median is kept).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=50))]
+    repeats: u32,
+    /// Print the summary as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// Prefer the CPU (software) adapter.
+    #[arg(long)]
+    cpu: bool,
 }
 
 #[derive(clap::Args)]
@@ -272,6 +313,7 @@ fn main() -> ExitCode {
         }) => bake(scene.as_deref(), out.as_deref(), cpu, json),
         Some(Command::Compare { a, b, json, diff }) => compare(&a, &b, json, diff.as_deref()),
         Some(Command::Info { scene, json }) => info(scene.as_deref(), json),
+        Some(Command::Bench(args)) => bench(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -365,6 +407,49 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
             m.stats.triangles,
             ctx.adapter_name()
         );
+    }
+    Ok(())
+}
+
+fn parse_sweep(s: &str) -> Result<canopy::bench::run::Sweep, String> {
+    canopy::bench::run::Sweep::parse(s).map_err(|e| e.to_string())
+}
+
+fn bench(args: BenchArgs) -> anyhow::Result<()> {
+    let (width, height) = args.size;
+    let req = canopy::bench::command::BenchRequest {
+        scene: args.scene,
+        flight: args.flight,
+        methods: args.methods,
+        sweeps: args.sweep,
+        width,
+        height,
+        frames: args.frames,
+        out: args.out,
+        truth_supersample: args.truth_supersample,
+        repeats: args.repeats,
+        adapter: adapter(args.cpu),
+        progress: true,
+    };
+    let outcome = canopy::bench::command::run_command(&req)?;
+    let (run, results) = (&outcome.run, &outcome.results);
+    if args.json {
+        println!("{}", canopy::bench::report::summary_json(run, results));
+        return Ok(());
+    }
+    print!("{}", canopy::bench::report::summary_table(results));
+    println!(
+        "{} frames of `{}` at {width}x{height} on {} ({}); truth: {} rendered, {} cached; {:.0} s",
+        run.frames,
+        run.flight,
+        run.device,
+        run.time_source.name(),
+        run.truth_rendered,
+        run.truth_cached,
+        run.seconds
+    );
+    for p in &outcome.written {
+        println!("wrote {}", p.display());
     }
     Ok(())
 }

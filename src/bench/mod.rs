@@ -1,11 +1,15 @@
-//! The pure-CPU half of `canopy bench`: flights (keyframed cameras, suns and knobs), the
-//! temporal measures (flicker against the truth's own flicker, the worst pop), the Pareto
-//! front of cost against error, the key and store of the cached ground-truth frames, and
-//! the PNG charts. The GPU runner and the CLI build on these.
+//! `canopy bench`: flights (keyframed cameras, suns and knobs), the temporal measures
+//! (flicker against the truth's own flicker, the worst pop), the Pareto front of cost against
+//! error, the key and store of the cached ground-truth frames, the PNG charts (the pure-CPU
+//! half), and the runner that renders the truth and every configuration along a flight, its
+//! report files and the command itself.
 
 pub mod chart;
+pub mod command;
 pub mod flight;
 pub mod pareto;
+pub mod report;
+pub mod run;
 pub mod temporal;
 pub mod truth_key;
 

@@ -191,6 +191,9 @@ pub struct FrameStats {
     /// GPU time of the frame from timestamp queries, when the adapter has them and the
     /// caller asked for a blocking measurement.
     pub gpu_ms: Option<f64>,
+    /// CPU time of culling and the method's prepare step (levels, expansion, sorting,
+    /// shading factors, instance lists), in ms; sun-dependent work is not included.
+    pub prepare_ms: f64,
     /// What the `btf` method did (absent for other methods).
     pub btf: Option<super::btf::BtfStats>,
     /// Sun-dependent state was rebuilt this frame (the sun moved): the trees' VCM reads

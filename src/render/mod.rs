@@ -281,6 +281,7 @@ impl Renderer {
 
         // Cull, then the method's CPU work. Work that follows the sun, not the camera (the
         // VCM reads here, the ground maps below) is timed as the sun update.
+        let prepare_start = std::time::Instant::now();
         let aspect = width as f32 / height as f32;
         let cam = &frame.camera;
         let frustum = cam.frustum(aspect);
@@ -344,6 +345,8 @@ impl Renderer {
                 false,
             ),
         };
+        // The sun-dependent VCM reads inside the prepare step are the sun update's.
+        let prepare_ms = prepare_start.elapsed().as_secs_f64() * 1e3 - sun_update_ms;
         let mut uniform_frame = *frame;
         uniform_frame.shadows.enabled = shadows_on;
         let mut uniforms = FrameUniforms::new(&uniform_frame, aspect, &cascades);
@@ -391,6 +394,7 @@ impl Renderer {
         let mut stats = FrameStats {
             width,
             height,
+            prepare_ms: prepare_ms.max(0.0),
             sun_update: sun_moved,
             sun_update_ms: sun_moved.then_some(sun_update_ms),
             ground_map_size: self

@@ -1,0 +1,208 @@
+//! What `canopy bench` leaves in its output folder: `results.csv` (a row per frame and
+//! configuration), `summary.json` (per configuration), `chart.png` (speed against
+//! accuracy), `flight.png` (FLIP and frame time along the flight) and `worst-N.png` (each
+//! configuration's worst frame: truth, method, FLIP map).
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use image::RgbaImage;
+
+use super::chart::{ChartPoint, DEFAULT_CHART_SIZE, FlightSeries, flight_chart, speed_accuracy_chart};
+use super::run::{BenchResults, ConfigSummary};
+use crate::render::btf::BtfSettings;
+use crate::render::measure::TimeSource;
+use crate::{Error, Result};
+
+/// What the summary says about the run as a whole.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RunInfo {
+    pub scene: String,
+    pub flight: String,
+    pub frames: usize,
+    pub width: u32,
+    pub height: u32,
+    pub truth_supersample: u32,
+    pub repeats: u32,
+    pub device: String,
+    pub time_source: TimeSource,
+    pub truth_rendered: usize,
+    pub truth_cached: usize,
+    /// Wall-clock seconds of the whole bench.
+    pub seconds: f64,
+}
+
+#[derive(serde::Serialize)]
+struct Settings {
+    lod_scale: f32,
+    weight_threshold: f32,
+    lod_fade: f32,
+    planes: &'static str,
+    vcm: bool,
+}
+
+impl From<&BtfSettings> for Settings {
+    fn from(s: &BtfSettings) -> Self {
+        Self {
+            lod_scale: s.lod_scale,
+            weight_threshold: s.weight_threshold,
+            lod_fade: s.lod_fade,
+            planes: s.planes.name(),
+            vcm: s.vcm,
+        }
+    }
+}
+
+#[derive(serde::Serialize)]
+struct ConfigJson<'a> {
+    #[serde(flatten)]
+    summary: &'a ConfigSummary,
+    /// The btf knobs (absent for the other methods).
+    settings: Option<Settings>,
+}
+
+#[derive(serde::Serialize)]
+struct SummaryJson<'a> {
+    #[serde(flatten)]
+    run: &'a RunInfo,
+    configurations: Vec<ConfigJson<'a>>,
+}
+
+/// The summary as `--json` prints it and `summary.json` holds it.
+pub fn summary_json(run: &RunInfo, results: &BenchResults) -> String {
+    let configurations = results
+        .summaries
+        .iter()
+        .zip(&results.configs)
+        .map(|(summary, c)| ConfigJson {
+            summary,
+            settings: (c.method == crate::render::Method::Btf).then(|| Settings::from(&c.btf)),
+        })
+        .collect();
+    serde_json::to_string_pretty(&SummaryJson {
+        run,
+        configurations,
+    })
+    .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+}
+
+/// The rows as CSV.
+pub fn results_csv(results: &BenchResults) -> String {
+    let mut s = String::from(
+        "frame,configuration,method,ms,prepare_ms,mean_flip,p95_flip,change,truth_change,flicker_excess\n",
+    );
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
+    for r in &results.rows {
+        let c = &results.configs[r.config];
+        let excess = r.change.zip(r.truth_change).map(|(m, t)| m - t);
+        let _ = writeln!(
+            s,
+            "{},\"{}\",{},{:.4},{:.4},{:.6},{:.6},{},{},{}",
+            r.frame,
+            c.label.replace('"', "'"),
+            c.method.name(),
+            r.ms,
+            r.prepare_ms,
+            r.mean_flip,
+            r.p95_flip,
+            opt(r.change),
+            opt(r.truth_change),
+            opt(excess)
+        );
+    }
+    s
+}
+
+/// A plain table of the summaries, for the terminal.
+pub fn summary_table(results: &BenchResults) -> String {
+    let mut s = format!(
+        "{:<44} {:>10} {:>9} {:>9} {:>9} {:>8} {:>14}\n",
+        "configuration", "median ms", "speed-up", "mean FLIP", "p95 FLIP", "flicker", "worst pop"
+    );
+    for m in &results.summaries {
+        let speedup = m
+            .speedup_vs_geometry
+            .map_or("-".into(), |x| format!("{x:.2}x"));
+        let pop = m
+            .worst_pop
+            .map_or("-".into(), |p| format!("{:.4} @{}", p.excess, p.frame));
+        let _ = writeln!(
+            s,
+            "{:<44} {:>10.2} {:>9} {:>9.4} {:>9.4} {:>8.2} {:>14}",
+            m.label, m.median_ms, speedup, m.mean_flip, m.p95_flip, m.flicker_ratio, pop
+        );
+    }
+    s
+}
+
+fn write_text(path: &Path, text: &str) -> Result<()> {
+    let fail = |e: std::io::Error| Error::BadInput(format!("cannot write {}: {e}", path.display()));
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, text).map_err(fail)?;
+    std::fs::rename(&tmp, path).map_err(fail)
+}
+
+/// Truth, method and FLIP map side by side.
+fn triptych(w: &super::run::WorstFrame) -> RgbaImage {
+    let (width, height) = w.truth.dimensions();
+    let mut out = RgbaImage::new(width * 3, height);
+    image::imageops::replace(&mut out, &w.truth, 0, 0);
+    image::imageops::replace(&mut out, &w.method, i64::from(width), 0);
+    let map = image::DynamicImage::ImageRgb8(w.flip_map.clone()).to_rgba8();
+    image::imageops::replace(&mut out, &map, 2 * i64::from(width), 0);
+    out
+}
+
+/// Writes every output into `dir` (created if needed); returns the files written.
+pub fn write_all(dir: &Path, run: &RunInfo, results: &BenchResults) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|e| {
+        Error::BadInput(format!(
+            "cannot create the output folder {}: {e}; pass another with --out",
+            dir.display()
+        ))
+    })?;
+    let mut written = Vec::new();
+    let csv = dir.join("results.csv");
+    write_text(&csv, &results_csv(results))?;
+    written.push(csv);
+    let json = dir.join("summary.json");
+    write_text(&json, &summary_json(run, results))?;
+    written.push(json);
+    let points: Vec<ChartPoint> = results
+        .summaries
+        .iter()
+        .map(|s| ChartPoint {
+            label: s.label.clone(),
+            method: s.method.to_string(),
+            ms: s.median_ms,
+            mean_flip: s.mean_flip,
+        })
+        .collect();
+    let chart = dir.join("chart.png");
+    speed_accuracy_chart(&chart, &points, DEFAULT_CHART_SIZE)?;
+    written.push(chart);
+    let series: Vec<FlightSeries> = results
+        .configs
+        .iter()
+        .enumerate()
+        .map(|(c, config)| {
+            let mine = results.rows.iter().filter(|r| r.config == c);
+            FlightSeries {
+                label: config.label.clone(),
+                flip: mine.clone().map(|r| r.mean_flip).collect(),
+                ms: mine.map(|r| r.ms).collect(),
+            }
+        })
+        .collect();
+    let flight = dir.join("flight.png");
+    flight_chart(&flight, &series, DEFAULT_CHART_SIZE)?;
+    written.push(flight);
+    for (c, w) in results.worst.iter().enumerate() {
+        if let Some(w) = w {
+            let path = dir.join(format!("worst-{c}.png"));
+            crate::imageio::save_png(&path, &triptych(w))?;
+            written.push(path);
+        }
+    }
+    Ok(written)
+}

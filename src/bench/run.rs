@@ -1,0 +1,498 @@
+//! The GPU half of `canopy bench`: every frame of a flight rendered as the ground truth
+//! (`geometry`, supersampled, cached by [`TruthKey`]) and by every configuration (a method
+//! with one value of each swept knob), each timed and compared with the truth and with its
+//! own previous frame.
+
+use std::path::PathBuf;
+
+use image::{RgbImage, RgbaImage};
+
+use super::flight::FlightFrame;
+use super::temporal::{Flicker, Pop, flicker};
+use super::truth_key::{TruthKey, TruthLookup, TruthRequest};
+use crate::metrics;
+use crate::render::btf::{BtfSettings, PlaneMode};
+use crate::render::measure::TimeSource;
+use crate::render::{FrameDesc, GpuContext, Method, Renderer};
+use crate::{Error, Result};
+
+/// A knob the bench can sweep.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Knob {
+    LodScale,
+    WeightThreshold,
+    LodFade,
+    Planes,
+    Vcm,
+}
+
+impl Knob {
+    pub const ALL: [Knob; 5] = [
+        Knob::LodScale,
+        Knob::WeightThreshold,
+        Knob::LodFade,
+        Knob::Planes,
+        Knob::Vcm,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Knob::LodScale => "lod_scale",
+            Knob::WeightThreshold => "weight_threshold",
+            Knob::LodFade => "lod_fade",
+            Knob::Planes => "planes",
+            Knob::Vcm => "vcm",
+        }
+    }
+
+    /// Sets this knob of `s` to `value`, or says what values it takes.
+    pub fn apply(self, value: &str, s: &mut BtfSettings) -> Result<()> {
+        let bad = |what: &str| {
+            Error::BadInput(format!(
+                "--sweep {}={value}: {what}",
+                self.name()
+            ))
+        };
+        let number = |lo: f32, hi: f32| -> Result<f32> {
+            let v: f32 = value
+                .parse()
+                .map_err(|_| bad(&format!("not a number; give values in {lo}..={hi}")))?;
+            if !(lo..=hi).contains(&v) {
+                return Err(bad(&format!("out of range; give values in {lo}..={hi}")));
+            }
+            Ok(v)
+        };
+        match self {
+            Knob::LodScale => s.lod_scale = number(0.05, 64.0)?,
+            Knob::WeightThreshold => s.weight_threshold = number(0.0, 1.0)?,
+            Knob::LodFade => s.lod_fade = number(0.0, 1.0)?,
+            Knob::Planes => {
+                s.planes = PlaneMode::parse(value).ok_or_else(|| bad("give single or crossed"))?
+            }
+            Knob::Vcm => {
+                s.vcm = match value {
+                    "on" => true,
+                    "off" => false,
+                    _ => return Err(bad("give on or off")),
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One `--sweep KEY=V1,V2,...`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sweep {
+    pub knob: Knob,
+    pub values: Vec<String>,
+}
+
+impl Sweep {
+    /// Parses `KEY=V1,V2,...`, checking every value against the knob.
+    pub fn parse(s: &str) -> Result<Sweep> {
+        let names: Vec<&str> = Knob::ALL.iter().map(|k| k.name()).collect();
+        let (key, values) = s.split_once('=').ok_or_else(|| {
+            Error::BadInput(format!(
+                "--sweep {s}: write KEY=V1,V2,... with KEY one of {}",
+                names.join(", ")
+            ))
+        })?;
+        let knob = Knob::ALL
+            .into_iter()
+            .find(|k| k.name() == key.trim().replace('-', "_"))
+            .ok_or_else(|| {
+                Error::BadInput(format!(
+                    "--sweep: unknown knob `{key}`; the knobs are {}",
+                    names.join(", ")
+                ))
+            })?;
+        let values: Vec<String> = values
+            .split(',')
+            .map(|v| v.trim().to_string())
+            .filter(|v| !v.is_empty())
+            .collect();
+        if values.is_empty() {
+            return Err(Error::BadInput(format!("--sweep {s}: no values")));
+        }
+        let mut probe = BtfSettings::default();
+        for v in &values {
+            knob.apply(v, &mut probe)?;
+        }
+        Ok(Sweep { knob, values })
+    }
+}
+
+/// One configuration: a method and, for `btf`, its knobs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Config {
+    /// e.g. `btf lod_scale=2 weight_threshold=0.1`, or the method's name.
+    pub label: String,
+    pub method: Method,
+    pub btf: BtfSettings,
+}
+
+/// Most configurations one bench may run.
+pub const MAX_CONFIGS: usize = 256;
+
+/// Every method, `btf` once per combination of the swept values (the others do not have
+/// these knobs and run once).
+pub fn configurations(methods: &[Method], sweeps: &[Sweep], base: BtfSettings) -> Result<Vec<Config>> {
+    let mut out = Vec::new();
+    for &method in methods {
+        if method != Method::Btf {
+            out.push(Config {
+                label: method.name().to_string(),
+                method,
+                btf: base,
+            });
+            continue;
+        }
+        let mut combos: Vec<(String, BtfSettings)> = vec![(String::new(), base)];
+        for sweep in sweeps {
+            let mut next = Vec::new();
+            for (label, s) in &combos {
+                for v in &sweep.values {
+                    let mut s = *s;
+                    sweep.knob.apply(v, &mut s)?;
+                    next.push((format!("{label} {}={v}", sweep.knob.name()), s));
+                }
+            }
+            combos = next;
+            if combos.len() > MAX_CONFIGS {
+                return Err(Error::BadInput(format!(
+                    "the sweeps make more than {MAX_CONFIGS} configurations; sweep fewer values"
+                )));
+            }
+        }
+        for (label, btf) in combos {
+            out.push(Config {
+                label: format!("btf{label}"),
+                method,
+                btf,
+            });
+        }
+    }
+    if out.is_empty() {
+        return Err(Error::BadInput("--methods: name at least one method".into()));
+    }
+    Ok(out)
+}
+
+/// How to run a bench.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    pub width: u32,
+    pub height: u32,
+    /// Samples per pixel side of the truth.
+    pub truth_supersample: u32,
+    /// Timed renders per frame and configuration (the median is kept).
+    pub repeats: u32,
+    /// Where the truth frames are cached.
+    pub cache_dir: PathBuf,
+    /// The scene's content ([`super::truth_key::scene_content`]), for the truth's key.
+    pub scene_content: Vec<u8>,
+}
+
+/// One frame of one configuration.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct FrameRow {
+    pub frame: usize,
+    /// Index into the configurations.
+    pub config: usize,
+    /// Median frame time (ms) of the repeats.
+    pub ms: f64,
+    /// CPU time of culling and the method's prepare step (ms, median).
+    pub prepare_ms: f64,
+    pub mean_flip: f64,
+    pub p95_flip: f64,
+    /// FLIP between this frame and the one before, of the method and of the truth (absent
+    /// for the first frame).
+    pub change: Option<f64>,
+    pub truth_change: Option<f64>,
+}
+
+/// One configuration along the whole flight.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ConfigSummary {
+    pub label: String,
+    pub method: &'static str,
+    pub median_ms: f64,
+    pub median_prepare_ms: f64,
+    /// Median frame time of `geometry` over this one's (when geometry ran).
+    pub speedup_vs_geometry: Option<f64>,
+    pub mean_flip: f64,
+    /// Mean over the frames of each frame's 95th percentile.
+    pub p95_flip: f64,
+    /// Mean frame-to-frame change of the method over the truth's (1: as steady as the truth).
+    pub flicker_ratio: f64,
+    /// The largest frame-to-frame change beyond the truth's, and its frame.
+    pub worst_pop: Option<Pop>,
+    /// The frame with the largest mean FLIP, and that FLIP.
+    pub worst_frame: usize,
+    pub worst_frame_flip: f64,
+}
+
+/// The images of a configuration's worst frame.
+pub struct WorstFrame {
+    pub frame: usize,
+    pub truth: RgbaImage,
+    pub method: RgbaImage,
+    pub flip_map: RgbImage,
+}
+
+/// Everything a bench measured.
+pub struct BenchResults {
+    pub configs: Vec<Config>,
+    pub rows: Vec<FrameRow>,
+    pub summaries: Vec<ConfigSummary>,
+    pub worst: Vec<Option<WorstFrame>>,
+    pub frames: usize,
+    pub time_source: TimeSource,
+    /// Truth frames rendered now and found in the cache.
+    pub truth_rendered: usize,
+    pub truth_cached: usize,
+}
+
+/// What the bench is doing, for a progress bar.
+#[derive(Clone, Copy, Debug)]
+pub enum BenchStep<'a> {
+    /// Rendering (or loading) the truth of frame `frame`.
+    Truth { frame: usize, cached: bool },
+    /// Rendering configuration `label` at frame `frame`.
+    Config { frame: usize, label: &'a str },
+    /// Frame `frame` is finished (`done` of `total` frames).
+    FrameDone { done: usize, total: usize },
+}
+
+/// The `q` quantile of `v` (sorted in place).
+fn quantile(v: &mut [f32], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f32::total_cmp);
+    f64::from(v[((v.len() - 1) as f64 * q).round() as usize])
+}
+
+fn rgb(img: &RgbaImage) -> RgbImage {
+    image::DynamicImage::ImageRgba8(img.clone()).to_rgb8()
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The truth of one frame: from the cache, or rendered (geometry, supersampled) and stored.
+fn truth_frame(
+    ctx: &GpuContext,
+    renderer: &mut Renderer,
+    desc: &FrameDesc,
+    f: &FlightFrame,
+    opts: &BenchOptions,
+) -> Result<(RgbaImage, bool)> {
+    let mut truth = *desc;
+    truth.method = Method::Geometry;
+    let sun = truth.sun.direction();
+    let key = TruthKey::new(&TruthRequest {
+        scene: &opts.scene_content,
+        position: f.position,
+        look_at: f.look_at,
+        fov_y_deg: truth.camera.fov_y_deg,
+        sun_direction: sun,
+        sun_radiance: truth.sun.color * truth.sun.intensity,
+        width: opts.width,
+        height: opts.height,
+        supersample: opts.truth_supersample,
+        extra: format!(
+            "fog {} exposure {} sky {:?} shadows {:?}",
+            truth.fog_density, truth.exposure, truth.sky, truth.shadows
+        )
+        .as_bytes(),
+    });
+    match key.load(&opts.cache_dir) {
+        TruthLookup::Hit(img) => return Ok((img, true)),
+        TruthLookup::Missing => {}
+        TruthLookup::Unusable { path, reason } => {
+            log::warn!("truth {} unusable ({reason}); rendering it again", path.display())
+        }
+    }
+    let (img, _) =
+        renderer.render_image(ctx, &truth, opts.width, opts.height, opts.truth_supersample)?;
+    if let Err(e) = key.store(&opts.cache_dir, &img) {
+        log::warn!("could not cache a truth frame: {e}");
+    }
+    Ok((img, false))
+}
+
+/// Runs every configuration along `frames` (from a flight), starting from `base` (the
+/// scene's frame: sky, fog, exposure, sun colour). The renderer needs the bake attached
+/// when a configuration draws baked images.
+pub fn run(
+    ctx: &GpuContext,
+    renderer: &mut Renderer,
+    base: &FrameDesc,
+    frames: &[FlightFrame],
+    configs: &[Config],
+    opts: &BenchOptions,
+    progress: &mut dyn FnMut(BenchStep),
+) -> Result<BenchResults> {
+    if frames.is_empty() {
+        return Err(Error::BadInput("the flight has no frames".into()));
+    }
+    let (w, h) = (opts.width, opts.height);
+    let mut rows = Vec::with_capacity(frames.len() * configs.len());
+    let mut prev: Vec<Option<RgbImage>> = vec![None; configs.len()];
+    let mut worst: Vec<Option<WorstFrame>> = configs.iter().map(|_| None).collect();
+    let mut worst_flip = vec![0.0f64; configs.len()];
+    let mut prev_truth: Option<RgbImage> = None;
+    let (mut rendered, mut cached) = (0, 0);
+    let mut source = TimeSource::GpuTimestamps;
+    for (i, f) in frames.iter().enumerate() {
+        let mut desc = *base;
+        f.apply(&mut desc);
+        let (truth, was_cached) = truth_frame(ctx, renderer, &desc, f, opts)?;
+        progress(BenchStep::Truth {
+            frame: i,
+            cached: was_cached,
+        });
+        if was_cached {
+            cached += 1;
+        } else {
+            rendered += 1;
+        }
+        let truth_rgb = rgb(&truth);
+        let truth_change = match &prev_truth {
+            Some(p) => Some(f64::from(metrics::flip(p, &truth_rgb)?.stats.mean)),
+            None => None,
+        };
+        for (c, config) in configs.iter().enumerate() {
+            progress(BenchStep::Config {
+                frame: i,
+                label: &config.label,
+            });
+            let mut d = desc;
+            d.method = config.method;
+            d.btf = config.btf;
+            // The flight's own knobs win over the configuration's.
+            f.apply(&mut d);
+            if i == 0 {
+                // The first frame builds pipelines: not timed.
+                renderer.render_image(ctx, &d, w, h, 1)?;
+            }
+            let mut times = Vec::new();
+            let mut prep = Vec::new();
+            let mut image = None;
+            for _ in 0..opts.repeats.max(1) {
+                let t0 = std::time::Instant::now();
+                let (img, stats) = renderer.render_image(ctx, &d, w, h, 1)?;
+                let wall = t0.elapsed().as_secs_f64() * 1e3;
+                if stats.gpu_ms.is_none() {
+                    source = TimeSource::CpuWallClock;
+                }
+                times.push(stats.gpu_ms.unwrap_or(wall));
+                prep.push(stats.prepare_ms);
+                image = Some(img);
+            }
+            let Some(img) = image else { continue };
+            let img_rgb = rgb(&img);
+            let mut res = metrics::flip(&truth_rgb, &img_rgb)?;
+            let mean_flip = f64::from(res.stats.mean);
+            let change = match &prev[c] {
+                Some(p) => Some(f64::from(metrics::flip(p, &img_rgb)?.stats.mean)),
+                None => None,
+            };
+            if worst[c].is_none() || mean_flip > worst_flip[c] {
+                worst_flip[c] = mean_flip;
+                worst[c] = Some(WorstFrame {
+                    frame: i,
+                    truth: truth.clone(),
+                    method: img.clone(),
+                    flip_map: res.error_image(),
+                });
+            }
+            rows.push(FrameRow {
+                frame: i,
+                config: c,
+                ms: median(&mut times),
+                prepare_ms: median(&mut prep),
+                mean_flip,
+                p95_flip: quantile(&mut res.errors, 0.95),
+                change,
+                truth_change,
+            });
+            prev[c] = Some(img_rgb);
+        }
+        prev_truth = Some(truth_rgb);
+        progress(BenchStep::FrameDone {
+            done: i + 1,
+            total: frames.len(),
+        });
+    }
+    let summaries = summarise(configs, &rows)?;
+    Ok(BenchResults {
+        configs: configs.to_vec(),
+        rows,
+        summaries,
+        worst,
+        frames: frames.len(),
+        time_source: source,
+        truth_rendered: rendered,
+        truth_cached: cached,
+    })
+}
+
+/// Per configuration: the medians, means and temporal figures of its rows.
+pub fn summarise(configs: &[Config], rows: &[FrameRow]) -> Result<Vec<ConfigSummary>> {
+    let mut out = Vec::with_capacity(configs.len());
+    for (c, config) in configs.iter().enumerate() {
+        let mine: Vec<&FrameRow> = rows.iter().filter(|r| r.config == c).collect();
+        let n = mine.len().max(1) as f64;
+        let mut ms: Vec<f64> = mine.iter().map(|r| r.ms).collect();
+        let mut prep: Vec<f64> = mine.iter().map(|r| r.prepare_ms).collect();
+        let pairs: Vec<(f64, f64)> = mine
+            .iter()
+            .filter_map(|r| Some((r.change?, r.truth_change?)))
+            .collect();
+        let method: Vec<f64> = pairs.iter().map(|p| p.0).collect();
+        let truth: Vec<f64> = pairs.iter().map(|p| p.1).collect();
+        let Flicker {
+            ratio, worst_pop, ..
+        } = flicker(&method, &truth)?;
+        // The temporal figures count from the flight's second frame.
+        let worst_pop = worst_pop.map(|p| Pop {
+            frame: mine
+                .iter()
+                .filter(|r| r.change.is_some())
+                .nth(p.frame.saturating_sub(1))
+                .map_or(p.frame, |r| r.frame),
+            excess: p.excess,
+        });
+        let worst = mine
+            .iter()
+            .max_by(|a, b| a.mean_flip.total_cmp(&b.mean_flip))
+            .copied();
+        out.push(ConfigSummary {
+            label: config.label.clone(),
+            method: config.method.name(),
+            median_ms: median(&mut ms),
+            median_prepare_ms: median(&mut prep),
+            speedup_vs_geometry: None,
+            mean_flip: mine.iter().map(|r| r.mean_flip).sum::<f64>() / n,
+            p95_flip: mine.iter().map(|r| r.p95_flip).sum::<f64>() / n,
+            flicker_ratio: ratio,
+            worst_pop,
+            worst_frame: worst.map_or(0, |r| r.frame),
+            worst_frame_flip: worst.map_or(0.0, |r| r.mean_flip),
+        });
+    }
+    if let Some(geo) = out.iter().find(|s| s.method == "geometry").map(|s| s.median_ms) {
+        for s in &mut out {
+            s.speedup_vs_geometry = (s.median_ms > 0.0).then(|| geo / s.median_ms);
+        }
+    }
+    Ok(out)
+}
