@@ -496,3 +496,81 @@ pub fn summarise(configs: &[Config], rows: &[FrameRow]) -> Result<Vec<ConfigSumm
     }
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sweeps_parse_and_refuse_unknown_knobs_and_bad_values() {
+        let s = Sweep::parse("lod_scale=0.5,1, 2").unwrap();
+        assert_eq!((s.knob, s.values.len()), (Knob::LodScale, 3));
+        assert_eq!(Sweep::parse("planes=single,crossed").unwrap().knob, Knob::Planes);
+        assert_eq!(Sweep::parse("weight-threshold=0.1").unwrap().knob, Knob::WeightThreshold);
+        for bad in ["lod_scale", "lod_scal=1", "lod_scale=", "lod_scale=x", "lod_scale=-1", "vcm=maybe", "weight_threshold=2"] {
+            let e = Sweep::parse(bad).unwrap_err().to_string();
+            assert!(e.contains("--sweep"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn btf_runs_once_per_combination_and_the_others_once() {
+        let sweeps = [
+            Sweep::parse("lod_scale=0.5,1,2,4").unwrap(),
+            Sweep::parse("weight_threshold=0,0.1,0.2").unwrap(),
+        ];
+        let methods = [Method::Geometry, Method::Btf, Method::Billboard];
+        let c = configurations(&methods, &sweeps, BtfSettings::default()).unwrap();
+        assert_eq!(c.len(), 1 + 12 + 1);
+        assert_eq!(c[0].label, "geometry");
+        assert_eq!(c[13].label, "billboard");
+        assert_eq!(c[1].label, "btf lod_scale=0.5 weight_threshold=0");
+        assert_eq!((c[12].btf.lod_scale, c[12].btf.weight_threshold), (4.0, 0.2));
+        let mut labels: Vec<&str> = c.iter().map(|c| c.label.as_str()).collect();
+        labels.dedup();
+        assert_eq!(labels.len(), 14, "labels are distinct");
+        // Without sweeps btf runs once with its defaults.
+        let plain = configurations(&[Method::Btf], &[], BtfSettings::default()).unwrap();
+        assert_eq!((plain.len(), plain[0].label.as_str()), (1, "btf"));
+        assert!(configurations(&[], &[], BtfSettings::default()).is_err());
+    }
+
+    fn row(frame: usize, config: usize, ms: f64, flip: f64, change: Option<(f64, f64)>) -> FrameRow {
+        FrameRow {
+            frame,
+            config,
+            ms,
+            prepare_ms: 0.1,
+            mean_flip: flip,
+            p95_flip: 2.0 * flip,
+            change: change.map(|c| c.0),
+            truth_change: change.map(|c| c.1),
+        }
+    }
+
+    #[test]
+    fn summaries_find_the_speedup_the_worst_frame_and_the_pop() {
+        let configs = configurations(&[Method::Geometry, Method::Btf], &[], BtfSettings::default())
+            .unwrap();
+        let mut rows = Vec::new();
+        for f in 0..5 {
+            let change = (f > 0).then_some((0.02, 0.02));
+            rows.push(row(f, 0, 100.0, 0.01, change));
+            // btf pops at frame 3: it changes 0.2 where the truth changes 0.02.
+            let btf_change = change.map(|(_, t)| (if f == 3 { 0.2 } else { t }, t));
+            rows.push(row(f, 1, 4.0 + f as f64, if f == 2 { 0.09 } else { 0.05 }, btf_change));
+        }
+        let s = summarise(&configs, &rows).unwrap();
+        assert_eq!(s[0].speedup_vs_geometry, Some(1.0));
+        assert_eq!(s[1].median_ms, 6.0);
+        assert!((s[1].speedup_vs_geometry.unwrap() - 100.0 / 6.0).abs() < 1e-9);
+        assert!((s[0].flicker_ratio - 1.0).abs() < 1e-9);
+        assert!(s[1].flicker_ratio > 2.0);
+        let pop = s[1].worst_pop.unwrap();
+        assert_eq!(pop.frame, 3);
+        assert!((pop.excess - 0.18).abs() < 1e-9);
+        assert_eq!((s[1].worst_frame, s[1].worst_frame_flip), (2, 0.09));
+        assert!((s[1].mean_flip - 0.058).abs() < 1e-9);
+        assert!((s[1].p95_flip - 0.116).abs() < 1e-9);
+    }
+}

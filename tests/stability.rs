@@ -1,0 +1,231 @@
+//! The stability suite: short flights on the BTF test stand where the methods are known to
+//! fail, each with its metric and a bound set from measurement (stated with the figure that
+//! set it), and each shown to fail when the thing it guards is switched off. The figures
+//! come from the bench's own runner (`canopy::bench::run`), so a bench of the same flight on
+//! any scene reports the same metrics.
+
+mod common;
+
+use std::sync::OnceLock;
+
+use canopy::bake;
+use canopy::bench::flight::{FlightFrame, Knobs};
+use canopy::bench::run::{self, BenchOptions, Config};
+use canopy::format::Baked;
+use canopy::model::World;
+use canopy::render::btf::BtfSettings;
+use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
+use canopy::scene::Scene;
+use glam::Vec3;
+
+use common::*;
+
+fn stand() -> Scene {
+    Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses")
+}
+
+/// The stand's bake, made once per test process.
+fn baked() -> &'static Baked {
+    static BAKED: OnceLock<Baked> = OnceLock::new();
+    BAKED.get_or_init(|| {
+        let ctx = gpu();
+        let scene = stand();
+        let world = scene.build_world().unwrap();
+        let settings = bake::cache::settings_of(&scene);
+        bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap()
+    })
+}
+
+fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
+    let scene = stand();
+    let world = scene.build_world().unwrap();
+    let mut renderer = Renderer::new(ctx, &world).unwrap();
+    renderer.attach_btf(ctx, baked(), &world).unwrap();
+    (scene, world, renderer)
+}
+
+/// A frame of a hand-made flight.
+fn frame(index: usize, position: Vec3, look_at: Vec3, sun: Option<[f32; 2]>) -> FlightFrame {
+    FlightFrame {
+        index,
+        t: index as f32,
+        position,
+        look_at,
+        sun,
+        knobs: Knobs::default(),
+    }
+}
+
+fn btf(label: &str, f: impl FnOnce(&mut BtfSettings)) -> Config {
+    let mut btf = BtfSettings {
+        vcm: false,
+        ..BtfSettings::default()
+    };
+    f(&mut btf);
+    Config {
+        label: label.into(),
+        method: Method::Btf,
+        btf,
+    }
+}
+
+/// The stand's frame for these flights: no fog, smaller shadow maps (the truth's cost).
+fn base(scene: &Scene) -> FrameDesc {
+    let mut f = FrameDesc::from_scene(scene);
+    f.fog_density = 0.0;
+    f.shadows.map_size = 1024;
+    f
+}
+
+fn options(tag: &str, size: u32) -> BenchOptions {
+    BenchOptions {
+        width: size,
+        height: size,
+        truth_supersample: 1,
+        repeats: 1,
+        cache_dir: std::env::temp_dir().join(format!(
+            "canopy-stability-{tag}-{}",
+            std::process::id()
+        )),
+        scene_content: tag.as_bytes().to_vec(),
+    }
+}
+
+/// LOD switch: the camera dollies down onto a tree across the distance where the twig
+/// level takes over from the main-branch level. The worst pop (the largest frame-to-frame
+/// change beyond the truth's own, scaled: `bench::temporal::flicker`) with the cross-fade
+/// must stay under this. Measured on lavapipe (llvmpipe 15, 128x128, 17 frames in 0.5 %
+/// steps): cross-fade 0.2: 0.0003; abrupt (`lod_fade` 0): 0.0087 at the switch, where btf
+/// changes 0.018 against its usual 0.009 (the truth: 0.020 every frame). The abrupt switch
+/// must exceed the bound.
+const LOD_SWITCH_MAX_POP: f64 = 0.003;
+
+#[test]
+fn lod_switch_the_cross_fade_keeps_the_worst_pop_under_its_bound() {
+    let ctx = gpu();
+    let (scene, world, mut renderer) = setup(&ctx);
+    let tree = world.forest.instances[0];
+    let model = &world.species[tree.species as usize];
+    let centre = tree.position + model.tree_bounds.center() * tree.scale;
+    let size = 128;
+    let focal = Camera::look_at(Vec3::ZERO, Vec3::Z, 40.0).focal_px(size);
+    let texels = renderer.btf_texels(tree.species as usize).unwrap();
+    let bound = canopy::lod::valid_beyond(texels.branch * tree.scale, focal, 1.0);
+    // 17 frames from 1.04 to 0.96 times the bound in 0.5 % steps, looking straight down:
+    // steps small enough that the motion itself changes little.
+    let n = 17;
+    let frames: Vec<FlightFrame> = (0..n)
+        .map(|i| {
+            let z = bound * (1.04 - 0.005 * i as f32);
+            frame(i, centre + Vec3::new(0.0, z, 0.001), centre, None)
+        })
+        .collect();
+    let configs = [
+        btf("fade 0.2", |s| s.lod_fade = 0.2),
+        btf("abrupt", |s| s.lod_fade = 0.0),
+    ];
+    let mut b = base(&scene);
+    b.camera.fov_y_deg = 40.0;
+    let r = run::run(&ctx, &mut renderer, &b, &frames, &configs, &options("lod", size), &mut |_| {})
+        .unwrap();
+    for (c, s) in r.summaries.iter().enumerate() {
+        let changes: Vec<String> = r
+            .rows
+            .iter()
+            .filter(|row| row.config == c)
+            .filter_map(|row| Some(format!("{:.4}/{:.4}", row.change?, row.truth_change?)))
+            .collect();
+        eprintln!("{}: change / truth's per frame {}", s.label, changes.join(" "));
+        eprintln!(
+            "LOD switch, {}: worst pop {:?}, flicker ratio {:.3}, mean FLIP {:.4}",
+            s.label, s.worst_pop, s.flicker_ratio, s.mean_flip
+        );
+    }
+    let pop = |i: usize| r.summaries[i].worst_pop.expect("a flight of 14 frames").excess;
+    assert!(
+        pop(0) < LOD_SWITCH_MAX_POP,
+        "with the cross-fade the worst pop is {:.4}",
+        pop(0)
+    );
+    assert!(
+        pop(1) > LOD_SWITCH_MAX_POP,
+        "the abrupt switch must show as a pop above the bound: {:.4}",
+        pop(1)
+    );
+}
+
+/// Light between samples: a fixed camera, the sun turned in 0.5 degree steps across a baked
+/// light direction (the stand bakes 6 lights: the +x axis is one, at azimuth 90, elevation
+/// 0; the sweep runs at 20 degrees up from azimuth 80 to 100). No frame-to-frame change may
+/// be larger than this many times the sweep's median change. Measured on lavapipe (96x96,
+/// 41 frames): blended 1.1x (median 0.0020); holding the light at the nearest sample
+/// (threshold 1: one light, no blending) 5.3x, at the step where the nearest sample changes,
+/// which must exceed the bound.
+const LIGHT_STEP_MAX_OVER_MEDIAN: f64 = 4.0;
+
+#[test]
+fn light_between_samples_changes_the_image_in_even_steps() {
+    let ctx = gpu();
+    let (scene, world, mut renderer) = setup(&ctx);
+    let tree = world.forest.instances[0];
+    let model = &world.species[tree.species as usize];
+    let centre = tree.position + model.tree_bounds.center() * tree.scale;
+    let size = 96;
+    let eye = centre + Vec3::new(-40.0, 10.0, -25.0);
+    let frames: Vec<FlightFrame> = (0..41)
+        .map(|i| frame(i, eye, centre, Some([80.0 + 0.5 * i as f32, 20.0])))
+        .collect();
+    let mut b = base(&scene);
+    b.ground_shadows = false;
+    let configs = [
+        btf("blended", |s| s.lod_scale = 4.0),
+        btf("nearest light only", |s| {
+            s.lod_scale = 4.0;
+            s.weight_threshold = 1.0;
+        }),
+    ];
+    let mut ratios = Vec::new();
+    for config in &configs {
+        let mut changes = Vec::new();
+        let mut prev: Option<image::RgbImage> = None;
+        for f in &frames {
+            let mut d = b;
+            d.method = config.method;
+            d.btf = config.btf;
+            f.apply(&mut d);
+            let (img, _) = renderer.render_image(&ctx, &d, size, size, 1).unwrap();
+            let img = rgb(&img);
+            if let Some(p) = &prev {
+                changes.push(f64::from(canopy::metrics::flip(p, &img).unwrap().stats.mean));
+            }
+            prev = Some(img);
+        }
+        let mut sorted = changes.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        let (at, max) = changes
+            .iter()
+            .copied()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap();
+        eprintln!(
+            "light sweep, {}: median change {median:.5}, largest {max:.5} at frame {} ({:.1}x the median)",
+            config.label,
+            at + 1,
+            max / median.max(1e-9)
+        );
+        ratios.push(max / median.max(1e-9));
+    }
+    let _ = world;
+    assert!(
+        ratios[0] < LIGHT_STEP_MAX_OVER_MEDIAN,
+        "blended lights: the largest step is {:.1}x the median",
+        ratios[0]
+    );
+    assert!(
+        ratios[1] > LIGHT_STEP_MAX_OVER_MEDIAN,
+        "the nearest light alone must show its switch: {:.1}x the median",
+        ratios[1]
+    );
+}
