@@ -167,3 +167,121 @@ fn an_unwritable_output_path_is_an_error_and_leaves_nothing() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("out.png"));
     assert!(!out.exists());
 }
+
+#[test]
+fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
+    let out = tmp("bench");
+    let cache = tmp("bench-cache");
+    let scene = common::data("btf.toml");
+    let run = || {
+        let o = canopy()
+            .env("CANOPY_CACHE_DIR", &cache)
+            .args(["bench"])
+            .arg(&scene)
+            .args(["--flight", "orbit", "--frames", "3", "--size", "64x48"])
+            .args([
+                "--methods",
+                "geometry,btf,billboard",
+                "--sweep",
+                "lod_scale=1,2",
+            ])
+            .args([
+                "--repeats",
+                "1",
+                "--truth-supersample",
+                "1",
+                "--cpu",
+                "--json",
+                "--out",
+            ])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "bench failed: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let json: serde_json::Value =
+            serde_json::from_slice(&o.stdout).expect("stdout is one JSON object");
+        json
+    };
+    let first = run();
+    let configs = first["configurations"].as_array().expect("configurations");
+    let labels: Vec<&str> = configs
+        .iter()
+        .map(|c| c["label"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        labels,
+        [
+            "geometry",
+            "btf lod_scale=1",
+            "btf lod_scale=2",
+            "billboard"
+        ]
+    );
+    for (i, c) in configs.iter().enumerate() {
+        assert!(c["median_ms"].as_f64().unwrap() > 0.0, "{c}");
+        let flip = c["mean_flip"].as_f64().unwrap();
+        // Unsupersampled, the truth is the geometry render itself.
+        if i == 0 {
+            assert_eq!(flip, 0.0, "{c}");
+        } else {
+            assert!(flip > 0.0 && flip < 1.0, "{c}");
+        }
+        assert!(c["flicker_ratio"].as_f64().unwrap().is_finite(), "{c}");
+    }
+    assert_eq!(configs[1]["settings"]["lod_scale"], 1.0);
+    assert_eq!(configs[0]["speedup_vs_geometry"], 1.0);
+    assert_eq!(
+        (
+            first["truth_rendered"].as_u64(),
+            first["truth_cached"].as_u64()
+        ),
+        (Some(3), Some(0))
+    );
+    let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 3 * 4, "{csv}");
+    for f in [
+        "summary.json",
+        "chart.png",
+        "flight.png",
+        "worst-0.png",
+        "worst-3.png",
+    ] {
+        assert!(out.join(f).is_file(), "{f} written");
+    }
+    let chart = image::open(out.join("chart.png")).unwrap();
+    assert!(chart.width() >= 200 && chart.height() >= 200);
+    let second = run();
+    assert_eq!(
+        (
+            second["truth_rendered"].as_u64(),
+            second["truth_cached"].as_u64()
+        ),
+        (Some(0), Some(3)),
+        "the second bench renders no geometry truth"
+    );
+}
+
+#[test]
+fn bench_refuses_bad_sweeps_and_flights_with_2() {
+    for args in [
+        ["--sweep", "lod_scale=abc"],
+        ["--sweep", "blur=1,2"],
+        ["--flight", "no-such-flight"],
+        ["--frames", "1"],
+    ] {
+        let o = canopy()
+            .args(["bench", "--out"])
+            .arg(tmp("never"))
+            .args(args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains("error"), "{args:?}: {err}");
+    }
+    assert!(!tmp("never").exists(), "nothing written on bad input");
+}

@@ -83,10 +83,8 @@ fn options(tag: &str, size: u32) -> BenchOptions {
         height: size,
         truth_supersample: 1,
         repeats: 1,
-        cache_dir: std::env::temp_dir().join(format!(
-            "canopy-stability-{tag}-{}",
-            std::process::id()
-        )),
+        cache_dir: std::env::temp_dir()
+            .join(format!("canopy-stability-{tag}-{}", std::process::id())),
         scene_content: tag.as_bytes().to_vec(),
     }
 }
@@ -126,8 +124,16 @@ fn lod_switch_the_cross_fade_keeps_the_worst_pop_under_its_bound() {
     ];
     let mut b = base(&scene);
     b.camera.fov_y_deg = 40.0;
-    let r = run::run(&ctx, &mut renderer, &b, &frames, &configs, &options("lod", size), &mut |_| {})
-        .unwrap();
+    let r = run::run(
+        &ctx,
+        &mut renderer,
+        &b,
+        &frames,
+        &configs,
+        &options("lod", size),
+        &mut |_| {},
+    )
+    .unwrap();
     for (c, s) in r.summaries.iter().enumerate() {
         let changes: Vec<String> = r
             .rows
@@ -135,13 +141,22 @@ fn lod_switch_the_cross_fade_keeps_the_worst_pop_under_its_bound() {
             .filter(|row| row.config == c)
             .filter_map(|row| Some(format!("{:.4}/{:.4}", row.change?, row.truth_change?)))
             .collect();
-        eprintln!("{}: change / truth's per frame {}", s.label, changes.join(" "));
+        eprintln!(
+            "{}: change / truth's per frame {}",
+            s.label,
+            changes.join(" ")
+        );
         eprintln!(
             "LOD switch, {}: worst pop {:?}, flicker ratio {:.3}, mean FLIP {:.4}",
             s.label, s.worst_pop, s.flicker_ratio, s.mean_flip
         );
     }
-    let pop = |i: usize| r.summaries[i].worst_pop.expect("a flight of 14 frames").excess;
+    let pop = |i: usize| {
+        r.summaries[i]
+            .worst_pop
+            .expect("a flight of 14 frames")
+            .excess
+    };
     assert!(
         pop(0) < LOD_SWITCH_MAX_POP,
         "with the cross-fade the worst pop is {:.4}",
@@ -196,7 +211,9 @@ fn light_between_samples_changes_the_image_in_even_steps() {
             let (img, _) = renderer.render_image(&ctx, &d, size, size, 1).unwrap();
             let img = rgb(&img);
             if let Some(p) = &prev {
-                changes.push(f64::from(canopy::metrics::flip(p, &img).unwrap().stats.mean));
+                changes.push(f64::from(
+                    canopy::metrics::flip(p, &img).unwrap().stats.mean,
+                ));
             }
             prev = Some(img);
         }

@@ -46,7 +46,10 @@ pub struct BenchOutcome {
 pub const MAX_BENCH_FRAMES: usize = 10_000;
 
 /// The flight's frames and the configurations of `req`, checked before anything renders.
-pub fn plan(req: &BenchRequest, world: &crate::model::World) -> Result<(Flight, usize, Vec<Config>)> {
+pub fn plan(
+    req: &BenchRequest,
+    world: &crate::model::World,
+) -> Result<(Flight, usize, Vec<Config>)> {
     let flight = Flight::resolve(&req.flight, &FlightContext::from_world(world))?;
     let n = req.frames.unwrap_or(flight.default_frames);
     if !(2..=MAX_BENCH_FRAMES).contains(&n) {
@@ -75,7 +78,11 @@ pub fn run_command(req: &BenchRequest) -> Result<BenchOutcome> {
     let ctx = GpuContext::headless(req.adapter)?;
     let mut renderer = Renderer::new(&ctx, &world)?;
     if configs.iter().any(|c| c.method.needs_bake()) {
-        let bar = bar(req.progress, 0, "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)");
+        let bar = bar(
+            req.progress,
+            0,
+            "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)",
+        );
         let baked = crate::bake::load_or_bake(&ctx, &scene, &world, &mut |p| {
             bar.set_length(p.total);
             bar.set_position(p.done);
@@ -101,8 +108,14 @@ pub fn run_command(req: &BenchRequest) -> Result<BenchOutcome> {
         "bench {msg:40} [{bar:30}] {pos}/{len} renders ({eta} left)",
     );
     let frames_total = n;
-    let results = run::run(&ctx, &mut renderer, &base, &frames, &configs, &opts, &mut |step| {
-        match step {
+    let results = run::run(
+        &ctx,
+        &mut renderer,
+        &base,
+        &frames,
+        &configs,
+        &opts,
+        &mut |step| match step {
             BenchStep::Truth { frame, cached } => {
                 bar.set_message(format!(
                     "frame {}/{frames_total}: truth {}",
@@ -116,8 +129,8 @@ pub fn run_command(req: &BenchRequest) -> Result<BenchOutcome> {
                 bar.inc(1);
             }
             BenchStep::FrameDone { .. } => {}
-        }
-    })?;
+        },
+    )?;
     bar.finish_and_clear();
     let run = RunInfo {
         scene: req

@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 
 use image::RgbaImage;
 
-use super::chart::{ChartPoint, DEFAULT_CHART_SIZE, FlightSeries, flight_chart, speed_accuracy_chart};
+use super::chart::{
+    ChartPoint, DEFAULT_CHART_SIZE, FlightSeries, flight_chart, speed_accuracy_chart,
+};
 use super::run::{BenchResults, ConfigSummary};
 use crate::render::btf::BtfSettings;
 use crate::render::measure::TimeSource;

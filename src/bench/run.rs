@@ -47,12 +47,7 @@ impl Knob {
 
     /// Sets this knob of `s` to `value`, or says what values it takes.
     pub fn apply(self, value: &str, s: &mut BtfSettings) -> Result<()> {
-        let bad = |what: &str| {
-            Error::BadInput(format!(
-                "--sweep {}={value}: {what}",
-                self.name()
-            ))
-        };
+        let bad = |what: &str| Error::BadInput(format!("--sweep {}={value}: {what}", self.name()));
         let number = |lo: f32, hi: f32| -> Result<f32> {
             let v: f32 = value
                 .parse()
@@ -137,7 +132,11 @@ pub const MAX_CONFIGS: usize = 256;
 
 /// Every method, `btf` once per combination of the swept values (the others do not have
 /// these knobs and run once).
-pub fn configurations(methods: &[Method], sweeps: &[Sweep], base: BtfSettings) -> Result<Vec<Config>> {
+pub fn configurations(
+    methods: &[Method],
+    sweeps: &[Sweep],
+    base: BtfSettings,
+) -> Result<Vec<Config>> {
     let mut out = Vec::new();
     for &method in methods {
         if method != Method::Btf {
@@ -174,7 +173,9 @@ pub fn configurations(methods: &[Method], sweeps: &[Sweep], base: BtfSettings) -
         }
     }
     if out.is_empty() {
-        return Err(Error::BadInput("--methods: name at least one method".into()));
+        return Err(Error::BadInput(
+            "--methods: name at least one method".into(),
+        ));
     }
     Ok(out)
 }
@@ -317,7 +318,10 @@ fn truth_frame(
         TruthLookup::Hit(img) => return Ok((img, true)),
         TruthLookup::Missing => {}
         TruthLookup::Unusable { path, reason } => {
-            log::warn!("truth {} unusable ({reason}); rendering it again", path.display())
+            log::warn!(
+                "truth {} unusable ({reason}); rendering it again",
+                path.display()
+            )
         }
     }
     let (img, _) =
@@ -489,7 +493,11 @@ pub fn summarise(configs: &[Config], rows: &[FrameRow]) -> Result<Vec<ConfigSumm
             worst_frame_flip: worst.map_or(0.0, |r| r.mean_flip),
         });
     }
-    if let Some(geo) = out.iter().find(|s| s.method == "geometry").map(|s| s.median_ms) {
+    if let Some(geo) = out
+        .iter()
+        .find(|s| s.method == "geometry")
+        .map(|s| s.median_ms)
+    {
         for s in &mut out {
             s.speedup_vs_geometry = (s.median_ms > 0.0).then(|| geo / s.median_ms);
         }
@@ -505,9 +513,23 @@ mod tests {
     fn sweeps_parse_and_refuse_unknown_knobs_and_bad_values() {
         let s = Sweep::parse("lod_scale=0.5,1, 2").unwrap();
         assert_eq!((s.knob, s.values.len()), (Knob::LodScale, 3));
-        assert_eq!(Sweep::parse("planes=single,crossed").unwrap().knob, Knob::Planes);
-        assert_eq!(Sweep::parse("weight-threshold=0.1").unwrap().knob, Knob::WeightThreshold);
-        for bad in ["lod_scale", "lod_scal=1", "lod_scale=", "lod_scale=x", "lod_scale=-1", "vcm=maybe", "weight_threshold=2"] {
+        assert_eq!(
+            Sweep::parse("planes=single,crossed").unwrap().knob,
+            Knob::Planes
+        );
+        assert_eq!(
+            Sweep::parse("weight-threshold=0.1").unwrap().knob,
+            Knob::WeightThreshold
+        );
+        for bad in [
+            "lod_scale",
+            "lod_scal=1",
+            "lod_scale=",
+            "lod_scale=x",
+            "lod_scale=-1",
+            "vcm=maybe",
+            "weight_threshold=2",
+        ] {
             let e = Sweep::parse(bad).unwrap_err().to_string();
             assert!(e.contains("--sweep"), "{bad}: {e}");
         }
@@ -525,7 +547,10 @@ mod tests {
         assert_eq!(c[0].label, "geometry");
         assert_eq!(c[13].label, "billboard");
         assert_eq!(c[1].label, "btf lod_scale=0.5 weight_threshold=0");
-        assert_eq!((c[12].btf.lod_scale, c[12].btf.weight_threshold), (4.0, 0.2));
+        assert_eq!(
+            (c[12].btf.lod_scale, c[12].btf.weight_threshold),
+            (4.0, 0.2)
+        );
         let mut labels: Vec<&str> = c.iter().map(|c| c.label.as_str()).collect();
         labels.dedup();
         assert_eq!(labels.len(), 14, "labels are distinct");
@@ -535,7 +560,13 @@ mod tests {
         assert!(configurations(&[], &[], BtfSettings::default()).is_err());
     }
 
-    fn row(frame: usize, config: usize, ms: f64, flip: f64, change: Option<(f64, f64)>) -> FrameRow {
+    fn row(
+        frame: usize,
+        config: usize,
+        ms: f64,
+        flip: f64,
+        change: Option<(f64, f64)>,
+    ) -> FrameRow {
         FrameRow {
             frame,
             config,
@@ -550,15 +581,25 @@ mod tests {
 
     #[test]
     fn summaries_find_the_speedup_the_worst_frame_and_the_pop() {
-        let configs = configurations(&[Method::Geometry, Method::Btf], &[], BtfSettings::default())
-            .unwrap();
+        let configs = configurations(
+            &[Method::Geometry, Method::Btf],
+            &[],
+            BtfSettings::default(),
+        )
+        .unwrap();
         let mut rows = Vec::new();
         for f in 0..5 {
             let change = (f > 0).then_some((0.02, 0.02));
             rows.push(row(f, 0, 100.0, 0.01, change));
             // btf pops at frame 3: it changes 0.2 where the truth changes 0.02.
             let btf_change = change.map(|(_, t)| (if f == 3 { 0.2 } else { t }, t));
-            rows.push(row(f, 1, 4.0 + f as f64, if f == 2 { 0.09 } else { 0.05 }, btf_change));
+            rows.push(row(
+                f,
+                1,
+                4.0 + f as f64,
+                if f == 2 { 0.09 } else { 0.05 },
+                btf_change,
+            ));
         }
         let s = summarise(&configs, &rows).unwrap();
         assert_eq!(s[0].speedup_vs_geometry, Some(1.0));

@@ -78,7 +78,11 @@ pub fn flicker(method: &[f64], truth: &[f64]) -> Result<Flicker> {
         v.get(v.len() / 2).copied().unwrap_or(0.0)
     };
     let scale = (median(method) + RATIO_FLOOR) / (median(truth) + RATIO_FLOOR);
-    let scaled: Vec<f64> = method.iter().zip(truth).map(|(m, t)| m - t * scale).collect();
+    let scaled: Vec<f64> = method
+        .iter()
+        .zip(truth)
+        .map(|(m, t)| m - t * scale)
+        .collect();
     let mean = |v: &[f64]| {
         if v.is_empty() {
             0.0
@@ -142,7 +146,9 @@ mod tests {
     fn a_pop_of_a_method_smoother_than_the_truth_is_found() {
         // The truth sparkles at 0.02 a frame, the method changes 0.009 and pops to 0.018:
         // a raw excess of -0.002, the pop still stands out against the scaled truth.
-        let t: Vec<f64> = (0..16).map(|k| 0.02 + 0.001 * ((k * 7) % 3) as f64).collect();
+        let t: Vec<f64> = (0..16)
+            .map(|k| 0.02 + 0.001 * ((k * 7) % 3) as f64)
+            .collect();
         let mut m: Vec<f64> = t.iter().map(|v| v * 0.45).collect();
         m[8] = 0.018;
         let f = flicker(&m, &t).unwrap();
