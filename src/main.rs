@@ -75,6 +75,10 @@ enum Command {
     /// timed and compared with the geometry ground truth, frame by frame; writes
     /// results.csv, summary.json, chart.png, flight.png and each configuration's worst frame.
     Bench(BenchArgs),
+    /// Model no more than a scene needs: measure a grid of btf knobs (LOD scale, weight
+    /// threshold, fade band, planes) along a flight and pick the cheapest meeting
+    /// --max-error (mean FLIP) and --max-flicker; --write stores it as the scene's [render].
+    Tune(TuneArgs),
     /// Describe a scene: species, triangles per level, trees, terrain.
     Info {
         scene: Option<PathBuf>,
@@ -121,6 +125,42 @@ struct BenchArgs {
 }
 
 #[derive(clap::Args)]
+struct TuneArgs {
+    /// Scene file (TOML). Omit for the embedded default forest.
+    scene: Option<PathBuf>,
+    /// Largest mean FLIP against the truth along the flight.
+    #[arg(long)]
+    max_error: f64,
+    /// Largest flicker ratio (the method's mean frame-to-frame change over the truth's).
+    #[arg(long, default_value_t = canopy::bench::tune::DEFAULT_MAX_FLICKER)]
+    max_flicker: f64,
+    /// A built-in flight (overview, walk, approach, sunset, orbit) or a flight file (TOML).
+    #[arg(long, default_value = "walk")]
+    flight: String,
+    /// Frames of the flight.
+    #[arg(long, default_value_t = 8)]
+    frames: usize,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, value_parser = parse_size, default_value = "320x180")]
+    size: (u32, u32),
+    /// Samples per pixel side of the ground truth.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=4))]
+    truth_supersample: u32,
+    /// Timed renders per frame and configuration (the median is kept).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=50))]
+    repeats: u32,
+    /// Write the chosen settings as the scene file's [render] table.
+    #[arg(long)]
+    write: bool,
+    /// Print the result as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+    /// Prefer the CPU (software) adapter.
+    #[arg(long)]
+    cpu: bool,
+}
+
+#[derive(clap::Args)]
 struct RenderArgs {
     /// Scene file (TOML). Omit for the embedded default forest.
     scene: Option<PathBuf>,
@@ -151,15 +191,18 @@ struct RenderArgs {
     /// Side of each shadow cascade's map, in texels.
     #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(16..=8192))]
     shadow_map: u32,
-    /// btf: a level is used while its largest texel projects below this many pixels.
-    #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
-    lod_scale: f32,
-    /// btf: images whose blending weight is below this are skipped (0..1).
-    #[arg(long, default_value_t = 0.0, value_parser = parse_unit)]
-    weight_threshold: f32,
-    /// btf: one camera-facing plane per billboard, or three crossed planes.
-    #[arg(long, default_value = "single", value_parser = parse_planes)]
-    planes: PlaneMode,
+    /// btf: a level is used while its largest texel projects below this many pixels
+    /// (default: the scene's [render] table, else 1).
+    #[arg(long, value_parser = parse_positive)]
+    lod_scale: Option<f32>,
+    /// btf: images whose blending weight is below this are skipped, 0..1 (default: the
+    /// scene's [render] table, else 0).
+    #[arg(long, value_parser = parse_unit)]
+    weight_threshold: Option<f32>,
+    /// btf: one camera-facing plane per billboard, or three crossed planes (default: the
+    /// scene's [render] table, else single).
+    #[arg(long, value_parser = parse_planes)]
+    planes: Option<PlaneMode>,
     /// btf: colour billboards by level (twig red, main branch yellow, tree blue).
     #[arg(long)]
     show_lod: bool,
@@ -176,9 +219,10 @@ struct RenderArgs {
     /// btf: draw the VCM sun factor alone, in grey (white = fully lit).
     #[arg(long)]
     show_shadow: bool,
-    /// btf: cross-fade band before each level's bound, as a fraction of it (0 = pop).
-    #[arg(long, default_value_t = 0.2, value_parser = parse_unit)]
-    lod_fade: f32,
+    /// btf: cross-fade band before each level's bound, as a fraction of it, 0 = pop
+    /// (default: the scene's [render] table, else 0.2).
+    #[arg(long, value_parser = parse_unit)]
+    lod_fade: Option<f32>,
     /// Prefer the CPU (software) adapter.
     #[arg(long)]
     cpu: bool,
@@ -314,6 +358,7 @@ fn main() -> ExitCode {
         Some(Command::Compare { a, b, json, diff }) => compare(&a, &b, json, diff.as_deref()),
         Some(Command::Info { scene, json }) => info(scene.as_deref(), json),
         Some(Command::Bench(args)) => bench(args),
+        Some(Command::Tune(args)) => tune(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -349,12 +394,13 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         frame.sun.azimuth_deg = az;
         frame.sun.elevation_deg = el;
     }
+    let start = frame.btf;
     frame.btf = canopy::render::btf::BtfSettings {
-        lod_scale: args.lod_scale,
-        weight_threshold: args.weight_threshold,
-        planes: args.planes,
+        lod_scale: args.lod_scale.unwrap_or(start.lod_scale),
+        weight_threshold: args.weight_threshold.unwrap_or(start.weight_threshold),
+        planes: args.planes.unwrap_or(start.planes),
         show_lod: args.show_lod,
-        lod_fade: args.lod_fade,
+        lod_fade: args.lod_fade.unwrap_or(start.lod_fade),
         vcm: args.vcm,
         show_shadow: args.show_shadow,
         vcm_sky: args.vcm_sky,
@@ -450,6 +496,86 @@ fn bench(args: BenchArgs) -> anyhow::Result<()> {
     );
     for p in &outcome.written {
         println!("wrote {}", p.display());
+    }
+    Ok(())
+}
+
+fn tune(args: TuneArgs) -> anyhow::Result<()> {
+    let target = canopy::bench::tune::TuneTarget::new(args.max_error, args.max_flicker)?;
+    let req = canopy::bench::command::TuneRequest {
+        scene: args.scene,
+        flight: args.flight,
+        target,
+        width: args.size.0,
+        height: args.size.1,
+        frames: args.frames,
+        truth_supersample: args.truth_supersample,
+        repeats: args.repeats,
+        adapter: adapter(args.cpu),
+        progress: true,
+        write: args.write,
+    };
+    let o = canopy::bench::command::run_tune(&req)?;
+    let chosen = o.chosen.map(|i| &o.results.summaries[i]);
+    if args.json {
+        let json = serde_json::json!({
+            "max_error": target.max_error,
+            "max_flicker": target.max_flicker,
+            "configurations_tried": o.configs.len(),
+            "frames": o.results.frames,
+            "seconds": o.seconds,
+            "device": o.device,
+            "chosen": chosen,
+            "settings": o.chosen.map(|i| {
+                let b = &o.configs[i].btf;
+                serde_json::json!({
+                    "lod_scale": b.lod_scale,
+                    "weight_threshold": b.weight_threshold,
+                    "lod_fade": b.lod_fade,
+                    "planes": b.planes.name(),
+                })
+            }),
+            "written": o.written,
+        });
+        println!("{json:#}");
+    } else {
+        println!(
+            "tried {} configurations along {} frames in {:.0} s on {}",
+            o.configs.len(),
+            o.results.frames,
+            o.seconds,
+            o.device
+        );
+        match chosen {
+            Some(s) => println!(
+                "chosen: {}: {:.2} ms median, mean FLIP {:.4} (target {}), flicker ratio {:.2} (target {})",
+                s.label,
+                s.median_ms,
+                s.mean_flip,
+                target.max_error,
+                s.flicker_ratio,
+                target.max_flicker
+            ),
+            None => {
+                let best = o
+                    .results
+                    .summaries
+                    .iter()
+                    .min_by(|a, b| a.mean_flip.total_cmp(&b.mean_flip));
+                println!(
+                    "no configuration meets mean FLIP {} and flicker {}; the most accurate: {}",
+                    target.max_error,
+                    target.max_flicker,
+                    best.map_or("-".into(), |b| format!("{} at {:.4}", b.label, b.mean_flip))
+                );
+            }
+        }
+        if let Some(p) = &o.written {
+            println!("wrote [render] to {}", p.display());
+        }
+    }
+    if o.chosen.is_none() {
+        anyhow::bail!("no configuration meets the target; loosen --max-error or --max-flicker");
     }
     Ok(())
 }

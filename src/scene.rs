@@ -46,6 +46,45 @@ pub struct Scene {
     /// `[bake]`: how BTF images are sampled. Optional, every key too.
     #[serde(default)]
     pub bake: BakeParams,
+    /// `[render]`: the `btf` knobs the viewer and `render` start from (what `canopy tune`
+    /// writes). Optional, every key too.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub render: Option<RenderParams>,
+}
+
+/// `[render]`: starting values of the `btf` method's knobs.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RenderParams {
+    /// A level is used while its largest texel projects below this many pixels (0.05..=64).
+    pub lod_scale: Option<f32>,
+    /// Images whose blending weight is below this are skipped (0..=1).
+    pub weight_threshold: Option<f32>,
+    /// Width of the LOD cross-fade band, as a fraction of the bound (0..=1).
+    pub lod_fade: Option<f32>,
+    /// `single` or `crossed`.
+    pub planes: Option<String>,
+}
+
+impl RenderParams {
+    fn check(&self) -> Result<(), FieldError> {
+        let range = |key: &str, v: Option<f32>, lo: f32, hi: f32| match v {
+            Some(x) if !(lo..=hi).contains(&x) => {
+                Err(FieldError::new(key, format!("must be a number in {lo}..={hi}")).with_found(x))
+            }
+            _ => Ok(()),
+        };
+        range("lod_scale", self.lod_scale, 0.05, 64.0)?;
+        range("weight_threshold", self.weight_threshold, 0.0, 1.0)?;
+        range("lod_fade", self.lod_fade, 0.0, 1.0)?;
+        if let Some(p) = &self.planes
+            && p != "single"
+            && p != "crossed"
+        {
+            return Err(FieldError::new("planes", "must be `single` or `crossed`").with_found(p));
+        }
+        Ok(())
+    }
 }
 
 /// `[sun]`: the directional light.
@@ -317,6 +356,9 @@ impl Scene {
         }
         check::range("camera.fov_deg", cam.fov_deg, 1.0, 170.0)?;
         self.bake.check().map_err(|e| e.prefixed("bake"))?;
+        if let Some(r) = &self.render {
+            r.check().map_err(|e| e.prefixed("render"))?;
+        }
         Ok(())
     }
 }

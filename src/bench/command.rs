@@ -2,13 +2,15 @@
 //! needs one), resolve the flight, run every configuration with a progress bar, write the
 //! outputs.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::flight::{Flight, FlightContext};
 use super::report::{self, RunInfo};
 use super::run::{self, BenchOptions, BenchResults, BenchStep, Config, Sweep};
 use super::truth_key::scene_content;
+use super::tune::{TuneTarget, candidates, choose, with_render_table};
+use crate::model::World;
 use crate::render::btf::BtfSettings;
 use crate::render::{AdapterPreference, FrameDesc, GpuContext, Method, Renderer};
 use crate::scene::Scene;
@@ -61,77 +63,136 @@ pub fn plan(
     Ok((flight, n, configs))
 }
 
-/// Runs the whole bench of `req`.
-pub fn run_command(req: &BenchRequest) -> Result<BenchOutcome> {
-    let started = Instant::now();
-    let scene = match &req.scene {
+/// Reads the scene (the default forest for `None`) and builds its world.
+fn load(scene: Option<&Path>) -> Result<(Scene, World)> {
+    let scene = match scene {
         Some(p) => Scene::load(p)?,
         None => Scene::default_scene(),
     };
     let world = scene.build_world()?;
-    let (flight, n, configs) = plan(req, &world)?;
-    crate::render::target::check_size(
-        req.width.saturating_mul(req.truth_supersample.max(1)),
-        req.height.saturating_mul(req.truth_supersample.max(1)),
-        None,
-    )?;
-    let ctx = GpuContext::headless(req.adapter)?;
-    let mut renderer = Renderer::new(&ctx, &world)?;
-    if configs.iter().any(|c| c.method.needs_bake()) {
+    Ok((scene, world))
+}
+
+/// A GPU context and a renderer for `world`, with the scene's bake attached when `bake`.
+fn renderer(
+    scene: &Scene,
+    world: &World,
+    adapter: AdapterPreference,
+    bake: bool,
+    progress: bool,
+) -> Result<(GpuContext, Renderer)> {
+    let ctx = GpuContext::headless(adapter)?;
+    let mut renderer = Renderer::new(&ctx, world)?;
+    if bake {
         let bar = bar(
-            req.progress,
+            progress,
             0,
             "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)",
         );
-        let baked = crate::bake::load_or_bake(&ctx, &scene, &world, &mut |p| {
+        let baked = crate::bake::load_or_bake(&ctx, scene, world, &mut |p| {
             bar.set_length(p.total);
             bar.set_position(p.done);
             bar.set_message(p.what.clone());
         });
         bar.finish_and_clear();
-        renderer.attach_btf(&ctx, &baked?.0, &world)?;
+        renderer.attach_btf(&ctx, &baked?.0, world)?;
     }
-    let frames = flight.frames(n);
-    let opts = BenchOptions {
-        width: req.width,
-        height: req.height,
-        truth_supersample: req.truth_supersample.max(1),
-        repeats: req.repeats.max(1),
+    Ok((ctx, renderer))
+}
+
+/// The runner's options, the sizes checked.
+fn options(
+    scene: &Scene,
+    (width, height): (u32, u32),
+    truth_supersample: u32,
+    repeats: u32,
+) -> Result<BenchOptions> {
+    crate::render::target::check_size(
+        width.saturating_mul(truth_supersample.max(1)),
+        height.saturating_mul(truth_supersample.max(1)),
+        None,
+    )?;
+    Ok(BenchOptions {
+        width,
+        height,
+        truth_supersample: truth_supersample.max(1),
+        repeats: repeats.max(1),
         cache_dir: crate::bake::cache::cache_dir(),
-        scene_content: scene_content(&scene),
-    };
-    let base = FrameDesc::from_scene(&scene);
+        scene_content: scene_content(scene),
+    })
+}
+
+/// Runs `configs` along `frames` from the scene's frame, with a progress bar.
+#[allow(clippy::too_many_arguments)]
+fn measure(
+    ctx: &GpuContext,
+    renderer: &mut Renderer,
+    scene: &Scene,
+    frames: &[super::flight::FlightFrame],
+    configs: &[Config],
+    opts: &BenchOptions,
+    progress: bool,
+    what: &str,
+) -> Result<BenchResults> {
+    let n = frames.len();
+    let base = FrameDesc::from_scene(scene);
     let total = (n * (configs.len() + 1)) as u64;
     let bar = bar(
-        req.progress,
+        progress,
         total,
-        "bench {msg:40} [{bar:30}] {pos}/{len} renders ({eta} left)",
+        &format!("{what} {{msg:40}} [{{bar:30}}] {{pos}}/{{len}} renders ({{eta}} left)"),
     );
-    let frames_total = n;
     let results = run::run(
-        &ctx,
-        &mut renderer,
+        ctx,
+        renderer,
         &base,
-        &frames,
-        &configs,
-        &opts,
+        frames,
+        configs,
+        opts,
         &mut |step| match step {
             BenchStep::Truth { frame, cached } => {
                 bar.set_message(format!(
-                    "frame {}/{frames_total}: truth {}",
+                    "frame {}/{n}: truth {}",
                     frame + 1,
                     if cached { "(cached)" } else { "rendered" }
                 ));
                 bar.inc(1);
             }
             BenchStep::Config { frame, label } => {
-                bar.set_message(format!("frame {}/{frames_total}: {label}", frame + 1));
+                bar.set_message(format!("frame {}/{n}: {label}", frame + 1));
                 bar.inc(1);
             }
             BenchStep::FrameDone { .. } => {}
         },
     )?;
     bar.finish_and_clear();
+    Ok(results)
+}
+
+/// Runs the whole bench of `req`.
+pub fn run_command(req: &BenchRequest) -> Result<BenchOutcome> {
+    let started = Instant::now();
+    let (scene, world) = load(req.scene.as_deref())?;
+    let (flight, n, configs) = plan(req, &world)?;
+    let opts = options(
+        &scene,
+        (req.width, req.height),
+        req.truth_supersample,
+        req.repeats,
+    )?;
+    let bake = configs.iter().any(|c| c.method.needs_bake());
+    let (ctx, mut renderer) = renderer(&scene, &world, req.adapter, bake, req.progress)?;
+    let frames = flight.frames(n);
+    let results = measure(
+        &ctx,
+        &mut renderer,
+        &scene,
+        &frames,
+        &configs,
+        &opts,
+        req.progress,
+        "bench",
+    )?;
     let run = RunInfo {
         scene: req
             .scene
@@ -167,4 +228,98 @@ fn bar(show: bool, len: u64, template: &str) -> indicatif::ProgressBar {
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     bar
+}
+
+/// What `canopy tune` was asked.
+#[derive(Clone, Debug)]
+pub struct TuneRequest {
+    pub scene: Option<PathBuf>,
+    pub flight: String,
+    pub target: TuneTarget,
+    pub width: u32,
+    pub height: u32,
+    pub frames: usize,
+    pub truth_supersample: u32,
+    pub repeats: u32,
+    pub adapter: AdapterPreference,
+    pub progress: bool,
+    /// Write the chosen knobs as the scene file's `[render]` table.
+    pub write: bool,
+}
+
+/// What `canopy tune` found.
+pub struct TuneOutcome {
+    pub configs: Vec<Config>,
+    pub results: BenchResults,
+    /// Index of the chosen configuration; `None` when none meets the target.
+    pub chosen: Option<usize>,
+    pub seconds: f64,
+    /// The scene file the `[render]` table was written to.
+    pub written: Option<PathBuf>,
+    pub device: String,
+}
+
+/// Measures the tune grid along the flight and picks the cheapest configuration meeting
+/// the target; writes it into the scene file when asked (atomically).
+pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
+    let started = Instant::now();
+    if req.write && req.scene.is_none() {
+        return Err(Error::BadInput(
+            "--write needs a scene file: the embedded default forest cannot be changed; save it to a file first".into(),
+        ));
+    }
+    if !(2..=MAX_BENCH_FRAMES).contains(&req.frames) {
+        return Err(Error::BadInput(format!(
+            "--frames {}: tune needs 2 to {MAX_BENCH_FRAMES} frames",
+            req.frames
+        )));
+    }
+    let (scene, world) = load(req.scene.as_deref())?;
+    let flight = Flight::resolve(&req.flight, &FlightContext::from_world(&world))?;
+    let opts = options(
+        &scene,
+        (req.width, req.height),
+        req.truth_supersample,
+        req.repeats,
+    )?;
+    let (ctx, mut renderer) = renderer(&scene, &world, req.adapter, true, req.progress)?;
+    let configs = candidates(FrameDesc::from_scene(&scene).btf);
+    let frames = flight.frames(req.frames);
+    let results = measure(
+        &ctx,
+        &mut renderer,
+        &scene,
+        &frames,
+        &configs,
+        &opts,
+        req.progress,
+        "tune",
+    )?;
+    let chosen = choose(&results.summaries, &req.target);
+    let mut written = None;
+    if let (true, Some(i), Some(path)) = (req.write, chosen, req.scene.as_ref()) {
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            Error::BadInput(format!(
+                "cannot read {} to write [render]: {e}",
+                path.display()
+            ))
+        })?;
+        let new = with_render_table(&text, &configs[i].btf);
+        // Check before replacing: the file must still parse as a scene.
+        Scene::parse(&new, &path.display().to_string())?;
+        let fail =
+            |e: std::io::Error| Error::BadInput(format!("cannot write {}: {e}", path.display()));
+        let tmp = path.with_extension("toml.tmp");
+        std::fs::write(&tmp, new).map_err(fail)?;
+        std::fs::rename(&tmp, path).map_err(fail)?;
+        written = Some(path.clone());
+    }
+    Ok(TuneOutcome {
+        configs,
+        results,
+        chosen,
+        seconds: started.elapsed().as_secs_f64(),
+        written,
+        device: ctx.adapter_name(),
+    })
 }

@@ -12,6 +12,7 @@ pub mod report;
 pub mod run;
 pub mod temporal;
 pub mod truth_key;
+pub mod tune;
 
 pub use chart::{ChartPoint, DEFAULT_CHART_SIZE, FlightSeries, flight_chart, speed_accuracy_chart};
 pub use flight::{Flight, FlightContext, FlightFrame, FlightKey, Knobs, PathShape};

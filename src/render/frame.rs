@@ -166,12 +166,26 @@ impl FrameDesc {
             fog_density: 0.0006,
             exposure: 1.0,
             stage: Stage::World,
-            btf: Default::default(),
+            btf: btf_settings_of(scene),
             trees: true,
             ground_shadows: true,
             sun_held: false,
         }
     }
+}
+
+/// The `btf` knobs a scene starts from: its `[render]` table over the defaults.
+pub fn btf_settings_of(scene: &Scene) -> super::btf::BtfSettings {
+    let mut s = super::btf::BtfSettings::default();
+    if let Some(r) = &scene.render {
+        s.lod_scale = r.lod_scale.unwrap_or(s.lod_scale);
+        s.weight_threshold = r.weight_threshold.unwrap_or(s.weight_threshold);
+        s.lod_fade = r.lod_fade.unwrap_or(s.lod_fade);
+        if let Some(p) = r.planes.as_deref().and_then(super::btf::PlaneMode::parse) {
+            s.planes = p;
+        }
+    }
+    s
 }
 
 /// What the render core did for one frame.

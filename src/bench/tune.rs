@@ -1,0 +1,245 @@
+//! `canopy tune`: model no more than a scene needs. Every configuration of a grid over the
+//! `btf` knobs is measured along a flight against the cached truth (the bench's runner), and
+//! the cheapest one whose mean FLIP and flicker ratio meet the targets is chosen. One grid
+//! measured once: a looser target can only pick a configuration as cheap or cheaper.
+
+use super::run::{Config, ConfigSummary};
+use crate::render::Method;
+use crate::render::btf::{BtfSettings, PlaneMode};
+use crate::{Error, Result};
+
+/// The most a configuration may cost in error and flicker.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TuneTarget {
+    /// Mean FLIP against the truth along the flight.
+    pub max_error: f64,
+    /// Mean frame-to-frame change over the truth's.
+    pub max_flicker: f64,
+}
+
+/// Default flicker bound of `canopy tune`.
+pub const DEFAULT_MAX_FLICKER: f64 = 1.2;
+
+/// The knob values tune tries.
+pub const LOD_SCALES: [f32; 5] = [0.5, 1.0, 2.0, 4.0, 8.0];
+pub const WEIGHT_THRESHOLDS: [f32; 4] = [0.0, 0.1, 0.2, 0.3];
+pub const LOD_FADES: [f32; 2] = [0.0, 0.2];
+pub const PLANES: [PlaneMode; 2] = [PlaneMode::Single, PlaneMode::Crossed];
+
+impl TuneTarget {
+    pub fn new(max_error: f64, max_flicker: f64) -> Result<Self> {
+        if !(max_error.is_finite() && max_error > 0.0 && max_error < 1.0) {
+            return Err(Error::BadInput(format!(
+                "--max-error {max_error}: give a mean FLIP between 0 and 1, e.g. 0.05"
+            )));
+        }
+        if !(max_flicker.is_finite() && max_flicker >= 1.0) {
+            return Err(Error::BadInput(format!(
+                "--max-flicker {max_flicker}: give a ratio of at least 1 (1 = as steady as the truth)"
+            )));
+        }
+        Ok(Self {
+            max_error,
+            max_flicker,
+        })
+    }
+
+    /// Whether a measured configuration meets the target.
+    pub fn met_by(&self, s: &ConfigSummary) -> bool {
+        s.mean_flip <= self.max_error && s.flicker_ratio <= self.max_flicker
+    }
+}
+
+/// A label for `btf` with these knobs.
+pub fn label(s: &BtfSettings) -> String {
+    format!(
+        "btf lod_scale={} weight_threshold={} lod_fade={} planes={}",
+        s.lod_scale,
+        s.weight_threshold,
+        s.lod_fade,
+        s.planes.name()
+    )
+}
+
+/// Every configuration of the grid, from `base` (its other knobs kept).
+pub fn candidates(base: BtfSettings) -> Vec<Config> {
+    let mut out = Vec::new();
+    for planes in PLANES {
+        for lod_fade in LOD_FADES {
+            for weight_threshold in WEIGHT_THRESHOLDS {
+                for lod_scale in LOD_SCALES {
+                    let btf = BtfSettings {
+                        lod_scale,
+                        weight_threshold,
+                        lod_fade,
+                        planes,
+                        ..base
+                    };
+                    out.push(Config {
+                        label: label(&btf),
+                        method: Method::Btf,
+                        btf,
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The cheapest measured configuration (by median frame time, then mean FLIP) that meets
+/// `target`; `None` when none does.
+pub fn choose(summaries: &[ConfigSummary], target: &TuneTarget) -> Option<usize> {
+    summaries
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| target.met_by(s))
+        .min_by(|a, b| {
+            a.1.median_ms
+                .total_cmp(&b.1.median_ms)
+                .then(a.1.mean_flip.total_cmp(&b.1.mean_flip))
+        })
+        .map(|(i, _)| i)
+}
+
+/// The scene file's text with its `[render]` table set to `s` (replacing one that is there,
+/// else appended); everything else, comments included, is kept as it was.
+pub fn with_render_table(text: &str, s: &BtfSettings) -> String {
+    let table = format!(
+        "[render]\n# Chosen by `canopy tune`.\nlod_scale = {}\nweight_threshold = {}\nlod_fade = {}\nplanes = \"{}\"\n",
+        s.lod_scale,
+        s.weight_threshold,
+        s.lod_fade,
+        s.planes.name()
+    );
+    let lines: Vec<&str> = text.lines().collect();
+    let is_header = |l: &str| l.trim_start().starts_with('[');
+    let start = lines.iter().position(|l| l.trim() == "[render]");
+    let mut out = String::new();
+    match start {
+        Some(i) => {
+            let end = lines[i + 1..]
+                .iter()
+                .position(|l| is_header(l))
+                .map_or(lines.len(), |k| i + 1 + k);
+            for l in &lines[..i] {
+                out.push_str(l);
+                out.push('\n');
+            }
+            out.push_str(&table);
+            if end < lines.len() {
+                out.push('\n');
+            }
+            for l in &lines[end..] {
+                out.push_str(l);
+                out.push('\n');
+            }
+        }
+        None => {
+            out.push_str(text);
+            if !text.ends_with('\n') && !text.is_empty() {
+                out.push('\n');
+            }
+            out.push('\n');
+            out.push_str(&table);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn summary(ms: f64, flip: f64, flicker: f64) -> ConfigSummary {
+        ConfigSummary {
+            label: format!("{ms} {flip}"),
+            method: "btf",
+            median_ms: ms,
+            median_prepare_ms: 0.0,
+            speedup_vs_geometry: None,
+            mean_flip: flip,
+            p95_flip: flip,
+            flicker_ratio: flicker,
+            worst_pop: None,
+            worst_frame: 0,
+            worst_frame_flip: flip,
+        }
+    }
+
+    #[test]
+    fn the_cheapest_configuration_meeting_the_target_is_chosen() {
+        let s = [
+            summary(10.0, 0.03, 1.0),
+            summary(6.0, 0.05, 1.1),
+            summary(4.0, 0.08, 1.0),
+            summary(3.0, 0.04, 1.5), // cheap and accurate, but flickers
+            summary(2.0, 0.20, 1.0),
+        ];
+        let t = |e: f64| TuneTarget::new(e, DEFAULT_MAX_FLICKER).unwrap();
+        assert_eq!(choose(&s, &t(0.05)), Some(1));
+        assert_eq!(choose(&s, &t(0.03)), Some(0));
+        assert_eq!(choose(&s, &t(0.10)), Some(2));
+        assert_eq!(choose(&s, &t(0.01)), None);
+        assert_eq!(
+            choose(&s, &TuneTarget::new(0.05, 2.0).unwrap()),
+            Some(3),
+            "a looser flicker bound lets the flickering one in"
+        );
+        // A looser target never picks a costlier configuration.
+        let mut last = f64::INFINITY;
+        for e in [0.02, 0.03, 0.04, 0.05, 0.08, 0.1, 0.5] {
+            if let Some(i) = choose(&s, &t(e)) {
+                assert!(s[i].median_ms <= last, "{e}");
+                last = s[i].median_ms;
+            }
+        }
+    }
+
+    #[test]
+    fn targets_are_checked() {
+        for (e, r) in [
+            (0.0, 1.2),
+            (1.5, 1.2),
+            (f64::NAN, 1.2),
+            (0.05, 0.5),
+            (0.05, f64::INFINITY),
+        ] {
+            assert!(TuneTarget::new(e, r).is_err(), "{e} {r}");
+        }
+    }
+
+    #[test]
+    fn the_grid_covers_every_knob_value_once() {
+        let c = candidates(BtfSettings::default());
+        assert_eq!(c.len(), 5 * 4 * 2 * 2);
+        let mut labels: Vec<&str> = c.iter().map(|c| c.label.as_str()).collect();
+        labels.sort();
+        labels.dedup();
+        assert_eq!(labels.len(), c.len());
+        assert!(c.iter().all(|c| c.method == Method::Btf));
+    }
+
+    #[test]
+    fn the_render_table_is_replaced_or_appended_and_the_rest_kept() {
+        let s = BtfSettings {
+            lod_scale: 2.0,
+            weight_threshold: 0.1,
+            ..BtfSettings::default()
+        };
+        let plain = "# my forest\n[forest]\ncount = 3 # three\n";
+        let out = with_render_table(plain, &s);
+        assert!(out.starts_with(plain));
+        assert!(out.contains("[render]\n# Chosen by `canopy tune`.\nlod_scale = 2\n"));
+        let again = with_render_table(&out, &BtfSettings::default());
+        assert_eq!(again.matches("[render]").count(), 1);
+        assert!(again.contains("lod_scale = 1\n") && again.starts_with(plain));
+        // A table in the middle keeps what follows it.
+        let middle = "[render]\nlod_scale = 9\n\n[sky]\nintensity = 1.0\n";
+        let out = with_render_table(middle, &s);
+        assert!(out.contains("lod_scale = 2\n") && !out.contains("lod_scale = 9"));
+        assert!(out.ends_with("[sky]\nintensity = 1.0\n"), "{out}");
+        let parsed: toml::Table = toml::from_str(&out).unwrap();
+        assert_eq!(parsed["render"]["planes"].as_str(), Some("single"));
+    }
+}
