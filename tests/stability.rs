@@ -300,9 +300,10 @@ fn light_between_samples_changes_the_image_in_even_steps() {
 /// largest step over the median: threshold 0: 2.8x, threshold 0.2: 3.1x, nearest view only:
 /// 4.6x (at frame 20, the middle); mean change of threshold 0.2 over 0: 0.99. (Across 70 to
 /// 110 degrees instead, threshold 0.2 steps 7.0x its median where a weight crosses 0.2: the
-/// culling is discontinuous there; not bounded here.) Bounds: blended views, no step larger than `VIEW_STEP_MAX_OVER_MEDIAN` times the
-/// median (the nearest view alone, threshold 1, must exceed it); threshold 0.2 changes the
-/// image at most `THRESHOLD_MAX_FLICKER` times as much per frame as threshold 0.
+/// culling is discontinuous there; not bounded here.) Bounds: blended views, no step larger
+/// than `VIEW_STEP_MAX_OVER_MEDIAN` times the median (the nearest view alone, threshold 1,
+/// must exceed it); threshold 0.2 changes the image at most `THRESHOLD_MAX_FLICKER` times as
+/// much per frame as threshold 0.
 const VIEW_STEP_MAX_OVER_MEDIAN: f64 = 4.0;
 const THRESHOLD_MAX_FLICKER: f64 = 1.5;
 
