@@ -516,63 +516,10 @@ fn tune(args: TuneArgs) -> anyhow::Result<()> {
         write: args.write,
     };
     let o = canopy::bench::command::run_tune(&req)?;
-    let chosen = o.chosen.map(|i| &o.results.summaries[i]);
     if args.json {
-        let json = serde_json::json!({
-            "max_error": target.max_error,
-            "max_flicker": target.max_flicker,
-            "configurations_tried": o.configs.len(),
-            "frames": o.results.frames,
-            "seconds": o.seconds,
-            "device": o.device,
-            "chosen": chosen,
-            "settings": o.chosen.map(|i| {
-                let b = &o.configs[i].btf;
-                serde_json::json!({
-                    "lod_scale": b.lod_scale,
-                    "weight_threshold": b.weight_threshold,
-                    "lod_fade": b.lod_fade,
-                    "planes": b.planes.name(),
-                })
-            }),
-            "written": o.written,
-        });
-        println!("{json:#}");
+        println!("{}", o.json(&target));
     } else {
-        println!(
-            "tried {} configurations along {} frames in {:.0} s on {}",
-            o.configs.len(),
-            o.results.frames,
-            o.seconds,
-            o.device
-        );
-        match chosen {
-            Some(s) => println!(
-                "chosen: {}: {:.2} ms median, mean FLIP {:.4} (target {}), flicker ratio {:.2} (target {})",
-                s.label,
-                s.median_ms,
-                s.mean_flip,
-                target.max_error,
-                s.flicker_ratio,
-                target.max_flicker
-            ),
-            None => {
-                let best = o
-                    .results
-                    .summaries
-                    .iter()
-                    .min_by(|a, b| a.mean_flip.total_cmp(&b.mean_flip));
-                println!(
-                    "no configuration meets mean FLIP {} and flicker {}; the most accurate: {}",
-                    target.max_error,
-                    target.max_flicker,
-                    best.map_or("-".into(), |b| format!("{} at {:.4}", b.label, b.mean_flip))
-                );
-            }
-        }
-        if let Some(p) = &o.written {
-            println!("wrote [render] to {}", p.display());
-        }
+        print!("{}", o.text(&target));
     }
     if o.chosen.is_none() {
         anyhow::bail!("no configuration meets the target; loosen --max-error or --max-flicker");

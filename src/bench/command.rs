@@ -323,3 +323,76 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
         device: ctx.adapter_name(),
     })
 }
+
+impl TuneOutcome {
+    /// The chosen configuration's summary.
+    pub fn chosen_summary(&self) -> Option<&super::run::ConfigSummary> {
+        self.chosen.map(|i| &self.results.summaries[i])
+    }
+
+    /// What `canopy tune --json` prints.
+    pub fn json(&self, target: &TuneTarget) -> String {
+        let settings = self.chosen.map(|i| {
+            let b = &self.configs[i].btf;
+            serde_json::json!({
+                "lod_scale": b.lod_scale,
+                "weight_threshold": b.weight_threshold,
+                "lod_fade": b.lod_fade,
+                "planes": b.planes.name(),
+            })
+        });
+        let json = serde_json::json!({
+            "max_error": target.max_error,
+            "max_flicker": target.max_flicker,
+            "configurations_tried": self.configs.len(),
+            "frames": self.results.frames,
+            "seconds": self.seconds,
+            "device": self.device,
+            "chosen": self.chosen_summary(),
+            "settings": settings,
+            "written": self.written,
+        });
+        format!("{json:#}")
+    }
+
+    /// What `canopy tune` prints.
+    pub fn text(&self, target: &TuneTarget) -> String {
+        let mut out = format!(
+            "tried {} configurations along {} frames in {:.0} s on {}\n",
+            self.configs.len(),
+            self.results.frames,
+            self.seconds,
+            self.device
+        );
+        match self.chosen_summary() {
+            Some(s) => {
+                out += &format!(
+                    "chosen: {}: {:.2} ms median, mean FLIP {:.4} (target {}), flicker ratio {:.2} (target {})\n",
+                    s.label,
+                    s.median_ms,
+                    s.mean_flip,
+                    target.max_error,
+                    s.flicker_ratio,
+                    target.max_flicker
+                )
+            }
+            None => {
+                let best = self
+                    .results
+                    .summaries
+                    .iter()
+                    .min_by(|a, b| a.mean_flip.total_cmp(&b.mean_flip));
+                out += &format!(
+                    "no configuration meets mean FLIP {} and flicker {}; the most accurate: {}\n",
+                    target.max_error,
+                    target.max_flicker,
+                    best.map_or("-".into(), |b| format!("{} at {:.4}", b.label, b.mean_flip))
+                );
+            }
+        }
+        if let Some(p) = &self.written {
+            out += &format!("wrote [render] to {}\n", p.display());
+        }
+        out
+    }
+}

@@ -313,23 +313,18 @@ impl Renderer {
                     &frame.btf,
                 ))
             }
-            (Method::Billboard, Some(b)) => {
-                let view = btf::PrepareView {
+            (Method::Billboard, Some(b)) => Prepared::Billboard(method::billboard::prepare_frame(
+                b,
+                ctx,
+                &self.world,
+                &visible,
+                &btf::PrepareView {
                     camera: cam,
                     focal_px: cam.focal_px(height),
                     to_sun,
                     frustum: &frustum,
-                };
-                let mut f = method::billboard::prepare(
-                    b.scene(),
-                    &self.world.tree_data,
-                    &visible,
-                    &view,
-                    b.max_billboards(),
-                );
-                b.upload(ctx, &std::mem::take(&mut f.records));
-                Prepared::Billboard(f)
-            }
+                },
+            )),
             _ => Prepared::Geometry(GeometryFrame::prepare(&self.world, frame, aspect, visible)),
         };
         let (runs, cascades, shadows_on) = match &prepared {

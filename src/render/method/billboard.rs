@@ -8,9 +8,13 @@
 
 use glam::{Mat4, Vec3};
 
-use super::btf::{BillboardGpu, BillboardMode, BtfFrame, BtfScene, BtfStats, PrepareView};
+use super::btf::{
+    BillboardGpu, BillboardMode, BtfAssets, BtfFrame, BtfScene, BtfStats, PrepareView,
+};
 use crate::model::mesh::Aabb;
+use crate::render::GpuContext;
 use crate::render::world_gpu::TreeGpu;
+use crate::render::world_gpu::WorldGpu;
 use crate::sphere::billboard_axes;
 
 /// The side the single image is taken from, in the tree's frame (horizontal).
@@ -34,6 +38,25 @@ impl FixedImage {
             light: lights.nearest((SIDE + Vec3::Y).normalize()) as u32,
         }
     }
+}
+
+/// [`prepare`] for the frame, the records uploaded through the `btf` method's buffer.
+pub fn prepare_frame(
+    assets: &mut BtfAssets,
+    ctx: &GpuContext,
+    world: &WorldGpu,
+    visible: &[Vec<u32>],
+    view: &PrepareView,
+) -> BtfFrame {
+    let mut f = prepare(
+        assets.scene(),
+        &world.tree_data,
+        visible,
+        view,
+        assets.max_billboards(),
+    );
+    assets.upload(ctx, &std::mem::take(&mut f.records));
+    f
 }
 
 /// One camera-facing record per visible tree, back to front (at most `max` of them, the
