@@ -360,3 +360,86 @@ fn orbiting_across_a_view_sample_changes_the_image_in_even_steps() {
         "threshold 0.2 flickers {ratio:.2}x as much as 0"
     );
 }
+
+/// Blur up close: the camera closes in on a tree's crown, from where the twig level's
+/// texels project to 1 pixel to where they project to 4 (the finest level has nothing finer
+/// to switch to, so it blurs). Mean FLIP against the truth per frame, as a function of
+/// texels per pixel, is printed. Measured on lavapipe (128x128), LOD knob 1: 0.096, 0.128,
+/// 0.173, 0.192, 0.188 at 1, 1.4, 2, 2.8, 4 px (mean 0.155; nearer, at 5.7 and 8 px with the
+/// camera in the crown, it falls again to 0.147 and 0.104); LOD knob 16, coarser levels kept
+/// up close: 0.249, 0.217, 0.259, 0.297, 0.299 (mean 0.264). Bounds: the mean with the knob
+/// at 1 under `BLUR_MAX_FLIP`, the knob at 16 over it; and the blur grows: the FLIP at 2.8 px
+/// at least 1.5 times the FLIP at 1 px.
+const BLUR_MAX_FLIP: f64 = 0.21;
+
+#[test]
+fn blur_up_close_grows_with_the_texel_size_and_stays_bounded() {
+    let ctx = gpu();
+    let (scene, world, mut renderer) = setup(&ctx);
+    let tree = world.forest.instances[0];
+    let model = &world.species[tree.species as usize];
+    let centre = tree.position + model.tree_bounds.center() * tree.scale;
+    let size = 128;
+    let fov = 40.0;
+    let focal = Camera::look_at(Vec3::ZERO, Vec3::Z, fov).focal_px(size);
+    let texels = renderer.btf_texels(tree.species as usize).unwrap();
+    let twig = texels.twig * tree.scale;
+    // Distances where a twig texel covers 1, 1.4, 2, 2.8 and 4 pixels, seen from the side
+    // and a little above.
+    let dir = Vec3::new(-0.8, 0.3, -0.5).normalize();
+    let px: Vec<f32> = (0..5).map(|i| 2f32.powf(i as f32 * 0.5)).collect();
+    let frames: Vec<FlightFrame> = px
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| frame(i, centre + dir * (twig * focal / p), centre, None))
+        .collect();
+    let mut b = base(&scene);
+    b.camera.fov_y_deg = fov;
+    let configs = [
+        btf("lod 1", |s| s.lod_scale = 1.0),
+        btf("lod 16", |s| s.lod_scale = 16.0),
+    ];
+    let r = run::run(
+        &ctx,
+        &mut renderer,
+        &b,
+        &frames,
+        &configs,
+        &options("blur", size),
+        &mut |_| {},
+    )
+    .unwrap();
+    let flip = |c: usize| -> Vec<f64> {
+        r.rows
+            .iter()
+            .filter(|row| row.config == c)
+            .map(|row| row.mean_flip)
+            .collect()
+    };
+    let (fine, coarse) = (flip(0), flip(1));
+    for (i, p) in px.iter().enumerate() {
+        eprintln!(
+            "twig texel {p:.1} px ({:.1} m): mean FLIP lod 1 {:.4}, lod 16 {:.4}",
+            frames[i].distance(),
+            fine[i],
+            coarse[i]
+        );
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    assert!(
+        mean(&fine) < BLUR_MAX_FLIP,
+        "up close with the LOD knob at 1: mean FLIP {:.4}",
+        mean(&fine)
+    );
+    assert!(
+        mean(&coarse) > BLUR_MAX_FLIP,
+        "coarser levels up close must blur past the bound: {:.4}",
+        mean(&coarse)
+    );
+    assert!(
+        fine[3] > 1.5 * fine[0],
+        "the blur grows with the texel size: {:.4} at 2.8 px, {:.4} at 1 px",
+        fine[3],
+        fine[0]
+    );
+}
