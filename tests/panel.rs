@@ -8,6 +8,12 @@ use canopy::scene::Scene;
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 
+/// A harness as tall as a full-height viewer panel: the default 600 px would leave the
+/// buttons at the bottom off screen, where a click does not reach them.
+fn tall<S>() -> egui_kittest::HarnessBuilder<S> {
+    Harness::builder().with_size(egui::vec2(800.0, 1000.0))
+}
+
 struct State {
     frame: FrameDesc,
     actions: PanelActions,
@@ -26,7 +32,7 @@ fn screenshot_button_and_shadow_toggle_work() {
         triangles: 1_500_000,
         ..Default::default()
     };
-    let mut harness = Harness::new_ui_state(
+    let mut harness = tall().build_ui_state(
         move |ui, s: &mut State| {
             let a = controls(ui, &mut s.frame, &stats, None);
             if a.screenshot || a.screenshot_as {
@@ -80,7 +86,7 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
         bake_progress: Some((40, 100, "fir tree".into())),
         ..Default::default()
     };
-    let mut harness = Harness::new_ui_state(
+    let mut harness = tall().build_ui_state(
         move |ui, s: &mut State| {
             controls(ui, &mut s.frame, &stats, None);
         },
@@ -132,7 +138,7 @@ fn dragging_a_sun_slider_holds_the_sun_until_it_is_let_go() {
         actions: PanelActions::default(),
     };
     let stats = PanelStats::default();
-    let mut harness = Harness::new_ui_state(
+    let mut harness = tall().build_ui_state(
         move |ui, s: &mut State| {
             s.actions = controls(ui, &mut s.frame, &stats, None);
         },
@@ -157,4 +163,47 @@ fn dragging_a_sun_slider_holds_the_sun_until_it_is_let_go() {
     harness.run();
     harness.run();
     assert!(!harness.state().actions.sun_held, "let go");
+}
+
+#[test]
+fn the_frame_time_plot_shows_cpu_and_gpu_lines_and_the_bench_button_opens_the_window() {
+    let scene = Scene::default_scene();
+    let state = State {
+        frame: FrameDesc::from_scene(&scene),
+        actions: PanelActions::default(),
+    };
+    let mut with_gpu = PanelStats::default();
+    for i in 0..400 {
+        with_gpu.history.push(16.0 + f64::from(i % 7), Some(5.0));
+    }
+    let mut harness = tall().build_ui_state(
+        move |ui, s: &mut State| {
+            let a = controls(ui, &mut s.frame, &with_gpu, None);
+            if a.open_bench {
+                s.actions = a;
+            }
+        },
+        state,
+    );
+    harness.run();
+    // The legend's entries name the plot's lines.
+    harness.get_by_label("CPU frame");
+    harness.get_by_label("GPU frame");
+    assert!(!harness.state().actions.open_bench);
+    harness.get_by_label("Bench results…").click();
+    harness.run();
+    assert!(harness.state().actions.open_bench);
+
+    let mut cpu_only = PanelStats::default();
+    cpu_only.history.push(16.0, None);
+    let mut frame = FrameDesc::from_scene(&scene);
+    let mut harness = tall().build_ui(move |ui| {
+        controls(ui, &mut frame, &cpu_only, None);
+    });
+    harness.run();
+    harness.get_by_label("CPU frame");
+    assert!(
+        harness.query_by_label("GPU frame").is_none(),
+        "no GPU times, no GPU line"
+    );
 }

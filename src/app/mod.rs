@@ -3,6 +3,7 @@
 //! [`panel`], drawing is the render core's.
 
 pub mod fly;
+pub mod history;
 pub mod panel;
 
 use std::path::{Path, PathBuf};
@@ -396,6 +397,9 @@ impl App {
         self.stats.gpu_frame_ms = r.renderer.last_gpu_ms();
         self.stats.sun_update_gpu_ms = r.renderer.last_sun_update_gpu_ms();
         self.stats.cpu_frame_ms = 0.9 * self.stats.cpu_frame_ms + 0.1 * f64::from(dt) * 1e3;
+        self.stats
+            .history
+            .push(f64::from(dt) * 1e3, self.stats.gpu_frame_ms);
         self.stats.camera_speed = self.fly.speed;
 
         // egui on top of the 3D view.
