@@ -1,6 +1,8 @@
 //! The viewer's control panel, headless through egui_kittest: widgets are found by label,
-//! clicked, and the frame description and requested actions change accordingly.
+//! clicked, and the frame description and requested actions change accordingly. The bench
+//! results window the same way, on folders written by the test.
 
+use canopy::app::bench_view::BenchWindow;
 use canopy::app::panel::{PanelActions, PanelStats, controls};
 use canopy::model::PerLevel;
 use canopy::render::FrameDesc;
@@ -206,4 +208,62 @@ fn the_frame_time_plot_shows_cpu_and_gpu_lines_and_the_bench_button_opens_the_wi
         harness.query_by_label("GPU frame").is_none(),
         "no GPU times, no GPU line"
     );
+}
+
+#[test]
+fn the_bench_window_shows_a_folders_table_or_what_is_missing() {
+    let dir = std::env::temp_dir().join(format!("canopy-panel-bench-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut window = BenchWindow::default();
+    window.open = true;
+    window.folder = dir.display().to_string();
+    let mut harness = tall().build_ui_state(
+        |ui, w: &mut BenchWindow| {
+            w.show(ui.ctx());
+        },
+        window,
+    );
+    harness.run();
+    harness.get_by_label("Bench results");
+    harness.get_by_label("Browse…");
+    harness.get_by_label("Load").click();
+    harness.run();
+    harness.get_by_label_contains("does not exist");
+    harness.get_by_label_contains("run `canopy bench --out");
+
+    std::fs::create_dir_all(&dir).unwrap();
+    image::RgbaImage::from_pixel(6, 4, image::Rgba([200, 40, 40, 255]))
+        .save(dir.join("chart.png"))
+        .unwrap();
+    std::fs::write(
+        dir.join("summary.json"),
+        r#"{"scene": "s.toml", "configurations": [
+            {"label": "billboard", "median_ms": 3.25, "speedup_vs_geometry": 4.5,
+             "mean_flip": 0.125, "p95_flip": 0.5, "flicker_ratio": 1.75}]}"#,
+    )
+    .unwrap();
+    harness.get_by_label("Load").click();
+    harness.run();
+    assert!(
+        harness.state().error().is_none(),
+        "{:?}",
+        harness.state().error()
+    );
+    assert!(harness.query_by_label_contains("does not exist").is_none());
+    harness.get_by_label("billboard");
+    harness.get_by_label("3.25");
+    harness.get_by_label("4.50x");
+    harness.get_by_label("0.1250");
+    harness.get_by_label("1.75");
+    harness.get_by_label("no flight.png in this folder");
+
+    std::fs::write(dir.join("summary.json"), "not json").unwrap();
+    harness.get_by_label("Load").click();
+    harness.run();
+    harness.get_by_label_contains("summary.json is not a bench summary");
+    assert!(
+        harness.query_by_label("billboard").is_none(),
+        "a failed load clears the old table"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -225,8 +225,10 @@ impl BenchWindow {
             .vscroll(true)
             .show(ctx, |ui| {
                 ui.horizontal(|ui| {
-                    ui.label("Folder");
-                    let field = ui.text_edit_singleline(&mut self.folder);
+                    let name = ui.label("Folder");
+                    let field = ui
+                        .text_edit_singleline(&mut self.folder)
+                        .labelled_by(name.id);
                     if field.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter)) {
                         load = true;
                     }
