@@ -1,12 +1,20 @@
 //! The viewer's control panel, headless through egui_kittest: widgets are found by label,
-//! clicked, and the frame description and requested actions change accordingly.
+//! clicked, and the frame description and requested actions change accordingly. The bench
+//! results window the same way, on folders written by the test.
 
+use canopy::app::bench_view::BenchWindow;
 use canopy::app::panel::{PanelActions, PanelStats, controls};
 use canopy::model::PerLevel;
 use canopy::render::FrameDesc;
 use canopy::scene::Scene;
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
+
+/// A harness as tall as a full-height viewer panel: the default 600 px would leave the
+/// buttons at the bottom off screen, where a click does not reach them.
+fn tall<S>() -> egui_kittest::HarnessBuilder<S> {
+    Harness::builder().with_size(egui::vec2(800.0, 1000.0))
+}
 
 struct State {
     frame: FrameDesc,
@@ -26,7 +34,7 @@ fn screenshot_button_and_shadow_toggle_work() {
         triangles: 1_500_000,
         ..Default::default()
     };
-    let mut harness = Harness::new_ui_state(
+    let mut harness = tall().build_ui_state(
         move |ui, s: &mut State| {
             let a = controls(ui, &mut s.frame, &stats, None);
             if a.screenshot || a.screenshot_as {
@@ -80,7 +88,7 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
         bake_progress: Some((40, 100, "fir tree".into())),
         ..Default::default()
     };
-    let mut harness = Harness::new_ui_state(
+    let mut harness = tall().build_ui_state(
         move |ui, s: &mut State| {
             controls(ui, &mut s.frame, &stats, None);
         },
@@ -132,7 +140,7 @@ fn dragging_a_sun_slider_holds_the_sun_until_it_is_let_go() {
         actions: PanelActions::default(),
     };
     let stats = PanelStats::default();
-    let mut harness = Harness::new_ui_state(
+    let mut harness = tall().build_ui_state(
         move |ui, s: &mut State| {
             s.actions = controls(ui, &mut s.frame, &stats, None);
         },
@@ -157,4 +165,105 @@ fn dragging_a_sun_slider_holds_the_sun_until_it_is_let_go() {
     harness.run();
     harness.run();
     assert!(!harness.state().actions.sun_held, "let go");
+}
+
+#[test]
+fn the_frame_time_plot_shows_cpu_and_gpu_lines_and_the_bench_button_opens_the_window() {
+    let scene = Scene::default_scene();
+    let state = State {
+        frame: FrameDesc::from_scene(&scene),
+        actions: PanelActions::default(),
+    };
+    let mut with_gpu = PanelStats::default();
+    for i in 0..400 {
+        with_gpu.history.push(16.0 + f64::from(i % 7), Some(5.0));
+    }
+    let mut harness = tall().build_ui_state(
+        move |ui, s: &mut State| {
+            let a = controls(ui, &mut s.frame, &with_gpu, None);
+            if a.open_bench {
+                s.actions = a;
+            }
+        },
+        state,
+    );
+    harness.run();
+    // The legend's entries name the plot's lines.
+    harness.get_by_label("CPU frame");
+    harness.get_by_label("GPU frame");
+    assert!(!harness.state().actions.open_bench);
+    harness.get_by_label("Bench results…").click();
+    harness.run();
+    assert!(harness.state().actions.open_bench);
+
+    let mut cpu_only = PanelStats::default();
+    cpu_only.history.push(16.0, None);
+    let mut frame = FrameDesc::from_scene(&scene);
+    let mut harness = tall().build_ui(move |ui| {
+        controls(ui, &mut frame, &cpu_only, None);
+    });
+    harness.run();
+    harness.get_by_label("CPU frame");
+    assert!(
+        harness.query_by_label("GPU frame").is_none(),
+        "no GPU times, no GPU line"
+    );
+}
+
+#[test]
+fn the_bench_window_shows_a_folders_table_or_what_is_missing() {
+    let dir = std::env::temp_dir().join(format!("canopy-panel-bench-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut window = BenchWindow::default();
+    window.open = true;
+    window.folder = dir.display().to_string();
+    let mut harness = tall().build_ui_state(
+        |ui, w: &mut BenchWindow| {
+            w.show(ui.ctx());
+        },
+        window,
+    );
+    harness.run();
+    harness.get_by_label("Bench results");
+    harness.get_by_label("Browse…");
+    harness.get_by_label("Load").click();
+    harness.run();
+    harness.get_by_label_contains("does not exist");
+    harness.get_by_label_contains("run `canopy bench --out");
+
+    std::fs::create_dir_all(&dir).unwrap();
+    image::RgbaImage::from_pixel(6, 4, image::Rgba([200, 40, 40, 255]))
+        .save(dir.join("chart.png"))
+        .unwrap();
+    std::fs::write(
+        dir.join("summary.json"),
+        r#"{"scene": "s.toml", "configurations": [
+            {"label": "billboard", "median_ms": 3.25, "speedup_vs_geometry": 4.5,
+             "mean_flip": 0.125, "p95_flip": 0.5, "flicker_ratio": 1.75}]}"#,
+    )
+    .unwrap();
+    harness.get_by_label("Load").click();
+    harness.run();
+    assert!(
+        harness.state().error().is_none(),
+        "{:?}",
+        harness.state().error()
+    );
+    assert!(harness.query_by_label_contains("does not exist").is_none());
+    harness.get_by_label("billboard");
+    harness.get_by_label("3.25");
+    harness.get_by_label("4.50x");
+    harness.get_by_label("0.1250");
+    harness.get_by_label("1.75");
+    harness.get_by_label("no flight.png in this folder");
+
+    std::fs::write(dir.join("summary.json"), "not json").unwrap();
+    harness.get_by_label("Load").click();
+    harness.run();
+    harness.get_by_label_contains("summary.json is not a bench summary");
+    assert!(
+        harness.query_by_label("billboard").is_none(),
+        "a failed load clears the old table"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

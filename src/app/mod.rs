@@ -2,7 +2,9 @@
 //! the surface texture, and egui on top. Thin by design: input goes to [`fly`], the panel is
 //! [`panel`], drawing is the render core's.
 
+pub mod bench_view;
 pub mod fly;
+pub mod history;
 pub mod panel;
 
 use std::path::{Path, PathBuf};
@@ -19,6 +21,7 @@ use crate::model::World;
 use crate::render::{AdapterPreference, FrameDesc, GpuContext, Method, Renderer};
 use crate::scene::Scene;
 use crate::{Error, Result};
+use bench_view::BenchWindow;
 use fly::{FlyController, FlyKey};
 use panel::{PanelActions, PanelStats};
 
@@ -84,6 +87,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         frames: 0,
         fatal: None,
         sun_slider_held: false,
+        bench: BenchWindow::default(),
     };
     event_loop
         .run_app(&mut app)
@@ -144,6 +148,8 @@ struct App {
     fatal: Option<Error>,
     /// A sun slider was being dragged in the last frame's panel.
     sun_slider_held: bool,
+    /// The "Bench results" window.
+    bench: BenchWindow,
 }
 
 impl App {
@@ -396,6 +402,9 @@ impl App {
         self.stats.gpu_frame_ms = r.renderer.last_gpu_ms();
         self.stats.sun_update_gpu_ms = r.renderer.last_sun_update_gpu_ms();
         self.stats.cpu_frame_ms = 0.9 * self.stats.cpu_frame_ms + 0.1 * f64::from(dt) * 1e3;
+        self.stats
+            .history
+            .push(f64::from(dt) * 1e3, self.stats.gpu_frame_ms);
         self.stats.camera_speed = self.fly.speed;
 
         // egui on top of the 3D view.
@@ -404,6 +413,8 @@ impl App {
         let frame = &mut self.frame;
         let stats = &self.stats;
         let message = self.message.as_ref();
+        let bench = &mut self.bench;
+        let mut bench_actions = Default::default();
         let mut out = r.egui_state.egui_ctx().run_ui(raw, |ui| {
             egui::Panel::right("controls")
                 .default_size(280.0)
@@ -412,6 +423,7 @@ impl App {
                         actions = panel::controls(ui, frame, stats, message);
                     });
                 });
+            bench_actions = bench.show(ui.ctx());
         });
         r.egui_state
             .handle_platform_output(&r.window, out.platform_output);
@@ -473,6 +485,20 @@ impl App {
         self.frames += 1;
         self.sun_slider_held = actions.sun_held;
 
+        if actions.open_bench {
+            self.bench.open(r.egui_state.egui_ctx());
+        }
+        if bench_actions.browse {
+            let mut dialog = rfd::FileDialog::new().set_title("Bench results folder");
+            let current = Path::new(self.bench.folder.trim());
+            if current.is_dir() {
+                dialog = dialog.set_directory(current);
+            }
+            if let Some(dir) = dialog.pick_folder() {
+                self.bench.folder = dir.display().to_string();
+                self.bench.load(r.egui_state.egui_ctx());
+            }
+        }
         if actions.screenshot {
             let path = crate::imageio::timestamped_path(Path::new("screenshots"));
             self.screenshot(&path);

@@ -1,5 +1,6 @@
-//! The egui side panel: stats, method, sun and shadow controls, screenshot buttons. Pure UI
-//! over plain state, so it is tested headless with egui_kittest.
+//! The egui side panel: stats and a frame-time plot, method, sun and shadow controls,
+//! screenshot buttons, the bench results button. Pure UI over plain state, so it is tested
+//! headless with egui_kittest.
 
 use crate::render::btf::PlaneMode;
 use crate::render::{FrameDesc, Method};
@@ -31,6 +32,8 @@ pub struct PanelStats {
     pub sun_update_gpu_ms: Option<f64>,
     /// A bake running in the background: done, total, what.
     pub bake_progress: Option<(u64, u64, String)>,
+    /// The last frames' CPU and GPU times, for the plot.
+    pub history: super::history::FrameTimeHistory,
 }
 
 /// What the user asked for this frame.
@@ -40,6 +43,8 @@ pub struct PanelActions {
     pub screenshot_as: bool,
     /// A sun slider is being dragged (the ground shadow maps may be previewed).
     pub sun_held: bool,
+    /// Open the bench results window.
+    pub open_bench: bool,
 }
 
 /// Draws the panel's contents into `ui`, editing `frame` in place.
@@ -77,6 +82,7 @@ pub fn controls(
         ui.label(format!("{:.1} m/s", stats.camera_speed));
         ui.end_row();
     });
+    super::history::plot(ui, &stats.history);
     ui.small(&stats.adapter);
     ui.separator();
 
@@ -209,6 +215,9 @@ pub fn controls(
             actions.screenshot_as = true;
         }
     });
+    if ui.button("Bench results…").clicked() {
+        actions.open_bench = true;
+    }
     if let Some((text, is_error)) = message {
         if *is_error {
             ui.colored_label(egui::Color32::from_rgb(230, 80, 70), text);
