@@ -174,8 +174,21 @@ pub fn speed_accuracy_chart(path: &Path, points: &[ChartPoint], size: (u32, u32)
             methods.push(&p.method);
         }
     }
+    // The render core's methods keep their colour from chart to chart; others follow.
+    let known = |m: &str| {
+        crate::render::Method::ALL
+            .iter()
+            .position(|x| x.name() == m)
+    };
+    let others: Vec<&str> = methods
+        .iter()
+        .copied()
+        .filter(|m| known(m).is_none())
+        .collect();
     let colour = |m: &str| {
-        let i = methods.iter().position(|x| *x == m).unwrap_or(0);
+        let i = known(m).unwrap_or_else(|| {
+            crate::render::Method::ALL.len() + others.iter().position(|x| *x == m).unwrap_or(0)
+        });
         PALETTE[i % PALETTE.len()]
     };
     let coords: Vec<(f64, f64)> = usable.iter().map(|p| (p.ms, p.mean_flip)).collect();
