@@ -314,70 +314,114 @@ pub fn flight_chart(path: &Path, series: &[FlightSeries], size: (u32, u32)) -> R
             .fold(0.0, f64::max)
     };
     let flip_max = finite_max(|s| &s.flip);
-    let ms_max = finite_max(|s| &s.ms);
+    let positive = || {
+        series
+            .iter()
+            .flat_map(|s| s.ms.iter().copied())
+            .filter(|v| v.is_finite() && *v > 0.0)
+    };
+    let (ms_lo, ms_hi) = positive().fold((f64::INFINITY, 0.0f64), |(lo, hi), v| {
+        (lo.min(v), hi.max(v))
+    });
+    // A log axis at least a factor 4 wide (times reach from btf's to geometry's).
+    let (ms_lo, ms_hi) = if ms_hi > 0.0 {
+        let mid = (ms_lo * ms_hi).sqrt();
+        let half = (ms_hi / ms_lo).sqrt().max(2.0) * 1.2;
+        (mid / half, mid * half)
+    } else {
+        (1.0, 10.0)
+    };
     let top = |m: f64, room: f64| if m > 0.0 { m * room } else { 1.0 };
     let (w, h) = size;
     let text = |px: f64| (FONT, (px * f64::from(h.min(w)) / 800.0).max(10.0));
+    let x_labels = (frames).min(12);
+    let colour = |i: usize| -> RGBColor {
+        if i < PALETTE.len() {
+            PALETTE[i]
+        } else {
+            // Past the palette: hues spread by the golden ratio.
+            let hsl = HSLColor((i as f64 * 0.618_034) % 1.0, 0.65, 0.42);
+            let (r, g, b) = hsl.rgb();
+            RGBColor(r, g, b)
+        }
+    };
 
     render(path, size, |root| {
         let e = |e: DrawingAreaErrorKind<_>| e.to_string();
         let root = root.titled("Along the flight", text(28.0)).map_err(e)?;
         let (upper, lower) = root.split_vertically(root.dim_in_pixel().1 / 2);
-        let panels: [(_, _, _, Values); 2] = [
+        let line = |c: RGBColor| ShapeStyle::from(&c).stroke_width(2);
+        // Finite values; on the log axis positive ones too.
+        let points = |v: &[f64], log: bool| -> Vec<(f64, f64)> {
+            v.iter()
+                .enumerate()
+                .filter(|(_, v)| v.is_finite() && (!log || **v > 0.0))
+                .map(|(k, v)| (k as f64, *v))
+                .collect()
+        };
+        let mut chart = ChartBuilder::on(&upper)
+            .margin(12)
+            .x_label_area_size((f64::from(h) * 0.06) as u32)
+            .y_label_area_size((f64::from(w) * 0.08) as u32)
             // Room above the lines for the legend.
-            (&upper, "FLIP against the truth", top(flip_max, 1.35), |s| {
-                &s.flip
-            }),
-            (&lower, "frame time (ms)", top(ms_max, 1.1), |s| &s.ms),
-        ];
-        for (panel, (area, desc, ymax, get)) in panels.into_iter().enumerate() {
-            let mut chart = ChartBuilder::on(area)
-                .margin(12)
-                .x_label_area_size((f64::from(h) * 0.06) as u32)
-                .y_label_area_size((f64::from(w) * 0.08) as u32)
-                .build_cartesian_2d(0.0..(frames - 1) as f64, 0.0..ymax)
-                .map_err(e)?;
+            .build_cartesian_2d(0.0..(frames - 1) as f64, 0.0..top(flip_max, 1.35))
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("frame")
+            .y_desc("FLIP against the truth")
+            .x_labels(x_labels)
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| tick_label(*v))
+            .axis_desc_style(text(18.0))
+            .label_style(text(15.0))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(e)?;
+        for (i, s) in series.iter().enumerate() {
+            let c = colour(i);
             chart
-                .configure_mesh()
-                .x_desc("frame")
-                .y_desc(desc)
-                .x_label_formatter(&|v| format!("{v:.0}"))
-                .y_label_formatter(&|v| tick_label(*v))
-                .axis_desc_style(text(18.0))
-                .label_style(text(15.0))
-                .light_line_style(RGBColor(235, 235, 235))
-                .draw()
+                .draw_series(LineSeries::new(points(&s.flip, false), line(c)))
+                .map_err(e)?
+                .label(s.label.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], line(c)));
+        }
+        // One legend, over the top panel: the colours are the same below.
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font(text(13.0))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(e)?;
+        let mut chart = ChartBuilder::on(&lower)
+            .margin(12)
+            .x_label_area_size((f64::from(h) * 0.06) as u32)
+            .y_label_area_size((f64::from(w) * 0.08) as u32)
+            .build_cartesian_2d(
+                0.0..(frames - 1) as f64,
+                (ms_lo..ms_hi)
+                    .log_scale()
+                    .with_key_points(log_ticks(ms_lo, ms_hi)),
+            )
+            .map_err(e)?;
+        chart
+            .configure_mesh()
+            .x_desc("frame")
+            .y_desc("frame time (ms, log scale)")
+            .x_labels(x_labels)
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| tick_label(*v))
+            .axis_desc_style(text(18.0))
+            .label_style(text(15.0))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(e)?;
+        for (i, s) in series.iter().enumerate() {
+            chart
+                .draw_series(LineSeries::new(points(&s.ms, true), line(colour(i))))
                 .map_err(e)?;
-            for (i, s) in series.iter().enumerate() {
-                let c = PALETTE[i % PALETTE.len()];
-                let pts: Vec<(f64, f64)> = get(s)
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, v)| v.is_finite())
-                    .map(|(k, v)| (k as f64, *v))
-                    .collect();
-                chart
-                    .draw_series(LineSeries::new(pts, ShapeStyle::from(&c).stroke_width(2)))
-                    .map_err(e)?
-                    .label(s.label.clone())
-                    .legend(move |(x, y)| {
-                        PathElement::new(
-                            vec![(x, y), (x + 20, y)],
-                            ShapeStyle::from(&c).stroke_width(2),
-                        )
-                    });
-            }
-            // One legend, over the top panel: the colours are the same below.
-            if panel == 0 {
-                chart
-                    .configure_series_labels()
-                    .position(SeriesLabelPosition::UpperRight)
-                    .label_font(text(15.0))
-                    .background_style(WHITE.mix(0.85))
-                    .border_style(BLACK)
-                    .draw()
-                    .map_err(e)?;
-            }
         }
         Ok(())
     })
