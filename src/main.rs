@@ -149,9 +149,14 @@ struct TuneArgs {
     /// Timed renders per frame and configuration (the median is kept).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=50))]
     repeats: u32,
-    /// Write the chosen settings as the scene file's [render] table.
+    /// Write the chosen settings as the scene file's [render] table (and, with --bake, its
+    /// [bake] views, lights and resolution).
     #[arg(long)]
     write: bool,
+    /// Search the bake too: views 6/18 x lights 6/18 x resolution 32/64 (8 bakes, each
+    /// cached), each with LOD scale 0.5–4 x weight threshold 0/0.2.
+    #[arg(long)]
+    bake: bool,
     /// Print the result as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -514,6 +519,7 @@ fn tune(args: TuneArgs) -> anyhow::Result<()> {
         adapter: adapter(args.cpu),
         progress: true,
         write: args.write,
+        bake: args.bake,
     };
     let o = canopy::bench::command::run_tune(&req)?;
     if args.json {

@@ -32,6 +32,7 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
         adapter: AdapterPreference::Cpu,
         progress: false,
         write: true,
+        bake: false,
     };
     let o = run_tune(&req).unwrap();
     let i = o.chosen.expect("a loose target is met");

@@ -9,7 +9,10 @@ use super::flight::{Flight, FlightContext};
 use super::report::{self, RunInfo};
 use super::run::{self, BenchOptions, BenchResults, BenchStep, Config, Sweep};
 use super::truth_key::scene_content;
-use super::tune::{TuneTarget, candidates, choose, with_render_table};
+use super::tune::{
+    BakeChoice, TuneTarget, bake_candidates, bake_knob_candidates, candidates, choose,
+    with_render_table, with_table_keys,
+};
 use crate::model::World;
 use crate::render::btf::BtfSettings;
 use crate::render::{AdapterPreference, FrameDesc, GpuContext, Method, Renderer};
@@ -245,6 +248,8 @@ pub struct TuneRequest {
     pub progress: bool,
     /// Write the chosen knobs as the scene file's `[render]` table.
     pub write: bool,
+    /// Search the bake's views, lights and resolution too (each bake cached).
+    pub bake: bool,
 }
 
 /// What `canopy tune` found.
@@ -257,6 +262,8 @@ pub struct TuneOutcome {
     /// The scene file the `[render]` table was written to.
     pub written: Option<PathBuf>,
     pub device: String,
+    /// With `--bake`: the bake of each configuration, and each bake's image bytes.
+    pub bakes: Vec<Option<(BakeChoice, u64)>>,
 }
 
 /// Measures the tune grid along the flight and picks the cheapest configuration meeting
@@ -282,19 +289,92 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
         req.truth_supersample,
         req.repeats,
     )?;
-    let (ctx, mut renderer) = renderer(&scene, &world, req.adapter, true, req.progress)?;
-    let configs = candidates(FrameDesc::from_scene(&scene).btf);
     let frames = flight.frames(req.frames);
-    let results = measure(
-        &ctx,
-        &mut renderer,
-        &scene,
-        &frames,
-        &configs,
-        &opts,
-        req.progress,
-        "tune",
-    )?;
+    let (ctx, mut renderer) = renderer(&scene, &world, req.adapter, !req.bake, req.progress)?;
+    let base = FrameDesc::from_scene(&scene).btf;
+    let (results, bakes) = if req.bake {
+        let mut all: Option<BenchResults> = None;
+        let mut bakes = Vec::new();
+        let choices = bake_candidates();
+        let max_layers = u64::from(ctx.device.limits().max_texture_array_layers);
+        for (k, b) in choices.iter().enumerate() {
+            let layers = world.species.len() as u64 * 3 * u64::from(b.views * b.lights + b.views);
+            if layers > max_layers {
+                log::warn!(
+                    "tune: skipping the bake of {} views x {} lights: {layers} texture layers, this GPU allows {max_layers}",
+                    b.views,
+                    b.lights
+                );
+                continue;
+            }
+            let mut s = scene.clone();
+            s.bake.views = b.views;
+            s.bake.lights = b.lights;
+            s.bake.resolution = b.resolution;
+            let bar = bar(
+                req.progress,
+                0,
+                &format!(
+                    "bake {}/{} ({}x{} at {}²) {{msg:24}} [{{bar:30}}] {{pos}}/{{len}} ({{eta}} left)",
+                    k + 1,
+                    choices.len(),
+                    b.views,
+                    b.lights,
+                    b.resolution
+                ),
+            );
+            let baked = crate::bake::load_or_bake(&ctx, &s, &world, &mut |p| {
+                bar.set_length(p.total);
+                bar.set_position(p.done);
+                bar.set_message(p.what.clone());
+            });
+            bar.finish_and_clear();
+            renderer.attach_btf(&ctx, &baked?.0, &world)?;
+            let bytes = renderer.btf_bytes();
+            let configs: Vec<Config> = bake_knob_candidates(base)
+                .into_iter()
+                .map(|mut c| {
+                    c.label = format!(
+                        "{} views={} lights={} resolution={}",
+                        c.label, b.views, b.lights, b.resolution
+                    );
+                    c
+                })
+                .collect();
+            bakes.extend(configs.iter().map(|_| Some((*b, bytes))));
+            let r = measure(
+                &ctx,
+                &mut renderer,
+                &scene,
+                &frames,
+                &configs,
+                &opts,
+                req.progress,
+                "tune",
+            )?;
+            match &mut all {
+                Some(a) => a.append(r),
+                None => all = Some(r),
+            }
+        }
+        let all = all.ok_or_else(|| Error::BadInput("no bake to try".into()))?;
+        (all, bakes)
+    } else {
+        let configs = candidates(base);
+        let r = measure(
+            &ctx,
+            &mut renderer,
+            &scene,
+            &frames,
+            &configs,
+            &opts,
+            req.progress,
+            "tune",
+        )?;
+        let bakes = vec![None; r.configs.len()];
+        (r, bakes)
+    };
+    let configs = results.configs.clone();
     let chosen = choose(&results.summaries, &req.target);
     let mut written = None;
     if let (true, Some(i), Some(path)) = (req.write, chosen, req.scene.as_ref()) {
@@ -304,7 +384,18 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
                 path.display()
             ))
         })?;
-        let new = with_render_table(&text, &configs[i].btf);
+        let mut new = with_render_table(&text, &configs[i].btf);
+        if let Some((b, _)) = bakes[i] {
+            new = with_table_keys(
+                &new,
+                "bake",
+                &[
+                    ("views", b.views.to_string()),
+                    ("lights", b.lights.to_string()),
+                    ("resolution", b.resolution.to_string()),
+                ],
+            );
+        }
         // Check before replacing: the file must still parse as a scene.
         Scene::parse(&new, &path.display().to_string())?;
         let fail =
@@ -321,6 +412,7 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
         seconds: started.elapsed().as_secs_f64(),
         written,
         device: ctx.adapter_name(),
+        bakes,
     })
 }
 
@@ -351,6 +443,12 @@ impl TuneOutcome {
             "chosen": self.chosen_summary(),
             "settings": settings,
             "written": self.written,
+            "bake": self.chosen.and_then(|i| self.bakes[i]).map(|(b, bytes)| serde_json::json!({
+                "views": b.views,
+                "lights": b.lights,
+                "resolution": b.resolution,
+                "image_bytes": bytes,
+            })),
         });
         format!("{json:#}")
     }
@@ -374,7 +472,10 @@ impl TuneOutcome {
                     target.max_error,
                     s.flicker_ratio,
                     target.max_flicker
-                )
+                );
+                if let Some(Some((_, bytes))) = self.chosen.map(|i| self.bakes[i]) {
+                    out += &format!("its bake's images: {:.1} MB\n", bytes as f64 / 1e6);
+                }
             }
             None => {
                 let best = self

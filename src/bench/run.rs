@@ -255,6 +255,38 @@ pub struct BenchResults {
     pub truth_cached: usize,
 }
 
+impl BenchResults {
+    /// Appends the results of other configurations measured along the same frames (their
+    /// indices follow this one's).
+    pub fn append(&mut self, other: BenchResults) {
+        let offset = self.configs.len();
+        self.configs.extend(other.configs);
+        self.rows.extend(other.rows.into_iter().map(|mut r| {
+            r.config += offset;
+            r
+        }));
+        self.worst.extend(other.worst);
+        self.truth_rendered += other.truth_rendered;
+        self.truth_cached += other.truth_cached;
+        if other.time_source == TimeSource::CpuWallClock {
+            self.time_source = TimeSource::CpuWallClock;
+        }
+        // Speed-ups are relative to a geometry run among all of them.
+        let mut summaries = std::mem::take(&mut self.summaries);
+        summaries.extend(other.summaries);
+        if let Some(geo) = summaries
+            .iter()
+            .find(|s| s.method == "geometry")
+            .map(|s| s.median_ms)
+        {
+            for s in &mut summaries {
+                s.speedup_vs_geometry = (s.median_ms > 0.0).then(|| geo / s.median_ms);
+            }
+        }
+        self.summaries = summaries;
+    }
+}
+
 /// What the bench is doing, for a progress bar.
 #[derive(Clone, Copy, Debug)]
 pub enum BenchStep<'a> {

@@ -26,6 +26,118 @@ pub const WEIGHT_THRESHOLDS: [f32; 4] = [0.0, 0.1, 0.2, 0.3];
 pub const LOD_FADES: [f32; 2] = [0.0, 0.2];
 pub const PLANES: [PlaneMode; 2] = [PlaneMode::Single, PlaneMode::Crossed];
 
+/// The bake settings `tune --bake` tries: views x lights x resolution. (66 views need
+/// 66 x 7 = 462 texture layers per image set, more than the 2048 most GPUs allow for the
+/// 6 sets of two species.)
+pub const BAKE_VIEWS: [u32; 2] = [6, 18];
+pub const BAKE_LIGHTS: [u32; 2] = [6, 18];
+pub const BAKE_RESOLUTIONS: [u32; 2] = [32, 64];
+/// With `--bake`, the knob grid per bake: LOD scale x weight threshold (fade 0.2, single
+/// planes), so that the whole search stays at 8 x 8 configurations.
+pub const BAKE_LOD_SCALES: [f32; 4] = [0.5, 1.0, 2.0, 4.0];
+pub const BAKE_WEIGHT_THRESHOLDS: [f32; 2] = [0.0, 0.2];
+
+/// One bake's sampling.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct BakeChoice {
+    pub views: u32,
+    pub lights: u32,
+    pub resolution: u32,
+}
+
+/// Every bake `tune --bake` tries, cheapest first.
+pub fn bake_candidates() -> Vec<BakeChoice> {
+    let mut out = Vec::new();
+    for resolution in BAKE_RESOLUTIONS {
+        for lights in BAKE_LIGHTS {
+            for views in BAKE_VIEWS {
+                out.push(BakeChoice {
+                    views,
+                    lights,
+                    resolution,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// The knob grid tried with each bake of `tune --bake`.
+pub fn bake_knob_candidates(base: BtfSettings) -> Vec<Config> {
+    let mut out = Vec::new();
+    for weight_threshold in BAKE_WEIGHT_THRESHOLDS {
+        for lod_scale in BAKE_LOD_SCALES {
+            let btf = BtfSettings {
+                lod_scale,
+                weight_threshold,
+                lod_fade: 0.2,
+                planes: PlaneMode::Single,
+                ..base
+            };
+            out.push(Config {
+                label: label(&btf),
+                method: Method::Btf,
+                btf,
+            });
+        }
+    }
+    out
+}
+
+/// `text` with `[table]`'s `keys` set (other keys of the table and the rest of the file
+/// kept; the table appended when missing).
+pub fn with_table_keys(text: &str, table: &str, keys: &[(&str, String)]) -> String {
+    let header = format!("[{table}]");
+    let lines: Vec<&str> = text.lines().collect();
+    let Some(start) = lines.iter().position(|l| l.trim() == header) else {
+        let mut out = text.to_string();
+        if !out.is_empty() && !out.ends_with('\n') {
+            out.push('\n');
+        }
+        out.push('\n');
+        out.push_str(&header);
+        out.push('\n');
+        for (k, v) in keys {
+            out.push_str(&format!("{k} = {v}\n"));
+        }
+        return out;
+    };
+    let end = lines[start + 1..]
+        .iter()
+        .position(|l| l.trim_start().starts_with('['))
+        .map_or(lines.len(), |k| start + 1 + k);
+    let key_of = |l: &str| l.split('=').next().map(|k| k.trim().to_string());
+    let mut out: Vec<String> = Vec::new();
+    out.extend(lines[..=start].iter().map(|l| l.to_string()));
+    let mut done = vec![false; keys.len()];
+    for l in &lines[start + 1..end] {
+        match keys
+            .iter()
+            .position(|(k, _)| key_of(l).as_deref() == Some(*k))
+        {
+            Some(i) => {
+                out.push(format!("{} = {}", keys[i].0, keys[i].1));
+                done[i] = true;
+            }
+            None => out.push(l.to_string()),
+        }
+    }
+    // Missing keys go after the table's last non-blank line.
+    let mut at = out.len();
+    while at > start + 1 && out[at - 1].trim().is_empty() {
+        at -= 1;
+    }
+    for (i, (k, v)) in keys.iter().enumerate().rev() {
+        if !done[i] {
+            out.insert(at, format!("{k} = {v}"));
+        }
+    }
+    out.extend(lines[end..].iter().map(|l| l.to_string()));
+    let mut s = out.join("\n");
+    s.push('\n');
+    s
+}
+
 impl TuneTarget {
     pub fn new(max_error: f64, max_flicker: f64) -> Result<Self> {
         if !(max_error.is_finite() && max_error > 0.0 && max_error < 1.0) {
@@ -218,6 +330,29 @@ mod tests {
         labels.dedup();
         assert_eq!(labels.len(), c.len());
         assert!(c.iter().all(|c| c.method == Method::Btf));
+    }
+
+    #[test]
+    fn bake_keys_are_set_and_the_other_keys_kept() {
+        let keys = [
+            ("views", "6".to_string()),
+            ("lights", "18".to_string()),
+            ("resolution", "32".to_string()),
+        ];
+        let text = "[forest]\ncount = 3\n\n[bake]\nviews = 66 # many\nsupersample = 2\n\n[sky]\nintensity = 1.0\n";
+        let out = with_table_keys(text, "bake", &keys);
+        let t: toml::Table = toml::from_str(&out).unwrap();
+        assert_eq!(t["bake"]["views"].as_integer(), Some(6));
+        assert_eq!(t["bake"]["lights"].as_integer(), Some(18));
+        assert_eq!(t["bake"]["resolution"].as_integer(), Some(32));
+        assert_eq!(t["bake"]["supersample"].as_integer(), Some(2));
+        assert_eq!(t["sky"]["intensity"].as_float(), Some(1.0));
+        assert!(out.starts_with("[forest]\ncount = 3\n"));
+        let appended = with_table_keys("[forest]\ncount = 3", "bake", &keys);
+        let t: toml::Table = toml::from_str(&appended).unwrap();
+        assert_eq!(t["bake"]["lights"].as_integer(), Some(18));
+        assert_eq!(bake_candidates().len(), 8);
+        assert_eq!(bake_knob_candidates(BtfSettings::default()).len(), 8);
     }
 
     #[test]
