@@ -14,7 +14,6 @@ use super::tune::{
     with_render_table, with_table_keys,
 };
 use crate::model::World;
-use crate::render::btf::BtfSettings;
 use crate::render::{AdapterPreference, FrameDesc, GpuContext, Method, Renderer};
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -53,7 +52,8 @@ pub const MAX_BENCH_FRAMES: usize = 10_000;
 /// The flight's frames and the configurations of `req`, checked before anything renders.
 pub fn plan(
     req: &BenchRequest,
-    world: &crate::model::World,
+    scene: &Scene,
+    world: &World,
 ) -> Result<(Flight, usize, Vec<Config>)> {
     let flight = Flight::resolve(&req.flight, &FlightContext::from_world(world))?;
     let n = req.frames.unwrap_or(flight.default_frames);
@@ -62,7 +62,9 @@ pub fn plan(
             "--frames {n}: a bench needs 2 to {MAX_BENCH_FRAMES} frames (the temporal figures compare consecutive frames)"
         )));
     }
-    let configs = run::configurations(&req.methods, &req.sweeps, BtfSettings::default())?;
+    // The knobs start from the scene's `[render]` table.
+    let base = crate::render::frame::btf_settings_of(scene);
+    let configs = run::configurations(&req.methods, &req.sweeps, base)?;
     Ok((flight, n, configs))
 }
 
@@ -176,7 +178,7 @@ fn measure(
 pub fn run_command(req: &BenchRequest) -> Result<BenchOutcome> {
     let started = Instant::now();
     let (scene, world) = load(req.scene.as_deref())?;
-    let (flight, n, configs) = plan(req, &world)?;
+    let (flight, n, configs) = plan(req, &scene, &world)?;
     let opts = options(
         &scene,
         (req.width, req.height),
