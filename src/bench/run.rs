@@ -272,18 +272,8 @@ impl BenchResults {
             self.time_source = TimeSource::CpuWallClock;
         }
         // Speed-ups are relative to a geometry run among all of them.
-        let mut summaries = std::mem::take(&mut self.summaries);
-        summaries.extend(other.summaries);
-        if let Some(geo) = summaries
-            .iter()
-            .find(|s| s.method == "geometry")
-            .map(|s| s.median_ms)
-        {
-            for s in &mut summaries {
-                s.speedup_vs_geometry = (s.median_ms > 0.0).then(|| geo / s.median_ms);
-            }
-        }
-        self.summaries = summaries;
+        self.summaries.extend(other.summaries);
+        set_speedups(&mut self.summaries);
     }
 }
 
@@ -481,6 +471,17 @@ pub fn run(
     })
 }
 
+/// Each summary's speed-up against the `geometry` one among them (none without it).
+fn set_speedups(summaries: &mut [ConfigSummary]) {
+    let geo = summaries
+        .iter()
+        .find(|s| s.method == "geometry")
+        .map(|s| s.median_ms);
+    for s in summaries {
+        s.speedup_vs_geometry = geo.filter(|_| s.median_ms > 0.0).map(|g| g / s.median_ms);
+    }
+}
+
 /// Per configuration: the medians, means and temporal figures of its rows.
 pub fn summarise(configs: &[Config], rows: &[FrameRow]) -> Result<Vec<ConfigSummary>> {
     let mut out = Vec::with_capacity(configs.len());
@@ -525,15 +526,7 @@ pub fn summarise(configs: &[Config], rows: &[FrameRow]) -> Result<Vec<ConfigSumm
             worst_frame_flip: worst.map_or(0.0, |r| r.mean_flip),
         });
     }
-    if let Some(geo) = out
-        .iter()
-        .find(|s| s.method == "geometry")
-        .map(|s| s.median_ms)
-    {
-        for s in &mut out {
-            s.speedup_vs_geometry = (s.median_ms > 0.0).then(|| geo / s.median_ms);
-        }
-    }
+    set_speedups(&mut out);
     Ok(out)
 }
 

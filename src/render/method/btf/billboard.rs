@@ -75,7 +75,7 @@ pub struct BillboardGpu {
 }
 
 /// A billboard with every field zero and no VCM shading (all factors 1).
-pub(super) const NO_SHADE: BillboardGpu = BillboardGpu {
+const NO_SHADE: BillboardGpu = BillboardGpu {
     center: [0.0; 3],
     radius: 0.0,
     plane_right: [0.0; 3],

@@ -11,7 +11,7 @@ use std::collections::HashMap;
 
 use glam::{Mat3, Mat4, Vec3};
 
-use super::billboard::{BillboardGpu, BillboardMode, NO_SHADE, SetInfo};
+use super::billboard::{BillboardGpu, BillboardMode, SetInfo};
 use super::settings::{BtfSettings, BtfStats, LOD_COLOURS, PlaneMode};
 use super::shading::{ObjectFrame, Shade, VcmShading};
 use crate::format::{Baked, BtfImageSet};
@@ -377,7 +377,7 @@ impl BtfScene {
                 view_weight: vb.weight,
                 view_count: self.views.len() as u32,
                 tint: [1.0; 3],
-                ..NO_SHADE
+                ..BillboardGpu::UNSHADED
             });
         }
         out
@@ -511,7 +511,7 @@ impl Pusher<'_, '_> {
             light_weight: lb.weight,
             tint: self.tint.0,
             mode: self.tint.1 as u32,
-            ..NO_SHADE
+            ..BillboardGpu::UNSHADED
         }
         .shade(&shade, set);
         self.out.push((depth, record));
