@@ -12,6 +12,7 @@ pub mod imageio;
 pub mod lod;
 pub mod metrics;
 pub mod model;
+pub mod progress;
 pub mod render;
 pub mod scene;
 pub mod sphere;

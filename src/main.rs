@@ -11,6 +11,7 @@ use glam::Vec3;
 
 use canopy::bake::report::BakeReport;
 use canopy::model::summary::WorldSummary;
+use canopy::progress;
 use canopy::render::btf::PlaneMode;
 use canopy::render::measure::{self, FrameReport, MeasureOptions};
 use canopy::render::{AdapterPreference, Camera, FrameDesc, GpuContext, Method, Renderer};
@@ -419,8 +420,9 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     let ctx = GpuContext::headless(adapter(args.cpu))?;
     let mut renderer = Renderer::new(&ctx, &world)?;
     if args.method.needs_bake() {
-        let bar = progress_bar(0, BAKE_BAR);
-        let baked = canopy::bake::load_or_bake(&ctx, &scene, &world, &mut |p| show(&bar, p));
+        let bar = progress::bar(true, 0, progress::BAKE_BAR);
+        let baked =
+            canopy::bake::load_or_bake(&ctx, &scene, &world, &mut |p| progress::show_bake(&bar, p));
         bar.finish_and_clear();
         renderer.attach_btf(&ctx, &baked?.0, &world)?;
     }
@@ -429,7 +431,8 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         frames: args.frames,
         supersample: args.supersample,
     };
-    let bar = progress_bar(
+    let bar = progress::bar(
+        true,
         u64::from(args.frames) + 1,
         "{msg} [{bar:30}] {pos}/{len} frames ({elapsed})",
     );
@@ -533,24 +536,6 @@ fn tune(args: TuneArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-const BAKE_BAR: &str = "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)";
-
-fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
-    let bar = indicatif::ProgressBar::new(len);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(template)
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    bar
-}
-
-/// Shows a bake's progress on `bar`.
-fn show(bar: &indicatif::ProgressBar, p: &canopy::bake::Progress) {
-    bar.set_length(p.total);
-    bar.set_position(p.done);
-    bar.set_message(p.what.clone());
-}
-
 fn adapter(cpu: bool) -> AdapterPreference {
     if cpu {
         AdapterPreference::Cpu
@@ -571,8 +556,10 @@ fn bake(
     let path = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| canopy::bake::cache::cache_path(&scene));
-    let bar = progress_bar(0, BAKE_BAR);
-    let baked = canopy::bake::bake_to(&path, &ctx, &scene, &world, &mut |p| show(&bar, p));
+    let bar = progress::bar(true, 0, progress::BAKE_BAR);
+    let baked = canopy::bake::bake_to(&path, &ctx, &scene, &world, &mut |p| {
+        progress::show_bake(&bar, p)
+    });
     bar.finish_and_clear();
     let (baked, times) = baked?;
     let r = BakeReport::new(&path, &baked, &times, &world);

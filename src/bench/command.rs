@@ -14,6 +14,7 @@ use super::tune::{
     with_render_table, with_table_keys,
 };
 use crate::model::World;
+use crate::progress::{BAKE_BAR, bar, show_bake};
 use crate::render::{AdapterPreference, FrameDesc, GpuContext, Method, Renderer};
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -89,20 +90,28 @@ fn renderer(
     let ctx = GpuContext::headless(adapter)?;
     let mut renderer = Renderer::new(&ctx, world)?;
     if bake {
-        let bar = bar(
-            progress,
-            0,
-            "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)",
-        );
-        let baked = crate::bake::load_or_bake(&ctx, scene, world, &mut |p| {
-            bar.set_length(p.total);
-            bar.set_position(p.done);
-            bar.set_message(p.what.clone());
-        });
-        bar.finish_and_clear();
-        renderer.attach_btf(&ctx, &baked?.0, world)?;
+        attach_bake(
+            &ctx,
+            &mut renderer,
+            scene,
+            world,
+            &bar(progress, 0, BAKE_BAR),
+        )?;
     }
     Ok((ctx, renderer))
+}
+
+/// Loads `scene`'s bake from the cache or bakes it (its progress on `bar`) and attaches it.
+fn attach_bake(
+    ctx: &GpuContext,
+    renderer: &mut Renderer,
+    scene: &Scene,
+    world: &World,
+    bar: &indicatif::ProgressBar,
+) -> Result<()> {
+    let baked = crate::bake::load_or_bake(ctx, scene, world, &mut |p| show_bake(bar, p));
+    bar.finish_and_clear();
+    renderer.attach_btf(ctx, &baked?.0, world)
 }
 
 /// The runner's options, the sizes checked.
@@ -223,18 +232,6 @@ pub fn run_command(req: &BenchRequest) -> Result<BenchOutcome> {
     })
 }
 
-fn bar(show: bool, len: u64, template: &str) -> indicatif::ProgressBar {
-    if !show {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(len);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(template)
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    bar
-}
-
 /// What `canopy tune` was asked.
 #[derive(Clone, Debug)]
 pub struct TuneRequest {
@@ -313,25 +310,21 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
             s.bake.views = b.views;
             s.bake.lights = b.lights;
             s.bake.resolution = b.resolution;
-            let bar = bar(
-                req.progress,
-                0,
-                &format!(
-                    "bake {}/{} ({}x{} at {}²) {{msg:24}} [{{bar:30}}] {{pos}}/{{len}} ({{eta}} left)",
-                    k + 1,
-                    choices.len(),
-                    b.views,
-                    b.lights,
-                    b.resolution
-                ),
+            let template = format!(
+                "bake {}/{} ({}x{} at {}²) {{msg:24}} [{{bar:30}}] {{pos}}/{{len}} ({{eta}} left)",
+                k + 1,
+                choices.len(),
+                b.views,
+                b.lights,
+                b.resolution
             );
-            let baked = crate::bake::load_or_bake(&ctx, &s, &world, &mut |p| {
-                bar.set_length(p.total);
-                bar.set_position(p.done);
-                bar.set_message(p.what.clone());
-            });
-            bar.finish_and_clear();
-            renderer.attach_btf(&ctx, &baked?.0, &world)?;
+            attach_bake(
+                &ctx,
+                &mut renderer,
+                &s,
+                &world,
+                &bar(req.progress, 0, &template),
+            )?;
             let bytes = renderer.btf_bytes();
             let configs: Vec<Config> = bake_knob_candidates(base)
                 .into_iter()
@@ -400,11 +393,7 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
         }
         // Check before replacing: the file must still parse as a scene.
         Scene::parse(&new, &path.display().to_string())?;
-        let fail =
-            |e: std::io::Error| Error::BadInput(format!("cannot write {}: {e}", path.display()));
-        let tmp = path.with_extension("toml.tmp");
-        std::fs::write(&tmp, new).map_err(fail)?;
-        std::fs::rename(&tmp, path).map_err(fail)?;
+        report::write_text(path, &new)?;
         written = Some(path.clone());
     }
     Ok(TuneOutcome {

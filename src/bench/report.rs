@@ -137,11 +137,18 @@ pub fn summary_table(results: &BenchResults) -> String {
     s
 }
 
-fn write_text(path: &Path, text: &str) -> Result<()> {
+/// Writes `text` to `path` through a temporary file beside it, renamed into place.
+pub(super) fn write_text(path: &Path, text: &str) -> Result<()> {
     let fail = |e: std::io::Error| Error::BadInput(format!("cannot write {}: {e}", path.display()));
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, text).map_err(fail)?;
-    std::fs::rename(&tmp, path).map_err(fail)
+    let name = path
+        .file_name()
+        .map_or("out".into(), |n| n.to_string_lossy().into_owned());
+    let tmp = path.with_file_name(format!(".{name}.tmp"));
+    let result = std::fs::write(&tmp, text).and_then(|()| std::fs::rename(&tmp, path));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(fail)
 }
 
 /// Truth, method and FLIP map side by side.
