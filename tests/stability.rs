@@ -44,6 +44,16 @@ fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
     (scene, world, renderer)
 }
 
+/// The stand's first tree and the centre of its box, in the world.
+fn first_tree(world: &World) -> (canopy::model::TreeInstance, Vec3) {
+    let tree = world.forest.instances[0];
+    let model = &world.species[tree.species as usize];
+    (
+        tree,
+        tree.position + model.tree_bounds.center() * tree.scale,
+    )
+}
+
 /// A frame of a hand-made flight.
 fn frame(index: usize, position: Vec3, look_at: Vec3, sun: Option<[f32; 2]>) -> FlightFrame {
     FlightFrame {
@@ -148,9 +158,7 @@ const LOD_SWITCH_MAX_POP: f64 = 0.003;
 fn lod_switch_the_cross_fade_keeps_the_worst_pop_under_its_bound() {
     let ctx = gpu();
     let (scene, world, mut renderer) = setup(&ctx);
-    let tree = world.forest.instances[0];
-    let model = &world.species[tree.species as usize];
-    let centre = tree.position + model.tree_bounds.center() * tree.scale;
+    let (tree, centre) = first_tree(&world);
     let size = 128;
     let focal = Camera::look_at(Vec3::ZERO, Vec3::Z, 40.0).focal_px(size);
     let texels = renderer.btf_texels(tree.species as usize).unwrap();
@@ -228,9 +236,7 @@ const LIGHT_STEP_MAX_OVER_MEDIAN: f64 = 4.0;
 fn light_between_samples_changes_the_image_in_even_steps() {
     let ctx = gpu();
     let (scene, world, mut renderer) = setup(&ctx);
-    let tree = world.forest.instances[0];
-    let model = &world.species[tree.species as usize];
-    let centre = tree.position + model.tree_bounds.center() * tree.scale;
+    let (_, centre) = first_tree(&world);
     let size = 96;
     let eye = centre + Vec3::new(-40.0, 10.0, -25.0);
     let frames: Vec<FlightFrame> = (0..41)
@@ -280,7 +286,6 @@ fn light_between_samples_changes_the_image_in_even_steps() {
         );
         ratios.push(max / median.max(1e-9));
     }
-    let _ = world;
     assert!(
         ratios[0] < LIGHT_STEP_MAX_OVER_MEDIAN,
         "blended lights: the largest step is {:.1}x the median",
@@ -311,9 +316,7 @@ const THRESHOLD_MAX_FLICKER: f64 = 1.5;
 fn orbiting_across_a_view_sample_changes_the_image_in_even_steps() {
     let ctx = gpu();
     let (scene, world, mut renderer) = setup(&ctx);
-    let tree = world.forest.instances[0];
-    let model = &world.species[tree.species as usize];
-    let centre = tree.position + model.tree_bounds.center() * tree.scale;
+    let (tree, centre) = first_tree(&world);
     let size = 96;
     // The tree's own frame turns with its yaw: orbit around the sample's world azimuth.
     let yaw = tree.yaw;
@@ -376,9 +379,7 @@ const BLUR_MAX_FLIP: f64 = 0.21;
 fn blur_up_close_grows_with_the_texel_size_and_stays_bounded() {
     let ctx = gpu();
     let (scene, world, mut renderer) = setup(&ctx);
-    let tree = world.forest.instances[0];
-    let model = &world.species[tree.species as usize];
-    let centre = tree.position + model.tree_bounds.center() * tree.scale;
+    let (tree, centre) = first_tree(&world);
     let size = 128;
     let fov = 40.0;
     let focal = Camera::look_at(Vec3::ZERO, Vec3::Z, fov).focal_px(size);
