@@ -12,6 +12,15 @@
 // image-based methods' terrain shadows, in place of the cascades.
 // (One layer, so that one PCF function serves it and the cascades.)
 @group(0) @binding(5) var ground_depth: texture_depth_2d_array;
+// The reference's sky visibility: the fraction of the sky each cell of a grid over the scene
+// sees through the trees' leaf area and past the terrain (src/render/sky_visibility.rs),
+// as a 3D texture with x, z, y as u, v, w.
+struct SkyVolume {
+    origin: vec4<f32>,
+    inv_size: vec4<f32>,
+}
+@group(0) @binding(6) var sky_volume: texture_3d<f32>;
+@group(0) @binding(7) var<uniform> sky_place: SkyVolume;
 
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
@@ -109,6 +118,20 @@ fn sun_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> f32 {
     return pcf3x3(shadow_map, i32(c), uv, ndc.z, frame.cascade_texel_uv * frame.pcf_radius);
 }
 
+// Fraction of the sky `world` sees (1 = all of it), read trilinearly from the volume half
+// a cell along the normal (so that the ground does not read the cells under it).
+fn sky_visibility(world: vec3<f32>, normal: vec3<f32>) -> f32 {
+    if frame.sky_vis_count == 0u {
+        return 1.0;
+    }
+    let p = world + normal * frame.sky_vis_texel_world * 0.5 - sky_place.origin.xyz;
+    let uvw = vec3<f32>(p.x, p.z, p.y) * sky_place.inv_size.xyz;
+    if uvw.z > 1.0 || any(uvw.xy < vec2<f32>(0.0)) || any(uvw.xy > vec2<f32>(1.0)) {
+        return 1.0;
+    }
+    return textureSampleLevel(sky_volume, ground_sampler, uvw, 0.0).r;
+}
+
 // How much of the sun the trees let through to `world`, from the alpha shadow map.
 fn ground_transmittance(world: vec3<f32>) -> f32 {
     let c = ground_coords(world);
@@ -141,7 +164,11 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) ve
     if frame.ground_alpha_on != 0u {
         vis *= ground_transmittance(in.world);
     }
-    let ambient = mix(frame.ground_ambient, frame.sky_ambient, n.y * 0.5 + 0.5);
+    // Hemispherical sky light; in the reference its sky part only where the sky is open.
+    // (Leaves take the side of their normal that faces up.)
+    let sky_normal = select(n, sign(n.y + 1e-6) * n, leaf);
+    let sky_open = sky_visibility(in.world, sky_normal);
+    let ambient = mix(frame.ground_ambient, frame.sky_ambient * sky_open, n.y * 0.5 + 0.5);
     let c = in.color * (frame.sun_color * direct * vis + ambient);
     return vec4<f32>(fog_and_exposure(c, 1.0, dist), 1.0);
 }

@@ -197,6 +197,15 @@ struct RenderArgs {
     /// Side of each shadow cascade's map, in texels.
     #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(16..=8192))]
     shadow_map: u32,
+    /// geometry: draw the reference the bench measures against (sky hidden by trees and
+    /// hills, sun shadows over the whole scene from 4096² cascades); slower.
+    #[arg(long)]
+    reference: bool,
+    /// geometry --reference: directions over the sky whose depth maps give the sky
+    /// visibility.
+    #[arg(long, default_value_t = canopy::render::sky_visibility::SKY_DIRECTIONS,
+          value_parser = clap::value_parser!(u32).range(1..=1024), requires = "reference")]
+    sky_directions: u32,
     /// btf: a level is used while its largest texel projects below this many pixels
     /// (default: the scene's [render] table, else 1).
     #[arg(long, value_parser = parse_positive)]
@@ -385,6 +394,19 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     frame.method = args.method;
     frame.shadows.map_size = args.shadow_map;
     frame.ground_shadows = args.ground_shadows;
+    if args.reference {
+        if args.method != Method::Geometry {
+            return Err(canopy::Error::BadInput(
+                "--reference draws the geometry method as the truth; drop it or use --method geometry"
+                    .into(),
+            )
+            .into());
+        }
+        frame.reference = Some(canopy::render::Reference {
+            sky_directions: args.sky_directions,
+            ..Default::default()
+        });
+    }
     if let (Some(pos), Some(target)) = (args.camera, args.look_at) {
         frame.camera = Camera::look_at(pos, target, frame.camera.fov_y_deg);
     }
@@ -419,6 +441,15 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     )?;
     let ctx = GpuContext::headless(adapter(args.cpu))?;
     let mut renderer = Renderer::new(&ctx, &world)?;
+    if let Some(r) = frame.reference {
+        let t0 = Instant::now();
+        renderer.prepare_reference(&ctx, &world, r.sky_directions, true)?;
+        log::info!(
+            "sky visibility from {} directions in {:.1} s",
+            r.sky_directions,
+            t0.elapsed().as_secs_f64()
+        );
+    }
     if args.method.needs_bake() {
         let bar = progress::bar(true, 0, progress::BAKE_BAR);
         let baked =

@@ -78,6 +78,8 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
         repeats: 1,
         cache_dir: dir.join("cache"),
         scene_content: canopy::bench::scene_content(&scene),
+        // The interactive geometry as the truth: this test checks the tuner's bookkeeping.
+        reference: None,
     };
     let again = run::run(
         &ctx,

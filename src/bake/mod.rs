@@ -1,6 +1,7 @@
 //! The bake: photographs every level of every species (twig, main branch, tree) from each
 //! sampled view direction, lit by each sampled light direction (sun only, self-shadowed) and
-//! by the sky alone, with the same render core as the ground truth, offscreen and
+//! by the sky alone (its own leaves hiding part of the sky, as in the reference), with the
+//! same render core as the ground truth, offscreen and
 //! supersampled so that alpha is coverage. Views and lights are in the object's own frame,
 //! so one bake serves every rotated, scaled instance. Then the visibility cube maps of every
 //! object of every level (`vcm`), drawn from the BTF images' alpha.
@@ -18,8 +19,9 @@ use crate::model::forest::{Forest, TreeInstance};
 use crate::model::mesh::{Aabb, Mesh};
 use crate::model::terrain::Terrain;
 use crate::model::tree::TreeModel;
+use crate::render::sky_visibility::SKY_DIRECTIONS;
 use crate::render::{
-    Camera, FrameDesc, GpuContext, Method, Renderer, ShadowSettings, Sky, Stage, Sun,
+    Camera, FrameDesc, GpuContext, Method, Reference, Renderer, ShadowSettings, Sky, Stage, Sun,
 };
 use crate::sphere::{DirectionSet, billboard_axes};
 use crate::{Error, Result};
@@ -158,6 +160,9 @@ pub fn bake_btf(
             let (center, radius) = bounding_sphere(&object.tree_bounds);
             let studio = studio_world(object);
             let mut renderer = Renderer::new(ctx, &studio)?;
+            // The images are reference frames of the object alone: its own leaves hide
+            // part of the sky from its inner leaves, as in the world's reference.
+            renderer.prepare_reference(ctx, &studio, SKY_DIRECTIONS, false)?;
             let res = settings.resolution;
             // Twice the rendered image's resolution: self-shadows as sharp as the image.
             let shadow_map = (2 * res * settings.supersample).clamp(256, 2048);
@@ -239,6 +244,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         trees: true,
         ground_shadows: false,
         sun_held: false,
+        reference: Some(Reference::default()),
     }
 }
 

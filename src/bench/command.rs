@@ -79,7 +79,8 @@ fn load(scene: Option<&Path>) -> Result<(Scene, World)> {
     Ok((scene, world))
 }
 
-/// A GPU context and a renderer for `world`, with the scene's bake attached when `bake`.
+/// A GPU context and a renderer for `world`, ready for reference frames (the truth), with
+/// the scene's bake attached when `bake`.
 fn renderer(
     scene: &Scene,
     world: &World,
@@ -89,6 +90,12 @@ fn renderer(
 ) -> Result<(GpuContext, Renderer)> {
     let ctx = GpuContext::headless(adapter)?;
     let mut renderer = Renderer::new(&ctx, world)?;
+    renderer.prepare_reference(
+        &ctx,
+        world,
+        crate::render::Reference::default().sky_directions,
+        true,
+    )?;
     if bake {
         attach_bake(
             &ctx,
@@ -133,6 +140,7 @@ fn options(
         repeats: repeats.max(1),
         cache_dir: crate::bake::cache::cache_dir(),
         scene_content: scene_content(scene),
+        reference: Some(crate::render::Reference::default()),
     })
 }
 

@@ -193,6 +193,9 @@ pub struct BenchOptions {
     pub cache_dir: PathBuf,
     /// The scene's content ([`super::truth_key::scene_content`]), for the truth's key.
     pub scene_content: Vec<u8>,
+    /// The truth is `geometry` drawn as the reference (sky visibility, whole-scene sun
+    /// shadows); `None`: the interactive `geometry` (cheaper, for quick checks).
+    pub reference: Option<crate::render::Reference>,
 }
 
 /// One frame of one configuration.
@@ -319,6 +322,7 @@ fn truth_frame(
 ) -> Result<(RgbaImage, bool)> {
     let mut truth = *desc;
     truth.method = Method::Geometry;
+    truth.reference = opts.reference;
     let sun = truth.sun.direction();
     let key = TruthKey::new(&TruthRequest {
         scene: &opts.scene_content,
@@ -331,8 +335,8 @@ fn truth_frame(
         height: opts.height,
         supersample: opts.truth_supersample,
         extra: format!(
-            "fog {} exposure {} sky {:?} shadows {:?}",
-            truth.fog_density, truth.exposure, truth.sky, truth.shadows
+            "fog {} exposure {} sky {:?} shadows {:?} reference {:?}",
+            truth.fog_density, truth.exposure, truth.sky, truth.shadows, truth.reference
         )
         .as_bytes(),
     });

@@ -118,6 +118,26 @@ impl Default for ShadowSettings {
     }
 }
 
+/// The `geometry` method as the reference every accuracy figure is measured against: the
+/// sky light hidden where trees and hills hide the sky (sky visibility maps), and sun
+/// shadows from larger cascade maps reaching the whole scene.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Reference {
+    /// Directions over the sky hemisphere whose depth maps give the sky visibility.
+    pub sky_directions: u32,
+    /// Side (texels) of each sun cascade's map (at least the frame's own).
+    pub sun_map_size: u32,
+}
+
+impl Default for Reference {
+    fn default() -> Self {
+        Self {
+            sky_directions: super::sky_visibility::SKY_DIRECTIONS,
+            sun_map_size: 4096,
+        }
+    }
+}
+
 /// Everything that may change from one frame to the next.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameDesc {
@@ -142,6 +162,8 @@ pub struct FrameDesc {
     /// are rebuilt at a reduced resolution while it lasts, and at full resolution on the
     /// first frame after it ends.
     pub sun_held: bool,
+    /// Draw `geometry` as the reference (other methods ignore it).
+    pub reference: Option<Reference>,
 }
 
 impl FrameDesc {
@@ -170,6 +192,7 @@ impl FrameDesc {
             trees: true,
             ground_shadows: true,
             sun_held: false,
+            reference: None,
         }
     }
 }
@@ -244,9 +267,11 @@ pub struct FrameUniforms {
     /// PCF radius of the cascades, in texels.
     pub pcf_radius: f32,
     pub sky_ambient: [f32; 3],
-    pub _pad0: f32,
+    /// Directions of the reference's sky visibility maps (0: the sky is never hidden).
+    pub sky_vis_count: u32,
     pub ground_ambient: [f32; 3],
-    pub _pad1: f32,
+    /// World size of one texel of the sky visibility maps.
+    pub sky_vis_texel_world: f32,
     pub sky_zenith: [f32; 3],
     pub _pad2: f32,
     pub sky_horizon: [f32; 3],
@@ -297,9 +322,9 @@ impl FrameUniforms {
             sun_color: sun.to_array(),
             pcf_radius: 1.0,
             sky_ambient: sky.to_array(),
-            _pad0: 0.0,
+            sky_vis_count: 0,
             ground_ambient: ground.to_array(),
-            _pad1: 0.0,
+            sky_vis_texel_world: 0.0,
             sky_zenith: frame.sky.color.to_array(),
             _pad2: 0.0,
             sky_horizon: horizon.to_array(),

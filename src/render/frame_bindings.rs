@@ -1,5 +1,6 @@
 //! What every colour pass binds: the frame's group 0 (uniforms, the shadow cascades' maps,
-//! the ground maps and their samplers) and the depth buffer of the target's size.
+//! the ground maps and their samplers, the reference's sky visibility) and the depth
+//! buffer of the target's size.
 
 use super::ground::GroundTextures;
 use super::pipelines::Layouts;
@@ -14,11 +15,17 @@ pub struct FrameBindings {
     pub bind_group: wgpu::BindGroup,
     /// It binds the ground maps (not their placeholders).
     pub ground_maps: bool,
+    /// It binds the sky visibility (not its placeholder).
+    pub sky_maps: bool,
 }
+
+/// The sky visibility group 0 binds: (3D texture, placement uniforms, not the placeholder).
+pub type SkyBinding<'a> = (&'a wgpu::TextureView, &'a wgpu::Buffer, bool);
 
 impl FrameBindings {
     /// Group 0 over `frame_uniforms`, the `cascades`, the `ground` textures and the
-    /// (shadow comparison, ground) samplers.
+    /// (shadow comparison, ground) samplers and the `sky` visibility.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         ctx: &GpuContext,
         layouts: &Layouts,
@@ -26,6 +33,7 @@ impl FrameBindings {
         cascades: CascadeMaps,
         samplers: (&wgpu::Sampler, &wgpu::Sampler),
         ground: &GroundTextures,
+        sky: SkyBinding<'_>,
     ) -> Self {
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("frame"),
@@ -55,12 +63,21 @@ impl FrameBindings {
                     binding: 5,
                     resource: wgpu::BindingResource::TextureView(&ground.depth_sampled),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: wgpu::BindingResource::TextureView(sky.0),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: sky.1.as_entire_binding(),
+                },
             ],
         });
         Self {
             cascades,
             bind_group,
             ground_maps: !ground.is_placeholder(),
+            sky_maps: sky.2,
         }
     }
 }

@@ -20,6 +20,7 @@ pub mod method;
 mod pipelines;
 pub mod shaders;
 pub mod shadow;
+pub mod sky_visibility;
 pub mod target;
 pub mod timing;
 pub mod world_gpu;
@@ -30,7 +31,7 @@ use image::RgbaImage;
 
 pub use camera::{Camera, Frustum, OrthoView};
 pub use context::{AdapterPreference, GpuContext};
-pub use frame::{FrameDesc, FrameStats, Method, ShadowSettings, Sky, Stage, Sun};
+pub use frame::{FrameDesc, FrameStats, Method, Reference, ShadowSettings, Sky, Stage, Sun};
 pub use ground::{GROUND_FORMAT, GROUND_MAP_SIZE, GROUND_PREVIEW_SIZE};
 pub use method::btf;
 pub use target::{OFFSCREEN_FORMAT, OffscreenTarget};
@@ -41,6 +42,7 @@ use ground::{GroundBillboards, GroundMaps, GroundTextures};
 use method::geometry::{GeometryFrame, GeometryMethod};
 use pipelines::{ColorPipelines, Layouts};
 use shadow::{CASCADES, CascadeMaps, Cascades};
+use sky_visibility::{SkyVisibility, SkyVolume};
 use timing::GpuTimer;
 use world_gpu::WorldGpu;
 
@@ -87,6 +89,9 @@ pub struct Renderer {
     ground: Option<GroundMaps>,
     /// What group 0 binds in their place until then.
     ground_placeholder: GroundTextures,
+    /// The reference's sky visibility, once [`Self::prepare_reference`] computed it.
+    sky_vis: Option<SkyVisibility>,
+    sky_placeholder: SkyVisibility,
 }
 
 impl Renderer {
@@ -110,6 +115,8 @@ impl Renderer {
         Ok(Self {
             geometry: GeometryMethod::new(ctx, &layouts)?,
             ground_placeholder: GroundTextures::placeholder(ctx)?,
+            sky_vis: None,
+            sky_placeholder: SkyVisibility::placeholder(ctx)?,
             ground_sampler: ground::ground_sampler(ctx),
             ground: None,
             layouts,
@@ -197,11 +204,11 @@ impl Renderer {
             16,
             MAX_SHADOW_MAP.min(ctx.device.limits().max_texture_dimension_2d),
         );
-        if self
-            .bindings
-            .as_ref()
-            .is_some_and(|b| b.cascades.size == size && b.ground_maps == self.ground.is_some())
-        {
+        if self.bindings.as_ref().is_some_and(|b| {
+            b.cascades.size == size
+                && b.ground_maps == self.ground.is_some()
+                && b.sky_maps == self.sky_vis.is_some()
+        }) {
             return Ok(());
         }
         let cascades = match self.bindings.take() {
@@ -212,6 +219,14 @@ impl Renderer {
             .ground
             .as_ref()
             .map_or(&self.ground_placeholder, |g| &g.textures);
+        let sky = match &self.sky_vis {
+            Some(s) => (&s.view, &s.placement, true),
+            None => (
+                &self.sky_placeholder.view,
+                &self.sky_placeholder.placement,
+                false,
+            ),
+        };
         self.bindings = Some(FrameBindings::new(
             ctx,
             &self.layouts,
@@ -219,8 +234,35 @@ impl Renderer {
             cascades,
             (&self.shadow_sampler, &self.ground_sampler),
             ground,
+            sky,
         ));
         Ok(())
+    }
+
+    /// Computes the reference's sky visibility of `world` (the world this renderer was made
+    /// for) from `directions` directions: over the whole scene with its terrain, or over the
+    /// trees alone in the studio (`terrain` false). Needed before reference frames; kept.
+    pub fn prepare_reference(
+        &mut self,
+        ctx: &GpuContext,
+        world: &World,
+        directions: u32,
+        terrain: bool,
+    ) -> Result<()> {
+        let bounds = sky_visibility::bounds_of(world, terrain);
+        if bounds.is_empty() {
+            return Err(Error::BadInput(
+                "the reference needs something to draw: the world is empty".into(),
+            ));
+        }
+        let volume = SkyVolume::compute(world, &bounds, terrain, directions.max(1));
+        self.sky_vis = Some(SkyVisibility::upload(ctx, &volume, directions.max(1))?);
+        Ok(())
+    }
+
+    /// Bytes of GPU memory held by the reference's sky visibility (0 until computed).
+    pub fn sky_visibility_bytes(&self) -> u64 {
+        self.sky_vis.as_ref().map_or(0, |s| s.bytes)
     }
 
     fn ensure_depth(&mut self, ctx: &GpuContext, width: u32, height: u32) -> Result<()> {
@@ -256,6 +298,39 @@ impl Renderer {
         }
         let studio = frame.stage == Stage::Studio;
         let is_btf = frame.method == Method::Btf;
+        // The reference: sky visibility maps, and sun cascades with larger maps reaching
+        // every point of the scene.
+        let reference = frame.reference.filter(|_| frame.method == Method::Geometry);
+        let mut effective = *frame;
+        if let Some(r) = reference {
+            match &self.sky_vis {
+                Some(s) if s.count == r.sky_directions.max(1) => {}
+                Some(s) => {
+                    return Err(Error::BadInput(format!(
+                        "the reference frame asks for sky visibility from {} directions, the renderer has {}: call prepare_reference again",
+                        r.sky_directions, s.count
+                    )));
+                }
+                None => {
+                    return Err(Error::BadInput(
+                        "a reference frame needs the sky visibility: call Renderer::prepare_reference first".into(),
+                    ));
+                }
+            }
+            // (The studio's one shadow map is fitted to the object already.)
+            if !studio {
+                effective.shadows.map_size = frame.shadows.map_size.max(r.sun_map_size);
+                let far = self
+                    .world
+                    .scene_bounds
+                    .corners()
+                    .iter()
+                    .map(|c| c.distance(frame.camera.position))
+                    .fold(0.0f32, f32::max);
+                effective.shadows.distance = frame.shadows.distance.max(far);
+            }
+        }
+        let frame = &effective;
         if frame.method.needs_bake() && self.btf.is_none() {
             return Err(Error::BadInput(format!(
                 "the {} method needs baked BTF images: run `canopy bake` (the viewer bakes on first use)",
@@ -345,6 +420,10 @@ impl Renderer {
         let mut uniform_frame = *frame;
         uniform_frame.shadows.enabled = shadows_on;
         let mut uniforms = FrameUniforms::new(&uniform_frame, aspect, &cascades);
+        if let Some(s) = self.sky_vis.as_ref().filter(|_| reference.is_some()) {
+            uniforms.sky_vis_count = s.count;
+            uniforms.sky_vis_texel_world = s.cell;
+        }
 
         // The ground shadow maps follow the sun, not the camera. They are submitted on their
         // own so that their cost can be timed (blocking, when measuring).

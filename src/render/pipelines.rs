@@ -87,6 +87,18 @@ impl Layouts {
                     },
                     count: None,
                 },
+                // The reference's sky visibility volume and its placement.
+                wgpu::BindGroupLayoutEntry {
+                    binding: 6,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D3,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                uniform_entry(7, wgpu::ShaderStages::FRAGMENT),
             ],
         });
         let shadow_frame = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
