@@ -103,11 +103,13 @@ fn far_frame(scene: &Scene, distance: f32) -> FrameDesc {
     f
 }
 
-/// Mean FLIP of btf against the 2x supersampled geometry render over the pixels the
+/// Mean FLIP of btf against the 2x supersampled reference render over the pixels the
 /// billboards cover, every tree at the tree level, 6 x 6 directions at 32 x 32 texels.
-/// Measured on lavapipe (Mesa 22.3, llvmpipe 15): 0.143. Trees there are 20 pixels tall, so
+/// Measured on lavapipe (Mesa 22.3, llvmpipe 15): 0.147 (0.143 against the interactive
+/// geometry before the bake hid the sky behind each object's own leaves, 0.172 after: the
+/// bake and the truth must light alike). Trees there are 20 pixels tall, so
 /// much of it is the geometry's own aliasing. Lighting the billboards from the wrong side
-/// (sun turned 180 degrees and lowered to 10 degrees) measures 0.41.
+/// (sun turned 180 degrees and lowered to 10 degrees) measures 0.44.
 const TREE_LEVEL_MAX_MEAN_FLIP: f32 = 0.16;
 
 #[test]
@@ -121,7 +123,17 @@ fn btf_matches_geometry_where_the_tree_level_is_valid() {
     // measure 0.161 against 0.143 without.)
     frame.btf.vcm = false;
     let (w, h) = (192, 192);
-    let (truth, _) = renderer.render_image(&ctx, &frame, w, h, 2).unwrap();
+    renderer
+        .prepare_reference(
+            &ctx,
+            &world,
+            canopy::render::sky_visibility::SKY_DIRECTIONS,
+            true,
+        )
+        .unwrap();
+    let mut reference = frame;
+    reference.reference = Some(canopy::render::Reference::default());
+    let (truth, _) = renderer.render_image(&ctx, &reference, w, h, 2).unwrap();
     frame.method = Method::Btf;
     let (btf, stats) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
     let b = stats.btf.expect("btf stats");

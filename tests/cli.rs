@@ -224,9 +224,10 @@ fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
     for (i, c) in configs.iter().enumerate() {
         assert!(c["median_ms"].as_f64().unwrap() > 0.0, "{c}");
         let flip = c["mean_flip"].as_f64().unwrap();
-        // Unsupersampled, the truth is the geometry render itself.
+        // The truth is the reference (sky visibility, whole-scene sun shadows): the
+        // interactive geometry differs from it, a little.
         if i == 0 {
-            assert_eq!(flip, 0.0, "{c}");
+            assert!(flip > 0.0 && flip < 0.2, "{c}");
         } else {
             assert!(flip > 0.0 && flip < 1.0, "{c}");
         }

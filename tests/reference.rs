@@ -164,7 +164,8 @@ fn a_lone_tree_at_a_baked_view_and_light_is_nearly_the_reference() {
     frame.btf.lod_fade = 0.0;
     let mut r = Renderer::new(&ctx, &world).unwrap();
     r.attach_btf(&ctx, &baked, &world).unwrap();
-    r.prepare_reference(&ctx, &world, SKY_DIRECTIONS, true).unwrap();
+    r.prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
+        .unwrap();
     let size = 2 * settings.resolution;
     let mut reference = frame;
     reference.reference = Some(Reference::default());
@@ -172,9 +173,8 @@ fn a_lone_tree_at_a_baked_view_and_light_is_nearly_the_reference() {
     let plain = rgb(&r.render_image(&ctx, &frame, size, size, 2).unwrap().0);
     frame.method = canopy::render::Method::Btf;
     let btf = rgb(&r.render_image(&ctx, &frame, size, size, 1).unwrap().0);
-    let flip = |a: &image::RgbImage, b: &image::RgbImage| {
-        canopy::metrics::flip(a, b).unwrap().stats.mean
-    };
+    let flip =
+        |a: &image::RgbImage, b: &image::RgbImage| canopy::metrics::flip(a, b).unwrap().stats.mean;
     let (against_reference, against_plain) = (flip(&truth, &btf), flip(&plain, &btf));
     eprintln!(
         "lone fir, view {view}, light {light}: btf tree level vs reference {against_reference:.4}, vs interactive geometry {against_plain:.4}"

@@ -70,6 +70,14 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     let (baked, _) = canopy::bake::load_or_bake(&ctx, &scene, &world, &mut |_| {}).unwrap();
     renderer.attach_btf(&ctx, &baked, &world).unwrap();
+    renderer
+        .prepare_reference(
+            &ctx,
+            &world,
+            canopy::render::Reference::default().sky_directions,
+            true,
+        )
+        .unwrap();
     let flight = Flight::resolve("orbit", &FlightContext::from_world(&world)).unwrap();
     let opts = BenchOptions {
         width: 96,
@@ -78,8 +86,8 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
         repeats: 1,
         cache_dir: dir.join("cache"),
         scene_content: canopy::bench::scene_content(&scene),
-        // The interactive geometry as the truth: this test checks the tuner's bookkeeping.
-        reference: None,
+        // The same truth as `tune`'s: the reference.
+        reference: Some(canopy::render::Reference::default()),
     };
     let again = run::run(
         &ctx,
