@@ -249,6 +249,17 @@ impl Renderer {
         directions: u32,
         terrain: bool,
     ) -> Result<()> {
+        if world.forest.instances.len() != self.world.tree_bounds.len()
+            || world.species.len() != self.world.species.len()
+        {
+            return Err(Error::BadInput(format!(
+                "the reference's world ({} trees, {} species) is not this renderer's ({} trees, {} species)",
+                world.forest.instances.len(),
+                world.species.len(),
+                self.world.tree_bounds.len(),
+                self.world.species.len()
+            )));
+        }
         let bounds = sky_visibility::bounds_of(world, terrain);
         if bounds.is_empty() {
             return Err(Error::BadInput(
