@@ -44,6 +44,10 @@ enum Command {
         /// Method to start with (btf shows terrain and sky until its bake is ready).
         #[arg(long, default_value = "btf", value_parser = parse_method)]
         method: Method,
+        /// Use this baked file (from `canopy bake --out`) instead of the cache; it must have
+        /// been baked from the scene, and is never re-baked.
+        #[arg(long)]
+        baked: Option<PathBuf>,
     },
     /// Render one frame to a PNG, no window needed.
     Render(RenderArgs),
@@ -197,6 +201,10 @@ struct RenderArgs {
     /// Side of each shadow cascade's map, in texels.
     #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(16..=8192))]
     shadow_map: u32,
+    /// btf / billboard: use this baked file (from `canopy bake --out`) instead of the cache;
+    /// it must have been baked from this scene, and is never re-baked.
+    #[arg(long)]
+    baked: Option<PathBuf>,
     /// geometry: draw the reference the bench measures against (sky hidden by trees and
     /// hills, sun shadows over the whole scene from 4096² cascades); slower.
     #[arg(long)]
@@ -354,12 +362,14 @@ fn main() -> ExitCode {
             screenshot,
             after_frames,
             method,
+            baked,
         }) => canopy::app::run_with(
             scene.as_deref(),
             canopy::app::ViewOptions {
                 screenshot,
                 after_frames,
                 method,
+                baked,
             },
         )
         .map_err(anyhow::Error::from),
@@ -450,7 +460,17 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
             t0.elapsed().as_secs_f64()
         );
     }
-    if args.method.needs_bake() {
+    if let Some(path) = &args.baked {
+        if !args.method.needs_bake() {
+            return Err(canopy::Error::BadInput(format!(
+                "--baked is for the methods that draw baked images (btf, billboard), not {}",
+                args.method.name()
+            ))
+            .into());
+        }
+        let baked = canopy::bake::open_baked(path, &scene)?;
+        renderer.attach_btf(&ctx, &baked, &world)?;
+    } else if args.method.needs_bake() {
         let bar = progress::bar(true, 0, progress::BAKE_BAR);
         let baked =
             canopy::bake::load_or_bake(&ctx, &scene, &world, &mut |p| progress::show_bake(&bar, p));

@@ -286,3 +286,81 @@ fn bench_refuses_bad_sweeps_and_flights_with_2() {
     }
     assert!(!tmp("never").exists(), "nothing written on bad input");
 }
+
+/// `--baked FILE`: a file from `bake --out` is used as it is (no bake, no cache); one of
+/// another scene, a truncated one, a missing one, or `--baked` with a method that draws no
+/// baked images exits with 2 and the specific reason, and nothing is baked in its place.
+#[test]
+fn a_named_baked_file_is_used_or_refused_with_its_reason() {
+    let cache = tmp("baked-cache");
+    let lone = common::data("lone_tree.toml");
+    let file = tmp("lone.canopy");
+    let o = canopy()
+        .env("CANOPY_CACHE_DIR", &cache)
+        .arg("bake")
+        .arg(&lone)
+        .arg("--out")
+        .arg(&file)
+        .arg("--cpu")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let render = |scene: &std::path::Path, baked: &std::path::Path, method: &str| {
+        canopy()
+            .env("CANOPY_CACHE_DIR", &cache)
+            .arg("render")
+            .arg(scene)
+            .args([
+                "--method", method, "--size", "64x48", "--frames", "1", "--cpu",
+            ])
+            .arg("--baked")
+            .arg(baked)
+            .arg("--out")
+            .arg(tmp("baked.png"))
+            .output()
+            .unwrap()
+    };
+    let o = render(&lone, &file, "btf");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cached = std::fs::read_dir(&cache).map_or(0, |d| d.count());
+    assert_eq!(cached, 0, "nothing baked into the cache");
+
+    let refused = |o: std::process::Output, want: &str| {
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(err.contains(want), "expected {want:?} in: {err}");
+    };
+    // Another scene.
+    refused(
+        render(&common::data("small.toml"), &file, "btf"),
+        "baked for another scene",
+    );
+    // Truncated.
+    let bytes = std::fs::read(&file).unwrap();
+    let cut = tmp("cut.canopy");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    refused(render(&lone, &cut, "btf"), "cannot use the baked file");
+    assert_eq!(
+        std::fs::read(&cut).unwrap().len(),
+        bytes.len() / 2,
+        "left as it was"
+    );
+    // Missing.
+    refused(render(&lone, &tmp("none.canopy"), "btf"), "could not open");
+    // A method without baked images.
+    refused(render(&lone, &file, "geometry"), "--baked is for");
+    // The viewer checks the file before it opens a window.
+    refused(
+        canopy()
+            .env("CANOPY_CACHE_DIR", &cache)
+            .arg("view")
+            .arg(common::data("small.toml"))
+            .arg("--baked")
+            .arg(&file)
+            .output()
+            .unwrap(),
+        "baked for another scene",
+    );
+    let cached = std::fs::read_dir(&cache).map_or(0, |d| d.count());
+    assert_eq!(cached, 0, "nothing baked into the cache");
+}

@@ -34,6 +34,8 @@ pub struct ViewOptions {
     pub after_frames: u32,
     /// The method the viewer starts with.
     pub method: Method,
+    /// A baked file to use instead of the cache (checked before the window opens).
+    pub baked: Option<PathBuf>,
 }
 
 impl Default for ViewOptions {
@@ -42,6 +44,7 @@ impl Default for ViewOptions {
             screenshot: None,
             after_frames: 3,
             method: Method::Btf,
+            baked: None,
         }
     }
 }
@@ -57,6 +60,11 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         None => Scene::default_scene(),
     };
     let world = scene.build_world()?;
+    // A named baked file is checked before the window opens: a wrong one is refused.
+    let preloaded = match &options.baked {
+        Some(path) => Some((crate::bake::open_baked(path, &scene)?, path.clone())),
+        None => None,
+    };
     let title = match scene_path {
         Some(p) => format!("canopy: {}", p.display()),
         None => "canopy: default forest".to_string(),
@@ -75,6 +83,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         world,
         bake_job: None,
         bake_failed: false,
+        preloaded,
         title,
         options,
         running: None,
@@ -134,6 +143,8 @@ struct App {
     world: World,
     bake_job: Option<BakeJob>,
     bake_failed: bool,
+    /// The baked file named with `--baked`, until it is attached.
+    preloaded: Option<(crate::format::Baked, PathBuf)>,
     title: String,
     options: ViewOptions,
     running: Option<Running>,
@@ -260,6 +271,16 @@ impl App {
     /// The btf method needs a bake: start one in the background, or attach a finished one.
     fn tend_bake(&mut self) {
         let Some(r) = &mut self.running else { return };
+        if let Some((baked, path)) = self.preloaded.take() {
+            self.message = Some(match r.renderer.attach_btf(&r.ctx, &baked, &self.world) {
+                Ok(()) => (format!("BTF images from {}", path.display()), false),
+                Err(e) => {
+                    self.bake_failed = true;
+                    (format!("cannot use {}: {e}", path.display()), true)
+                }
+            });
+            return;
+        }
         // The bake starts with the viewer (from the cache when it can), whatever the method.
         if !r.renderer.has_btf() && self.bake_job.is_none() && !self.bake_failed {
             let progress = Arc::new(Mutex::new(crate::bake::Progress {

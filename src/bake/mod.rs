@@ -269,6 +269,24 @@ pub fn load_or_bake(
     load_or_bake_at(&cache::cache_path(scene), ctx, scene, world, progress)
 }
 
+/// A baked file the user named (`--baked`): read and checked against `scene`, never baked
+/// again. Any problem (missing, unreadable, corrupt, truncated, another version, another
+/// scene or other bake settings) is bad input with its specific reason.
+pub fn open_baked(path: &std::path::Path, scene: &crate::scene::Scene) -> Result<Baked> {
+    crate::format::read_expecting(path, cache::scene_hash(scene)).map_err(|e| {
+        let hint = match e {
+            crate::format::FormatError::SceneMismatch { .. } => {
+                " (pass the scene file it was baked from, or bake this scene with `canopy bake SCENE --out FILE`)"
+            }
+            _ => "",
+        };
+        Error::BadInput(format!(
+            "cannot use the baked file {}: {e}{hint}",
+            path.display()
+        ))
+    })
+}
+
 /// [`load_or_bake`] with the cache file at `path`.
 pub fn load_or_bake_at(
     path: &std::path::Path,
