@@ -135,6 +135,40 @@ fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
     }
 }
 
+/// Where a label would be drawn, in pixels (top left corner, size).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LabelBox {
+    x: i32,
+    y: i32,
+    width: i32,
+    height: i32,
+}
+
+/// How far down (pixels) each label moves so that none overlaps an earlier one: a line at
+/// a time, at most 8 lines.
+fn stack_labels(boxes: &[LabelBox]) -> Vec<i32> {
+    let mut placed: Vec<LabelBox> = Vec::with_capacity(boxes.len());
+    let mut shifts = Vec::with_capacity(boxes.len());
+    for b in boxes {
+        let overlaps = |c: &LabelBox, dy: i32| {
+            b.x < c.x + c.width
+                && c.x < b.x + b.width
+                && b.y + dy < c.y + c.height
+                && c.y < b.y + dy + b.height
+        };
+        let mut dy = 0;
+        for _ in 0..8 {
+            if !placed.iter().any(|c| overlaps(c, dy)) {
+                break;
+            }
+            dy += b.height + 2;
+        }
+        placed.push(LabelBox { y: b.y + dy, ..*b });
+        shifts.push(dy);
+    }
+    shifts
+}
+
 /// A number as a tick label: no trailing zeros, no exponent for chart-sized values.
 fn tick_label(v: f64) -> String {
     let s = format!("{v:.3}");
@@ -260,20 +294,45 @@ pub fn speed_accuracy_chart(path: &Path, points: &[ChartPoint], size: (u32, u32)
         }
         let label_px = text(15.0).1;
         let label_style = TextStyle::from((FONT, label_px)).color(&BLACK);
-        chart
-            .draw_series(front.iter().map(|&i| {
-                // Labels of points in the right fifth go to their left, so they stay inside.
-                // (The embedded font is monospaced: a character is 0.6 em wide.)
-                let label = usable[i].label.clone();
+        // Labels of points in the right fifth go to their left, so they stay inside. (The
+        // embedded font is monospaced: a character is 0.6 em wide.) Labels that would
+        // overlap an earlier one move down a line.
+        let boxes: Vec<LabelBox> = front
+            .iter()
+            .map(|&i| {
+                let label = &usable[i].label;
+                let width = (0.6 * label_px * label.chars().count() as f64) as i32;
                 let right = (coords[i].0 / x0).ln() / (x1 / x0).ln() > 0.8;
                 let dx = if right {
-                    -(radius + 3) - (0.6 * label_px * label.chars().count() as f64) as i32
+                    -(radius + 3) - width
                 } else {
                     radius + 3
                 };
-                EmptyElement::at(coords[i])
-                    + Text::new(label, (dx, -radius - label_px as i32), label_style.clone())
-            }))
+                let (px, py) = chart.backend_coord(&coords[i]);
+                LabelBox {
+                    x: px + dx,
+                    y: py - radius - label_px as i32,
+                    width,
+                    height: label_px as i32,
+                }
+            })
+            .collect();
+        let shifts = stack_labels(&boxes);
+        let anchors: Vec<(i32, i32)> = front
+            .iter()
+            .map(|&i| chart.backend_coord(&coords[i]))
+            .collect();
+        chart
+            .draw_series(front.iter().zip(&boxes).zip(&shifts).zip(&anchors).map(
+                |(((&i, b), &dy), &(px, py))| {
+                    EmptyElement::at(coords[i])
+                        + Text::new(
+                            usable[i].label.clone(),
+                            (b.x - px, b.y - py + dy),
+                            label_style.clone(),
+                        )
+                },
+            ))
             .map_err(e)?;
         chart
             .configure_series_labels()
@@ -429,6 +488,24 @@ pub fn flight_chart(path: &Path, series: &[FlightSeries], size: (u32, u32)) -> R
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn overlapping_labels_move_down_and_apart_ones_stay() {
+        let b = |x, y| LabelBox {
+            x,
+            y,
+            width: 100,
+            height: 15,
+        };
+        // Two labels at nearly the same place (two btf points side by side), one far away.
+        let shifts = stack_labels(&[b(10, 50), b(14, 52), b(400, 50), b(12, 48)]);
+        assert_eq!(shifts[0], 0);
+        assert_eq!(shifts[2], 0);
+        assert!(shifts[1] >= 15 - 2, "{shifts:?}");
+        // The third near one clears both.
+        assert!(shifts[3] > shifts[1], "{shifts:?}");
+    }
+
     use super::*;
     use std::collections::HashSet;
     use std::path::PathBuf;
