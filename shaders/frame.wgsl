@@ -25,10 +25,10 @@ struct Frame {
     pcf_radius: f32,
     // Sky ambient from above / from below (colour x intensity).
     sky_ambient: vec3<f32>,
-    // Directions of the reference's sky visibility maps (0: the sky is never hidden).
+    // Directions of the reference's sky visibility (0: the sky is never hidden).
     sky_vis_count: u32,
     ground_ambient: vec3<f32>,
-    // World size of one texel of the sky visibility maps.
+    // Side of one cell of the sky visibility volume (m).
     sky_vis_texel_world: f32,
     // Background colours (not scaled by intensity).
     sky_zenith: vec3<f32>,

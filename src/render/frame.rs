@@ -119,7 +119,7 @@ impl Default for ShadowSettings {
 }
 
 /// The `geometry` method as the reference every accuracy figure is measured against: the
-/// sky light hidden where trees and hills hide the sky (sky visibility maps), and sun
+/// sky light hidden where trees and hills hide the sky (a sky visibility volume), and sun
 /// shadows from larger cascade maps reaching the whole scene.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Reference {
@@ -267,10 +267,10 @@ pub struct FrameUniforms {
     /// PCF radius of the cascades, in texels.
     pub pcf_radius: f32,
     pub sky_ambient: [f32; 3],
-    /// Directions of the reference's sky visibility maps (0: the sky is never hidden).
+    /// Directions of the reference's sky visibility (0: the sky is never hidden).
     pub sky_vis_count: u32,
     pub ground_ambient: [f32; 3],
-    /// World size of one texel of the sky visibility maps.
+    /// Side of one cell of the sky visibility volume (m).
     pub sky_vis_texel_world: f32,
     pub sky_zenith: [f32; 3],
     pub _pad2: f32,

@@ -16,7 +16,7 @@ pub struct FrameBindings {
     /// It binds the ground maps (not their placeholders).
     pub ground_maps: bool,
     /// It binds the sky visibility (not its placeholder).
-    pub sky_maps: bool,
+    pub sky_volume: bool,
 }
 
 /// The sky visibility group 0 binds: (3D texture, placement uniforms, not the placeholder).
@@ -77,7 +77,7 @@ impl FrameBindings {
             cascades,
             bind_group,
             ground_maps: !ground.is_placeholder(),
-            sky_maps: sky.2,
+            sky_volume: sky.2,
         }
     }
 }

@@ -207,7 +207,7 @@ impl Renderer {
         if self.bindings.as_ref().is_some_and(|b| {
             b.cascades.size == size
                 && b.ground_maps == self.ground.is_some()
-                && b.sky_maps == self.sky_vis.is_some()
+                && b.sky_volume == self.sky_vis.is_some()
         }) {
             return Ok(());
         }
@@ -271,11 +271,6 @@ impl Renderer {
         Ok(())
     }
 
-    /// Bytes of GPU memory held by the reference's sky visibility (0 until computed).
-    pub fn sky_visibility_bytes(&self) -> u64 {
-        self.sky_vis.as_ref().map_or(0, |s| s.bytes)
-    }
-
     fn ensure_depth(&mut self, ctx: &GpuContext, width: u32, height: u32) -> Result<()> {
         if self
             .depth
@@ -309,7 +304,7 @@ impl Renderer {
         }
         let studio = frame.stage == Stage::Studio;
         let is_btf = frame.method == Method::Btf;
-        // The reference: sky visibility maps, and sun cascades with larger maps reaching
+        // The reference: sky visibility, and sun cascades with larger maps reaching
         // every point of the scene.
         let reference = frame.reference.filter(|_| frame.method == Method::Geometry);
         let mut effective = *frame;

@@ -372,8 +372,6 @@ pub struct SkyVisibility {
     pub cell: f32,
     pub view: wgpu::TextureView,
     pub placement: wgpu::Buffer,
-    /// Bytes of GPU memory held.
-    pub bytes: u64,
 }
 
 fn texture_3d(ctx: &GpuContext, dims: [u32; 3], data: &[u8]) -> Result<wgpu::TextureView> {
@@ -448,7 +446,6 @@ impl SkyVisibility {
             cell: volume.cell,
             view,
             placement,
-            bytes: data.len() as u64,
         })
     }
 
@@ -466,7 +463,6 @@ impl SkyVisibility {
                     inv_size: [1.0, 1.0, 1.0, 0.0],
                 },
             ),
-            bytes: 1,
         })
     }
 }

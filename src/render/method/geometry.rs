@@ -107,11 +107,6 @@ impl GeometryMethod {
         })
     }
 
-    /// The depth-only pipeline of the cascades (also draws the sky visibility maps).
-    pub fn shadow_pipeline(&self) -> &wgpu::RenderPipeline {
-        &self.shadow_pipeline
-    }
-
     /// Uploads each cascade's uniforms (the frame's, seen from the cascade's light).
     pub fn write_uniforms(
         &self,
