@@ -141,15 +141,14 @@ fn ground_transmittance(world: vec3<f32>) -> f32 {
     return textureSampleLevel(ground_alpha, ground_sampler, c.xy, 0.0).r;
 }
 
-@fragment
-fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+// The lit colour of a fragment (before fog and exposure).
+fn shade(in: VertexOut, front: bool) -> vec3<f32> {
     var n = normalize(in.normal);
     let leaf = in.foliage > 0.5;
     if leaf && !front {
         n = -n;
     }
     let to_eye = frame.camera_pos - in.world;
-    let dist = length(to_eye);
     let l = frame.sun_dir;
     let ndl = dot(n, l);
     // Leaves let some light through: a leaf lit from behind still glows a little.
@@ -169,6 +168,39 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) ve
     let sky_normal = select(n, sign(n.y + 1e-6) * n, leaf);
     let sky_open = sky_visibility(in.world, sky_normal);
     let ambient = mix(frame.ground_ambient, frame.sky_ambient * sky_open, n.y * 0.5 + 0.5);
-    let c = in.color * (frame.sun_color * direct * vis + ambient);
-    return vec4<f32>(fog_and_exposure(c, 1.0, dist), 1.0);
+    return in.color * (frame.sun_color * direct * vis + ambient);
+}
+
+@fragment
+fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    let dist = length(frame.camera_pos - in.world);
+    return vec4<f32>(fog_and_exposure(shade(in, front), 1.0, dist), 1.0);
+}
+
+// The texel bake's voxelisation (src/render/voxelize.rs): every fragment of an
+// orthographic view adds its pixel's coverage and its lit colour to the voxel it lies in,
+// so that one pass gives every slab at once. Sums in fixed point: 4 words per voxel
+// (fragments, then red, green, blue times `scale`).
+struct VoxelGrid {
+    box_min: vec3<f32>,
+    voxel: f32,
+    dims: vec3<u32>,
+    scale: f32,
+}
+@group(3) @binding(0) var<uniform> voxel_grid: VoxelGrid;
+@group(3) @binding(1) var<storage, read_write> voxel_sums: array<atomic<u32>>;
+
+@fragment
+fn fs_voxel(in: VertexOut, @builtin(front_facing) front: bool) {
+    let cell = vec3<i32>(floor((in.world - voxel_grid.box_min) / voxel_grid.voxel));
+    if any(cell < vec3<i32>(0)) || any(cell >= vec3<i32>(voxel_grid.dims)) {
+        return;
+    }
+    let c = max(shade(in, front), vec3<f32>(0.0)) * voxel_grid.scale;
+    let d = voxel_grid.dims;
+    let i = 4u * ((u32(cell.z) * d.y + u32(cell.y)) * d.x + u32(cell.x));
+    atomicAdd(&voxel_sums[i], 1u);
+    atomicAdd(&voxel_sums[i + 1u], u32(c.r + 0.5));
+    atomicAdd(&voxel_sums[i + 2u], u32(c.g + 0.5));
+    atomicAdd(&voxel_sums[i + 3u], u32(c.b + 0.5));
 }

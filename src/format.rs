@@ -1,7 +1,8 @@
-//! The `.canopy` file: everything one bake produces (BTF image sets, visibility cube maps),
+//! The `.canopy` file: everything one bake produces (BTF image sets, visibility cube maps,
+//! texel volumes),
 //! in one versioned, checksummed file that the viewer caches and validates on load.
 //!
-//! # Byte layout (format version 2)
+//! # Byte layout (format version 3)
 //!
 //! All integers are little-endian, `f32` is IEEE 754 binary32 (little-endian bits). Offsets
 //! are in bytes. There is no padding anywhere.
@@ -11,7 +12,7 @@
 //!   off  size  field
 //!    0     8   magic           "CANOPY\r\n" (43 41 4E 4F 50 59 0D 0A); the CR LF pair catches
 //!                              a file whose line endings were converted in transfer
-//!    8     4   version         u32, 2
+//!    8     4   version         u32, 3
 //!   12     4   section_count   u32 N, at most MAX_SECTIONS (4096)
 //!   16     8   file_size       u64, total length of the file in bytes, header included
 //!   24     8   scene_hash      u64, hash of the scene text + bake settings (from the caller)
@@ -20,9 +21,11 @@
 //!   40     4   resolution      u32, one of 32, 64, 128              | BakeSettings
 //!   44     4   supersample     u32, 1..=8                           |
 //!   48     4   vcm_resolution  u32, 8..=128                        /
-//!   52     4   reserved        u32, must be 0
+//!   52     4   texel_resolution u32, 0 (no texel volumes) or 16..=256: voxels along the
+//!                              longest side of each species' box
 //!   56  16*N   section table, one 16-byte entry per section, in file order:
-//!                +0  u32 kind      1 = BTF image sets, 2 = VCM sets (0 and others invalid)
+//!                +0  u32 kind      1 = BTF image sets, 2 = VCM sets, 3 = texel volumes
+//!                                  (0 and others invalid)
 //!                +4  u32 crc32     CRC-32 (IEEE, as crc32fast) of the section's payload
 //!                +8  u64 length    payload length in bytes, 4..=MAX_SECTION_BYTES (1 GiB)
 //!   56+16N  4  header_crc      u32, CRC-32 of header bytes [0, 56+16N)
@@ -62,10 +65,24 @@
 //!   48     8   opacity_len     u64, must equal 8*6*resolution²
 //!   56     O   opacity         u8 per texel: 8 corners x 6 cube faces x resolution², each
 //!                              face res rows of res texels (see `crate::vcm` for the layout)
+//!
+//! TEXEL VOLUME RECORD (kind 3; 44 bytes + voxel data)
+//!    0     4   species         u32
+//!    4     4   lights          u32, one of 6, 18, 66, 258
+//!    8    12   dims            3 x u32 (x, y, z voxels), each 1..=256
+//!   20    12   box_min         3 x f32, finite (the volume's lowest corner, object frame)
+//!   32     4   voxel           f32, finite, > 0: side of one (cubic) voxel, m
+//!   36     8   voxels_len      u64, must equal (lights+1)*x*y*z*4
+//!   44     V   voxels          RGBA8 premultiplied, lights+1 volumes back to back: volume k
+//!                              (k < lights) lit by light sample k alone (sun only, self-
+//!                              shadowed), volume `lights` by the sky alone; in a volume,
+//!                              voxel (i, j, k) at ((k*y + j)*x + i)*4, j = 0 the lowest row;
+//!                              alpha is the coverage of one voxel-thick slab
 //! ```
 //!
 //! A set's own views, lights and resolution are checked against the allowed values but need
-//! not equal the header's settings. A BTF set of one `(species, level)` appears at most once. Records of one kind keep their
+//! not equal the header's settings. A BTF set of one `(species, level)` appears at most once,
+//! a texel volume of one species too. Records of one kind keep their
 //! order across sections; the writer puts all BTF sections first, then all VCM sections,
 //! packing records greedily so no section exceeds [`MAX_SECTION_BYTES`] (one record must
 //! fit in one section). A reader accepts the sections of both kinds in any order.
@@ -99,7 +116,7 @@ use crate::model::Level;
 /// The first 8 bytes of every `.canopy` file.
 pub const MAGIC: [u8; 8] = *b"CANOPY\r\n";
 /// The format version this code writes and the only one it reads.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 /// Most sections a file may have.
 pub const MAX_SECTIONS: u32 = 4096;
 /// Largest payload of one section (1 GiB).
@@ -114,6 +131,10 @@ pub const SUPERSAMPLE_RANGE: RangeInclusive<u32> = 1..=8;
 pub const VCM_RESOLUTION_RANGE: RangeInclusive<u32> = 8..=128;
 /// Bounding-box corners per VCM set.
 pub const VCM_CORNERS: usize = 8;
+/// Allowed texel resolutions (voxels along a box's longest side); 0 means no texels.
+pub const TEXEL_RESOLUTION_RANGE: RangeInclusive<u32> = 16..=256;
+/// Allowed voxel counts along each axis of a texel volume.
+pub const TEXEL_DIM_RANGE: RangeInclusive<u32> = 1..=256;
 /// Cube faces per visibility cube map.
 pub const CUBE_FACES: usize = 6;
 
@@ -127,11 +148,14 @@ const SECTION_PREFIX_BYTES: u64 = 4;
 const BTF_RECORD_FIXED_BYTES: u64 = 56;
 /// Bytes of a VCM record besides its opacity data.
 const VCM_RECORD_FIXED_BYTES: u64 = 56;
+/// Fixed part of a texel volume record (before the voxels).
+const TEXEL_RECORD_FIXED_BYTES: u64 = 44;
 
 const SETTINGS_DIRECTIONS: &str = "6, 18, 66 or 258";
 const SETTINGS_RESOLUTIONS: &str = "32, 64 or 128";
 const SETTINGS_SUPERSAMPLE: &str = "1 to 8";
 const SETTINGS_VCM_RESOLUTION: &str = "8 to 128";
+const SETTINGS_TEXEL_RESOLUTION: &str = "0 (none) or 16 to 256";
 
 /// Everything that can go wrong reading or writing a `.canopy` file. Every variant but
 /// [`FormatError::Io`] means the file (or the data given to write) is unusable and the
@@ -251,6 +275,8 @@ pub struct Baked {
     pub btf: Vec<BtfImageSet>,
     /// Visibility cube maps.
     pub vcm: Vec<VcmSet>,
+    /// Texel volumes, one per species (none when the settings' texel resolution is 0).
+    pub texels: Vec<TexelVolume>,
 }
 
 /// The bake parameters stored in the header.
@@ -266,6 +292,9 @@ pub struct BakeSettings {
     pub supersample: u32,
     /// VCM face resolution: in [`VCM_RESOLUTION_RANGE`].
     pub vcm_resolution: u32,
+    /// Voxels along the longest side of each species' texel volume: 0 (no texels) or in
+    /// [`TEXEL_RESOLUTION_RANGE`].
+    pub texel_resolution: u32,
 }
 
 /// The billboard images of one species at one level.
@@ -305,6 +334,23 @@ pub struct VcmSet {
     pub mean_opacity: [f32; 8],
 }
 
+/// One species' whole tree as RGBA volumes in its box (object frame): one per baked light
+/// and one lit by the sky.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelVolume {
+    pub species: u32,
+    /// Light samples (the BTF's direction set of this count).
+    pub lights: u32,
+    /// Voxels along x, y, z.
+    pub dims: [u32; 3],
+    /// Lowest corner of the volume in the object frame.
+    pub box_min: [f32; 3],
+    /// Side of one cubic voxel (m).
+    pub voxel: f32,
+    /// RGBA8 premultiplied, lights+1 volumes (see the record layout above).
+    pub voxels: Vec<u8>,
+}
+
 /// The kind tag of a section.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u32)]
@@ -313,6 +359,8 @@ pub enum SectionKind {
     Btf = 1,
     /// [`VcmSet`] records.
     Vcm = 2,
+    /// [`TexelVolume`] records.
+    Texel = 3,
 }
 
 impl SectionKind {
@@ -321,6 +369,7 @@ impl SectionKind {
         match tag {
             1 => Some(SectionKind::Btf),
             2 => Some(SectionKind::Vcm),
+            3 => Some(SectionKind::Texel),
             _ => None,
         }
     }
@@ -329,6 +378,7 @@ impl SectionKind {
         match self {
             SectionKind::Btf => "btf image sets",
             SectionKind::Vcm => "vcm sets",
+            SectionKind::Texel => "texel volumes",
         }
     }
 }
@@ -379,6 +429,13 @@ impl BakeSettings {
                 "vcm_resolution",
                 self.vcm_resolution,
                 SETTINGS_VCM_RESOLUTION,
+            );
+        }
+        if self.texel_resolution != 0 && !TEXEL_RESOLUTION_RANGE.contains(&self.texel_resolution) {
+            return bad(
+                "texel_resolution",
+                self.texel_resolution,
+                SETTINGS_TEXEL_RESOLUTION,
             );
         }
         Ok(())
@@ -491,6 +548,58 @@ impl VcmSet {
     }
 }
 
+impl TexelVolume {
+    /// Voxels in one of its volumes, or None on overflow.
+    pub fn voxel_count(&self) -> Option<u64> {
+        u64::from(self.dims[0])
+            .checked_mul(u64::from(self.dims[1]))?
+            .checked_mul(u64::from(self.dims[2]))
+    }
+
+    /// The length `voxels` must have: (lights+1)*x*y*z*4, or None on overflow.
+    pub fn expected_voxels_len(&self) -> Option<u64> {
+        self.voxel_count()?
+            .checked_mul(4)?
+            .checked_mul(u64::from(self.lights).checked_add(1)?)
+    }
+
+    /// The volume's highest corner in the object frame.
+    pub fn box_max(&self) -> [f32; 3] {
+        std::array::from_fn(|i| self.box_min[i] + self.dims[i] as f32 * self.voxel)
+    }
+
+    /// What is wrong with this volume's fields given its data length, if anything.
+    fn problem(&self, voxels_len: u64) -> Option<String> {
+        if !DIRECTION_COUNTS.contains(&self.lights) {
+            return Some(format!(
+                "lights is {}, not {SETTINGS_DIRECTIONS}",
+                self.lights
+            ));
+        }
+        if let Some(i) = self.dims.iter().position(|d| !TEXEL_DIM_RANGE.contains(d)) {
+            return Some(format!("dims[{i}] is {}, not 1 to 256", self.dims[i]));
+        }
+        if let Some(i) = self.box_min.iter().position(|c| !c.is_finite()) {
+            return Some(format!("box_min[{i}] is {}, not finite", self.box_min[i]));
+        }
+        if !(self.voxel.is_finite() && self.voxel > 0.0) {
+            return Some(format!("voxel is {}, not finite and > 0", self.voxel));
+        }
+        let expected = self.expected_voxels_len();
+        if expected != Some(voxels_len) {
+            return Some(format!(
+                "voxels holds {voxels_len} bytes, expected {} ({} lights + sky x {}x{}x{} x 4)",
+                show_len(expected),
+                self.lights,
+                self.dims[0],
+                self.dims[1],
+                self.dims[2]
+            ));
+        }
+        None
+    }
+}
+
 impl Baked {
     /// Bytes of BTF image data (direct + ambient) over all sets.
     pub fn btf_bytes(&self) -> u64 {
@@ -503,6 +612,11 @@ impl Baked {
     /// Bytes of VCM opacity data over all sets.
     pub fn vcm_bytes(&self) -> u64 {
         self.vcm.iter().map(|s| s.opacity.len() as u64).sum()
+    }
+
+    /// Bytes of texel voxels over all volumes.
+    pub fn texel_bytes(&self) -> u64 {
+        self.texels.iter().map(|t| t.voxels.len() as u64).sum()
     }
 
     /// Checks everything [`write_atomic`] checks before writing: the settings, every set
@@ -531,7 +645,16 @@ impl Baked {
                 });
             }
         }
+        for (i, t) in self.texels.iter().enumerate() {
+            if let Some(reason) = t.problem(t.voxels.len() as u64) {
+                return Err(FormatError::MalformedContent {
+                    section: format!("texel volume {i} (species {})", t.species),
+                    reason,
+                });
+            }
+        }
         check_unique_btf(&self.btf)?;
+        check_unique_texels(&self.texels)?;
         let plans = plan_sections(self, section_limit);
         if let Some(p) = plans.iter().find(|p| p.len > section_limit) {
             return Err(FormatError::AbsurdSize {
@@ -559,6 +682,19 @@ fn image_bytes(resolution: u32) -> Option<u64> {
 
 fn show_len(len: Option<u64>) -> String {
     len.map_or_else(|| "more than 2^64".to_owned(), |l| l.to_string())
+}
+
+fn check_unique_texels(volumes: &[TexelVolume]) -> Result<(), FormatError> {
+    let mut seen = HashSet::with_capacity(volumes.len());
+    for (i, t) in volumes.iter().enumerate() {
+        if !seen.insert(t.species) {
+            return Err(FormatError::MalformedContent {
+                section: format!("texel volume {i} (species {})", t.species),
+                reason: "a texel volume of this species appears twice".into(),
+            });
+        }
+    }
+    Ok(())
 }
 
 fn check_unique_btf(sets: &[BtfImageSet]) -> Result<(), FormatError> {
@@ -596,6 +732,10 @@ fn vcm_record_len(set: &VcmSet) -> u64 {
     VCM_RECORD_FIXED_BYTES + set.opacity.len() as u64
 }
 
+fn texel_record_len(t: &TexelVolume) -> u64 {
+    TEXEL_RECORD_FIXED_BYTES + t.voxels.len() as u64
+}
+
 /// Packs records into sections greedily, each at most `limit` bytes unless one record alone
 /// is larger (which [`Baked::validate`] rejects).
 fn plan_sections(baked: &Baked, limit: u64) -> Vec<PlannedSection> {
@@ -609,6 +749,12 @@ fn plan_sections(baked: &Baked, limit: u64) -> Vec<PlannedSection> {
     pack(
         SectionKind::Vcm,
         baked.vcm.iter().map(vcm_record_len),
+        limit,
+        &mut plans,
+    );
+    pack(
+        SectionKind::Texel,
+        baked.texels.iter().map(texel_record_len),
         limit,
         &mut plans,
     );
@@ -696,6 +842,21 @@ fn write_section_payload<W: Write>(
                 w.write_all(&s.opacity)?;
             }
         }
+        SectionKind::Texel => {
+            for t in &baked.texels[range] {
+                w.write_all(&t.species.to_le_bytes())?;
+                w.write_all(&t.lights.to_le_bytes())?;
+                for d in t.dims {
+                    w.write_all(&d.to_le_bytes())?;
+                }
+                for c in t.box_min {
+                    w.write_all(&c.to_le_bytes())?;
+                }
+                w.write_all(&t.voxel.to_le_bytes())?;
+                w.write_all(&(t.voxels.len() as u64).to_le_bytes())?;
+                w.write_all(&t.voxels)?;
+            }
+        }
     }
     Ok(())
 }
@@ -729,7 +890,7 @@ impl<'a> Encoding<'a> {
             s.resolution,
             s.supersample,
             s.vcm_resolution,
-            0,
+            s.texel_resolution,
         ] {
             header.extend_from_slice(&v.to_le_bytes());
         }
@@ -1019,13 +1180,6 @@ fn decode<R: Read>(
 
     // The header is intact: check what it says.
     let header_len = input.pos;
-    let reserved = u32_at(&rest, 40);
-    if reserved != 0 {
-        return Err(FormatError::MalformedContent {
-            section: "the header".into(),
-            reason: format!("the reserved field is {reserved}, not 0"),
-        });
-    }
     let file_size = u64_at(&rest, 4);
     if file_size > input.len {
         return Err(FormatError::Truncated {
@@ -1058,6 +1212,7 @@ fn decode<R: Read>(
         resolution: u32_at(&rest, 28),
         supersample: u32_at(&rest, 32),
         vcm_resolution: u32_at(&rest, 36),
+        texel_resolution: u32_at(&rest, 40),
     };
     settings.validate()?;
 
@@ -1070,7 +1225,7 @@ fn decode<R: Read>(
         let Some(kind) = SectionKind::from_u32(tag) else {
             return Err(FormatError::MalformedContent {
                 section: format!("section {i}"),
-                reason: format!("unknown section kind {tag} (known: 1 = btf, 2 = vcm)"),
+                reason: format!("unknown section kind {tag} (known: 1 = btf, 2 = vcm, 3 = texel)"),
             });
         };
         if len > MAX_SECTION_BYTES {
@@ -1105,6 +1260,7 @@ fn decode<R: Read>(
         settings,
         btf: Vec::new(),
         vcm: Vec::new(),
+        texels: Vec::new(),
     };
     for (i, &(kind, stored, len)) in entries.iter().enumerate() {
         let name = format!("section {i} ({})", kind.name());
@@ -1117,6 +1273,7 @@ fn decode<R: Read>(
         let mut result = match kind {
             SectionKind::Btf => decode_btf(&mut section, &mut baked.btf),
             SectionKind::Vcm => decode_vcm(&mut section, &mut baked.vcm),
+            SectionKind::Texel => decode_texels(&mut section, &mut baked.texels),
         };
         if result.is_ok() && section.remaining != 0 {
             result = Err(section.malformed(format!(
@@ -1141,6 +1298,7 @@ fn decode<R: Read>(
         result?;
     }
     check_unique_btf(&baked.btf)?;
+    check_unique_texels(&baked.texels)?;
     Ok(baked)
 }
 
@@ -1321,6 +1479,33 @@ fn decode_vcm<R: Read>(
     Ok(())
 }
 
+fn decode_texels<R: Read>(
+    s: &mut Section<'_, '_, R>,
+    out: &mut Vec<TexelVolume>,
+) -> Result<(), FormatError> {
+    let count = s.record_count(TEXEL_RECORD_FIXED_BYTES)?;
+    for index in 0..count {
+        let mut t = TexelVolume {
+            species: s.u32("species")?,
+            lights: s.u32("lights")?,
+            dims: [s.u32("dims")?, s.u32("dims")?, s.u32("dims")?],
+            box_min: [s.f32("box_min")?, s.f32("box_min")?, s.f32("box_min")?],
+            voxel: s.f32("voxel")?,
+            voxels: Vec::new(),
+        };
+        let len = s.u64("voxels length")?;
+        if let Some(reason) = t.problem(len) {
+            return Err(s.malformed(format!(
+                "texel record {index} (species {}): {reason}",
+                t.species
+            )));
+        }
+        t.voxels = s.bytes(len, "the voxels")?;
+        out.push(t);
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1419,6 +1604,19 @@ mod tests {
             resolution: 32,
             supersample: 2,
             vcm_resolution: 8,
+            texel_resolution: 16,
+        }
+    }
+
+    fn texel_volume(species: u32, dims: [u32; 3]) -> TexelVolume {
+        let len = 7 * dims.iter().product::<u32>() as usize * 4;
+        TexelVolume {
+            species,
+            lights: 6,
+            dims,
+            box_min: [-1.5, 0.0, -1.5],
+            voxel: 0.25,
+            voxels: noise(species + 200, len),
         }
     }
 
@@ -1466,6 +1664,7 @@ mod tests {
             settings: settings(),
             btf: vec![btf_set(0, Level::Twig), btf_set(1, Level::Tree)],
             vcm: vec![vcm_set(0, Level::Twig, 8), vcm_set(7, Level::Branch, 16)],
+            texels: vec![texel_volume(0, [8, 16, 8])],
         }
     }
 
@@ -1476,6 +1675,7 @@ mod tests {
             settings: settings(),
             btf: Vec::new(),
             vcm: vec![vcm_set(3, Level::Twig, 8), vcm_set(4, Level::Tree, 8)],
+            texels: vec![texel_volume(1, [2, 3, 2])],
         }
     }
 
@@ -1548,7 +1748,14 @@ mod tests {
         assert_eq!(u64_at(&bytes, 16), bytes.len() as u64);
         assert_eq!(
             bytes.len() as u64,
-            60 + 2 * 16 + 2 * 4 + 2 * 56 + 2 * 56 + baked.btf_bytes() + baked.vcm_bytes()
+            60 + 3 * 16
+                + 3 * 4
+                + 2 * 56
+                + 2 * 56
+                + 44
+                + baked.btf_bytes()
+                + baked.vcm_bytes()
+                + baked.texel_bytes()
         );
         assert_eq!(to_bytes(&baked), bytes, "encoding is deterministic");
         let (back, peak) = peak_during(|| from_bytes(&bytes).unwrap());
@@ -1567,6 +1774,7 @@ mod tests {
             settings: settings(),
             btf: Vec::new(),
             vcm: Vec::new(),
+            texels: Vec::new(),
         };
         let bytes = to_bytes(&baked);
         assert_eq!(bytes.len(), 60);
@@ -1585,11 +1793,12 @@ mod tests {
             [
                 (SectionKind::Btf, 1),
                 (SectionKind::Btf, 1),
-                (SectionKind::Vcm, 2)
+                (SectionKind::Vcm, 2),
+                (SectionKind::Texel, 1)
             ]
         );
         let bytes = Encoding::new(&baked, limit).into_bytes();
-        assert_eq!(section_count(&bytes), 3);
+        assert_eq!(section_count(&bytes), 4);
         assert!(from_bytes(&bytes).unwrap() == baked);
 
         // Sections of both kinds in any order decode too: put VCM first.
@@ -1877,7 +2086,15 @@ mod tests {
 
         // Ambient of the wrong size, radius not positive, texel size NaN, VCM too short,
         // mean opacity out of range: each caught on write and on read.
-        let breakers: [fn(&mut Baked); 5] = [
+        // Texel volumes: voxels one byte short, a zero or huge dimension, a NaN corner, a
+        // negative voxel, a light count that is no direction set.
+        let breakers: [fn(&mut Baked); 11] = [
+            |b| b.texels[0].voxels.pop().map_or((), drop),
+            |b| b.texels[0].dims[1] = 0,
+            |b| b.texels[0].dims[2] = 100_000,
+            |b| b.texels[0].box_min[0] = f32::NAN,
+            |b| b.texels[0].voxel = -0.25,
+            |b| b.texels[0].lights = 5,
             |b| b.btf[0].ambient.extend([0; 4]),
             |b| b.btf[0].radius = 0.0,
             |b| b.btf[1].texel_size = f32::NAN,
@@ -1918,6 +2135,15 @@ mod tests {
             Err(FormatError::MalformedContent { reason, .. }) if reason.contains("left after the last record")
         ));
 
+        // The same species' texel volume twice.
+        let mut baked = sample();
+        baked.texels.push(baked.texels[0].clone());
+        assert!(baked.validate().is_err());
+        assert!(matches!(
+            from_bytes(&to_bytes(&baked)),
+            Err(FormatError::MalformedContent { reason, .. }) if reason.contains("twice")
+        ));
+
         // The same BTF set twice.
         let mut baked = sample();
         baked.btf[1] = baked.btf[0].clone();
@@ -1943,13 +2169,15 @@ mod tests {
         let dir = scratch_dir("settings");
         let path = dir.join("bad.canopy");
         type Change = fn(&mut BakeSettings);
-        let cases: [(Change, &str); 6] = [
+        let cases: [(Change, &str); 8] = [
             (|s| s.views = 7, "views"),
             (|s| s.lights = 0, "lights"),
             (|s| s.resolution = 256, "resolution"),
             (|s| s.supersample = 0, "supersample"),
             (|s| s.supersample = 9, "supersample"),
             (|s| s.vcm_resolution = 4, "vcm_resolution"),
+            (|s| s.texel_resolution = 8, "texel_resolution"),
+            (|s| s.texel_resolution = 512, "texel_resolution"),
         ];
         for (change, name) in cases {
             let mut baked = small();

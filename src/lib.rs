@@ -15,6 +15,7 @@ pub mod model;
 pub mod progress;
 pub mod render;
 pub mod scene;
+pub mod slices;
 pub mod sphere;
 pub mod vcm;
 

@@ -637,6 +637,20 @@ fn bake(
                 s.species, s.level, s.bytes, s.radius_m, s.texel_m
             );
         }
+        if r.texels.is_empty() {
+            println!("  no texel volumes (texel_resolution = 0)");
+        } else {
+            println!(
+                "  texel volumes ({} voxels on the longest side, {} lights + sky each): {} bytes, {:.1} s",
+                r.texel_resolution, r.lights, r.texel_bytes, r.texel_seconds
+            );
+        }
+        for t in &r.texels {
+            println!(
+                "  {:<10} {}x{}x{} voxels of {:.3} m, {} volumes, {} bytes",
+                t.species, t.dims[0], t.dims[1], t.dims[2], t.voxel_m, t.volumes, t.bytes
+            );
+        }
         println!("wrote {} ({} bytes)", r.out, r.file_bytes);
     }
     Ok(())

@@ -8,7 +8,7 @@ use crate::format::{BakeSettings, Baked};
 use crate::scene::Scene;
 
 /// Bumped whenever the generator or the bake changes what it makes: old caches are rebaked.
-pub const BAKE_REVISION: u32 = 4;
+pub const BAKE_REVISION: u32 = 5;
 
 /// The bake settings a scene asks for.
 pub fn settings_of(scene: &Scene) -> BakeSettings {
@@ -18,6 +18,7 @@ pub fn settings_of(scene: &Scene) -> BakeSettings {
         resolution: scene.bake.resolution,
         supersample: scene.bake.supersample,
         vcm_resolution: 32,
+        texel_resolution: scene.bake.texel_resolution,
     }
 }
 
@@ -52,6 +53,7 @@ pub fn scene_hash(scene: &Scene) -> u64 {
         s.resolution,
         s.supersample,
         s.vcm_resolution,
+        s.texel_resolution,
         BAKE_REVISION,
     ] {
         h = fnv1a(&v.to_le_bytes(), h);

@@ -4,10 +4,12 @@
 //! same render core as the ground truth, offscreen and
 //! supersampled so that alpha is coverage. Views and lights are in the object's own frame,
 //! so one bake serves every rotated, scaled instance. Then the visibility cube maps of every
-//! object of every level (`vcm`), drawn from the BTF images' alpha.
+//! object of every level (`vcm`), drawn from the BTF images' alpha, and each species' texel
+//! volumes (`texel`), photographed slab by slab.
 
 pub mod cache;
 pub mod report;
+pub mod texel;
 pub mod vcm;
 
 use glam::{Mat4, Vec3};
@@ -91,7 +93,9 @@ pub fn image_count(settings: &BakeSettings, species: usize) -> u64 {
 /// Steps of a whole bake of `world` (what [`Progress::total`] counts): one per BTF image and
 /// one per object whose 8 cube maps are baked.
 pub fn step_count(settings: &BakeSettings, world: &World) -> u64 {
-    image_count(settings, world.species.len()) + vcm::object_count(world)
+    image_count(settings, world.species.len())
+        + vcm::object_count(world)
+        + texel::step_count(world, settings.texel_resolution, settings.lights)
 }
 
 /// How long a bake and each of its parts took.
@@ -101,6 +105,7 @@ pub struct BakeTimes {
     pub seconds: f64,
     pub btf_seconds: f64,
     pub vcm_seconds: f64,
+    pub texel_seconds: f64,
 }
 
 /// The whole bake of `world`: the BTF image sets, then the visibility cube maps.
@@ -131,10 +136,28 @@ pub fn bake(
             })
         },
     )?;
+    let vcm_seconds = t1.elapsed().as_secs_f64();
+    let t2 = std::time::Instant::now();
+    let before_texels = images + vcm::object_count(world);
+    baked.texels = texel::bake_texels(
+        ctx,
+        world,
+        settings.texel_resolution,
+        settings.lights,
+        settings.supersample,
+        &mut |done, what| {
+            progress(&Progress {
+                done: before_texels + done,
+                total,
+                what: what.to_owned(),
+            })
+        },
+    )?;
     let times = BakeTimes {
         seconds: t0.elapsed().as_secs_f64(),
         btf_seconds,
-        vcm_seconds: t1.elapsed().as_secs_f64(),
+        vcm_seconds,
+        texel_seconds: t2.elapsed().as_secs_f64(),
     };
     Ok((baked, times))
 }
@@ -218,6 +241,7 @@ pub fn bake_btf(
         settings: *settings,
         btf,
         vcm: Vec::new(),
+        texels: Vec::new(),
     })
 }
 
@@ -241,6 +265,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         exposure: 1.0,
         stage: Stage::Studio,
         btf: Default::default(),
+        texel: Default::default(),
         trees: true,
         ground_shadows: false,
         sun_held: false,

@@ -22,12 +22,30 @@ pub struct BakeReport {
     pub seconds: f64,
     pub btf_seconds: f64,
     pub vcm_seconds: f64,
+    pub texel_seconds: f64,
+    /// Voxels along each species' longest side (0: no texels baked).
+    pub texel_resolution: u32,
+    /// Bytes of texel volumes (all lights and the sky).
+    pub texel_bytes: u64,
+    /// One per species' texel volumes.
+    pub texels: Vec<TexelReport>,
     pub views: u32,
     pub lights: u32,
     pub resolution: u32,
     pub supersample: u32,
     /// One per BTF image set.
     pub sets: Vec<SetReport>,
+}
+
+/// One species' texel volumes in a [`BakeReport`].
+#[derive(Clone, Debug, Serialize)]
+pub struct TexelReport {
+    pub species: String,
+    pub dims: [u32; 3],
+    pub voxel_m: f32,
+    /// Volumes: one per light and one lit by the sky.
+    pub volumes: u32,
+    pub bytes: usize,
 }
 
 /// One BTF image set of a [`BakeReport`].
@@ -62,6 +80,24 @@ impl BakeReport {
                 texel_m: s.texel_size,
             })
             .collect();
+        let name = |s: u32| {
+            world
+                .species
+                .get(s as usize)
+                .map(|t| t.name.clone())
+                .unwrap_or_default()
+        };
+        let texels = baked
+            .texels
+            .iter()
+            .map(|t| TexelReport {
+                species: name(t.species),
+                dims: t.dims,
+                voxel_m: t.voxel,
+                volumes: t.lights + 1,
+                bytes: t.voxels.len(),
+            })
+            .collect();
         Self {
             out: path.display().to_string(),
             file_bytes: std::fs::metadata(path).map(|m| m.len()).unwrap_or(0),
@@ -72,6 +108,10 @@ impl BakeReport {
             seconds: times.seconds,
             btf_seconds: times.btf_seconds,
             vcm_seconds: times.vcm_seconds,
+            texel_seconds: times.texel_seconds,
+            texel_resolution: settings.texel_resolution,
+            texel_bytes: baked.texel_bytes(),
+            texels,
             views: settings.views,
             lights: settings.lights,
             resolution: settings.resolution,

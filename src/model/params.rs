@@ -27,6 +27,9 @@ pub struct BakeParams {
     pub resolution: u32,
     /// Supersampling per side when rendering the images (1..=8, default 4): alpha is coverage.
     pub supersample: u32,
+    /// Voxels along the longest side of each species' texel volume (the `texel` method):
+    /// 0 bakes none, else 16..=256 (default 64).
+    pub texel_resolution: u32,
 }
 
 impl Default for BakeParams {
@@ -36,6 +39,7 @@ impl Default for BakeParams {
             lights: 6,
             resolution: 64,
             supersample: 4,
+            texel_resolution: 64,
         }
     }
 }
@@ -57,6 +61,9 @@ impl BakeParams {
                 .with_found(self.resolution));
         }
         check::range_u32("supersample", self.supersample, 1, 8)?;
+        if self.texel_resolution != 0 {
+            check::range_u32("texel_resolution", self.texel_resolution, 16, 256)?;
+        }
         Ok(())
     }
 }

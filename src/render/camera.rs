@@ -27,6 +27,8 @@ pub struct OrthoView {
     pub forward: Vec3,
     pub up: Vec3,
     pub half_height: f32,
+    /// Distance from the camera to the far plane (the near plane is `Camera::near`).
+    pub far: f32,
 }
 
 impl Camera {
@@ -60,8 +62,27 @@ impl Camera {
             forward: forward.normalize_or(Vec3::NEG_Z),
             up: up.normalize_or(Vec3::Y),
             half_height: half_height.max(1e-4),
+            far: Self::ORTHO_DEPTH,
         });
         c.near = 0.0;
+        c
+    }
+
+    /// An orthographic camera that sees only what lies between `near` and `far` metres in
+    /// front of it: one slab of an object (the texel bake).
+    pub fn slab(
+        position: Vec3,
+        forward: Vec3,
+        up: Vec3,
+        half_height: f32,
+        near: f32,
+        far: f32,
+    ) -> Self {
+        let mut c = Self::orthographic(position, forward, up, half_height);
+        c.near = near.max(0.0);
+        if let Some(o) = &mut c.ortho {
+            o.far = far.max(c.near + 1e-4);
+        }
         c
     }
 
@@ -99,9 +120,13 @@ impl Camera {
     }
 
     pub fn projection(&self, aspect: f32) -> Mat4 {
-        if let Some(OrthoView { half_height: h, .. }) = self.ortho {
+        if let Some(OrthoView {
+            half_height: h,
+            far,
+            ..
+        }) = self.ortho
+        {
             // Reversed Z as for perspective: depth 1 at the camera, 0 far away.
-            let far = Self::ORTHO_DEPTH;
             let w = h * aspect.max(1e-4);
             return glam::camera::rh::proj::directx::orthographic(-w, w, -h, h, far, self.near);
         }

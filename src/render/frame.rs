@@ -17,22 +17,31 @@ pub enum Method {
     Btf,
     /// One camera-facing image per tree from a single baked view and light: the floor.
     Billboard,
+    /// Each tree as a volumetric texel: its baked volumes sliced parallel to the screen
+    /// (needs a bake with texel volumes).
+    Texel,
 }
 
 impl Method {
-    pub const ALL: &'static [Method] = &[Method::Geometry, Method::Btf, Method::Billboard];
+    pub const ALL: &'static [Method] = &[
+        Method::Geometry,
+        Method::Btf,
+        Method::Billboard,
+        Method::Texel,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
             Method::Geometry => "geometry",
             Method::Btf => "btf",
             Method::Billboard => "billboard",
+            Method::Texel => "texel",
         }
     }
 
     /// The method draws baked images (and needs a bake).
     pub fn needs_bake(self) -> bool {
-        matches!(self, Method::Btf | Method::Billboard)
+        matches!(self, Method::Btf | Method::Billboard | Method::Texel)
     }
 
     pub fn parse(s: &str) -> Option<Method> {
@@ -152,6 +161,8 @@ pub struct FrameDesc {
     pub stage: Stage,
     /// Knobs of the `btf` method.
     pub btf: super::btf::BtfSettings,
+    /// Knobs of the `texel` method.
+    pub texel: super::method::texel::TexelSettings,
     /// Draw the trees (off: terrain and sky only, e.g. while a bake is running).
     pub trees: bool,
     /// Image-based methods: soft tree shadows on the ground from an alpha shadow map, and
@@ -189,6 +200,7 @@ impl FrameDesc {
             exposure: 1.0,
             stage: Stage::World,
             btf: btf_settings_of(scene),
+            texel: Default::default(),
             trees: true,
             ground_shadows: true,
             sun_held: false,
@@ -233,6 +245,8 @@ pub struct FrameStats {
     pub prepare_ms: f64,
     /// What the `btf` method did (absent for other methods).
     pub btf: Option<super::btf::BtfStats>,
+    /// What the `texel` method did (absent for other methods).
+    pub texel: Option<super::method::texel::TexelStats>,
     /// Sun-dependent state was rebuilt this frame (the sun moved): the trees' VCM reads
     /// and the ground alpha shadow map.
     pub sun_update: bool,

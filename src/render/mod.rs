@@ -23,6 +23,7 @@ pub mod shadow;
 pub mod sky_visibility;
 pub mod target;
 pub mod timing;
+pub mod voxelize;
 pub mod world_gpu;
 
 use std::collections::HashMap;
@@ -70,6 +71,7 @@ enum Prepared {
     Btf(btf::BtfFrame),
     /// The `billboard` method's records (drawn like `btf`'s, with no parts as geometry).
     Billboard(btf::BtfFrame),
+    Texel(method::texel::TexelFrame),
 }
 
 /// Owns the GPU side of a world and the pipelines; created once, then asked for frames.
@@ -85,6 +87,8 @@ pub struct Renderer {
     timer: Option<GpuTimer>,
     geometry: GeometryMethod,
     btf: Option<btf::BtfAssets>,
+    /// The bake's texel volumes, when it has them.
+    texel: Option<method::texel::TexelAssets>,
     /// The ground shadow maps, once a method has used them.
     ground: Option<GroundMaps>,
     /// What group 0 binds in their place until then.
@@ -92,6 +96,8 @@ pub struct Renderer {
     /// The reference's sky visibility, once [`Self::prepare_reference`] computed it.
     sky_vis: Option<SkyVisibility>,
     sky_placeholder: SkyVisibility,
+    /// The texel bake's voxelisation pipeline, once asked for.
+    voxel_pipeline: Option<voxelize::VoxelPipeline>,
 }
 
 impl Renderer {
@@ -128,10 +134,13 @@ impl Renderer {
             depth: None,
             timer: GpuTimer::new(ctx),
             btf: None,
+            texel: None,
+            voxel_pipeline: None,
         })
     }
 
-    /// Loads baked BTF image sets for the `btf` method (replacing any loaded before).
+    /// Loads a bake for the image-based methods (replacing any loaded before): its BTF
+    /// image sets and visibility cube maps, and its texel volumes when it has them.
     pub fn attach_btf(
         &mut self,
         ctx: &GpuContext,
@@ -139,6 +148,11 @@ impl Renderer {
         world: &World,
     ) -> Result<()> {
         self.btf = Some(btf::BtfAssets::new(ctx, baked, world)?);
+        self.texel = if baked.texels.is_empty() {
+            None
+        } else {
+            Some(method::texel::TexelAssets::new(ctx, baked, world)?)
+        };
         if let Some(g) = &mut self.ground {
             g.invalidate();
         }
@@ -147,6 +161,16 @@ impl Renderer {
 
     pub fn has_btf(&self) -> bool {
         self.btf.is_some()
+    }
+
+    /// The attached bake has texel volumes (the `texel` method can draw).
+    pub fn has_texels(&self) -> bool {
+        self.texel.is_some()
+    }
+
+    /// Bytes of texel volumes on the GPU (0 without them).
+    pub fn texel_bytes(&self) -> u64 {
+        self.texel.as_ref().map_or(0, |t| t.bytes)
     }
 
     /// Texel sizes of a species' three levels, from the attached bake.
@@ -343,6 +367,11 @@ impl Renderer {
                 frame.method.name()
             )));
         }
+        if frame.method == Method::Texel && self.texel.is_none() {
+            return Err(Error::BadInput(
+                "the texel method needs baked texel volumes, and this bake has none: set texel_resolution above 0 in the scene's [bake] table and bake again".into(),
+            ));
+        }
         // The btf method's trees are not geometry, so their shadows on the ground come from
         // the alpha shadow map, and the terrain's own shadows from the terrain depth drawn
         // with it, both rebuilt only when the sun moves.
@@ -406,6 +435,35 @@ impl Renderer {
                     frustum: &frustum,
                 },
             )),
+            (Method::Texel, b) => {
+                let vcm = match b {
+                    Some(b) if frame.texel.vcm && frame.trees => {
+                        let t0 = std::time::Instant::now();
+                        if b.update_sun(to_sun) {
+                            sun_moved = true;
+                            sun_update_ms += t0.elapsed().as_secs_f64() * 1e3;
+                        }
+                        Some(b.scene())
+                    }
+                    _ => None,
+                };
+                match self.texel.as_mut() {
+                    Some(t) => Prepared::Texel(t.prepare_frame(
+                        ctx,
+                        &self.world,
+                        &visible,
+                        &method::texel::TexelView {
+                            camera: cam,
+                            focal_px: cam.focal_px(height),
+                            to_sun,
+                            frustum: &frustum,
+                        },
+                        &frame.texel,
+                        vcm,
+                    )),
+                    None => return Err(Error::Gpu("the texel volumes are not loaded".into())),
+                }
+            }
             _ => Prepared::Geometry(GeometryFrame::prepare(&self.world, frame, aspect, visible)),
         };
         let (runs, cascades, shadows_on) = match &prepared {
@@ -417,6 +475,13 @@ impl Renderer {
             Prepared::Btf(b) | Prepared::Billboard(b) => (
                 self.world
                     .upload_lists(ctx, &[b.trunk_only.clone(), b.trunk_and_limbs.clone()]),
+                Cascades::none(),
+                false,
+            ),
+            // No tree parts as geometry; the list still holds the terrain's instance.
+            Prepared::Texel(_) => (
+                self.world
+                    .upload_lists(ctx, &[vec![Vec::new(); self.world.species.len()]]),
                 Cascades::none(),
                 false,
             ),
@@ -490,6 +555,13 @@ impl Renderer {
             }
             _ => None,
         };
+        let texel_pipelines = match (&prepared, self.texel.as_mut()) {
+            (Prepared::Texel(_), Some(t)) => Some(
+                t.pipelines(&ctx.device, &self.layouts.frame, format)
+                    .clone(),
+            ),
+            _ => None,
+        };
         let queries = self.timer.as_mut().and_then(|t| t.begin()).cloned();
         let (Some(bindings), Some(depth), Some(pipes)) = (
             &self.bindings,
@@ -503,44 +575,20 @@ impl Renderer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
-        for c in 0..CASCADES {
-            // Cleared even when off, so a stale map never shades a frame.
-            let ts = queries
-                .as_ref()
-                .filter(|_| c == 0)
-                .map(|q| wgpu::RenderPassTimestampWrites {
-                    query_set: q,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: None,
-                });
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("shadow cascade"),
-                color_attachments: &[],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &bindings.cascades.layer_views[c],
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: ts,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            if let Prepared::Geometry(g) = &prepared
-                && g.shadows_on
-            {
-                self.geometry.draw_cascade(
-                    &mut pass,
-                    c,
-                    &self.world,
-                    &runs[c + 1],
-                    !studio,
-                    &mut stats,
-                );
-            }
-        }
+        let casters = match &prepared {
+            Prepared::Geometry(g) if g.shadows_on => Some(&runs[1..]),
+            _ => None,
+        };
+        encode_cascades(
+            &mut encoder,
+            bindings,
+            &self.geometry,
+            &self.world,
+            casters,
+            !studio,
+            queries.as_ref(),
+            &mut stats,
+        );
 
         {
             let ts = queries.as_ref().map(|q| wgpu::RenderPassTimestampWrites {
@@ -607,6 +655,22 @@ impl Renderer {
                     // The btf knobs do not apply.
                     stats.btf = None;
                 }
+                (Prepared::Texel(tf), _) => {
+                    // The terrain, then the texels over it.
+                    GeometryMethod::draw_main(
+                        &mut pass,
+                        &self.world,
+                        &runs[0],
+                        pipes,
+                        !studio,
+                        &mut stats,
+                    );
+                    if let (Some(t), Some(p)) = (&self.texel, &texel_pipelines) {
+                        pass.set_bind_group(0, &bindings.bind_group, &[]);
+                        t.draw(&mut pass, p, tf, &mut stats);
+                    }
+                    stats.texel = Some(tf.stats);
+                }
                 _ => GeometryMethod::draw_main(
                     &mut pass,
                     &self.world,
@@ -632,6 +696,111 @@ impl Renderer {
             return Err(Error::Gpu(e));
         }
         Ok(stats)
+    }
+
+    /// A voxel grid for [`Self::voxelize`] (building the voxel pipeline on first use).
+    pub fn voxel_target(
+        &mut self,
+        ctx: &GpuContext,
+        box_min: glam::Vec3,
+        dims: glam::UVec3,
+        voxel: f32,
+    ) -> Result<voxelize::VoxelTarget> {
+        if self.voxel_pipeline.is_none() {
+            let p = ctx.checked("building the voxel pipeline", || {
+                voxelize::VoxelPipeline::new(&ctx.device, &self.layouts)
+            })?;
+            self.voxel_pipeline = Some(p);
+        }
+        let Some(p) = &self.voxel_pipeline else {
+            return Err(Error::Gpu("the voxel pipeline was not built".into()));
+        };
+        voxelize::VoxelTarget::new(ctx, p, box_min, dims, voxel)
+    }
+
+    /// The texel bake's voxelisation: the trees of `frame` (a `geometry` frame in the
+    /// studio, orthographic) drawn at `width` x `height` pixels, every fragment added to the
+    /// voxel of `target` it lies in (see [`voxelize`]). Sun shadows and the reference's
+    /// sky visibility shade the fragments as in a frame.
+    pub fn voxelize(
+        &mut self,
+        ctx: &GpuContext,
+        frame: &FrameDesc,
+        width: u32,
+        height: u32,
+        target: &voxelize::VoxelTarget,
+    ) -> Result<()> {
+        target::check_size(width, height, Some(ctx))?;
+        if ctx.is_lost() {
+            return Err(Error::Gpu("the GPU device was lost; restart canopy".into()));
+        }
+        self.ensure_depth(ctx, width, height)?;
+        self.ensure_bindings(ctx, frame.shadows.map_size)?;
+        let aspect = width as f32 / height as f32;
+        let visible = self.world.cull(&frame.camera.frustum(aspect));
+        let g = GeometryFrame::prepare(&self.world, frame, aspect, visible);
+        let runs = self.world.upload_lists(ctx, &g.lists);
+        let mut uniform_frame = *frame;
+        uniform_frame.shadows.enabled = g.shadows_on;
+        let mut uniforms = FrameUniforms::new(&uniform_frame, aspect, &g.cascades);
+        if let Some(s) = self.sky_vis.as_ref().filter(|_| frame.reference.is_some()) {
+            uniforms.sky_vis_count = s.count;
+            uniforms.sky_vis_texel_world = s.cell;
+        }
+        ctx.queue
+            .write_buffer(&self.frame_uniforms, 0, bytemuck::bytes_of(&uniforms));
+        self.geometry.write_uniforms(ctx, &uniforms, &g);
+        let (Some(bindings), Some(depth), Some(voxel)) =
+            (&self.bindings, &self.depth, &self.voxel_pipeline)
+        else {
+            return Err(Error::Gpu("render targets were not created".into()));
+        };
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("voxelise"),
+            });
+        let mut stats = FrameStats::default();
+        let casters = g.shadows_on.then_some(&runs[1..]);
+        let studio = frame.stage == Stage::Studio;
+        encode_cascades(
+            &mut encoder,
+            bindings,
+            &self.geometry,
+            &self.world,
+            casters,
+            !studio,
+            None,
+            &mut stats,
+        );
+        target.clear(&mut encoder);
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("voxelise"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth.view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, &bindings.bind_group, &[]);
+            pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
+            pass.set_bind_group(3, &target.bind_group, &[]);
+            GeometryMethod::draw_with(&mut pass, &self.world, &runs[0], voxel.meshes(), !studio);
+        }
+        target.copy_out(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+        if let Some(e) = ctx.take_error() {
+            return Err(Error::Gpu(e));
+        }
+        Ok(())
     }
 
     /// Renders one frame offscreen and reads it back; with `supersample` > 1, renders that
@@ -661,5 +830,48 @@ impl Renderer {
         )?;
         let img = target.read(ctx)?;
         Ok((target::downsample(&img, ss), stats))
+    }
+}
+
+/// The sun cascades' passes: each map cleared (even when off, so a stale map never shades a
+/// frame) and, when `casters` holds each cascade's tree runs, drawn. The first pass opens
+/// the frame's GPU timer when there is one.
+#[allow(clippy::too_many_arguments)]
+fn encode_cascades(
+    encoder: &mut wgpu::CommandEncoder,
+    bindings: &FrameBindings,
+    geometry: &GeometryMethod,
+    world: &WorldGpu,
+    casters: Option<&[Vec<world_gpu::TreeRun>]>,
+    terrain: bool,
+    queries: Option<&wgpu::QuerySet>,
+    stats: &mut FrameStats,
+) {
+    for c in 0..CASCADES {
+        let ts = queries
+            .filter(|_| c == 0)
+            .map(|q| wgpu::RenderPassTimestampWrites {
+                query_set: q,
+                beginning_of_pass_write_index: Some(0),
+                end_of_pass_write_index: None,
+            });
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("shadow cascade"),
+            color_attachments: &[],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &bindings.cascades.layer_views[c],
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: ts,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        if let Some(runs) = casters.and_then(|r| r.get(c)) {
+            geometry.draw_cascade(&mut pass, c, world, runs, terrain, stats);
+        }
     }
 }

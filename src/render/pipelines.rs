@@ -226,6 +226,14 @@ fn light_view_pipeline(
     })
 }
 
+/// The two pipelines a pass draws meshes with: bark and ground (back faces culled), and
+/// foliage (two-sided).
+#[derive(Clone, Copy)]
+pub struct MeshPipelines<'a> {
+    pub opaque: &'a wgpu::RenderPipeline,
+    pub foliage: &'a wgpu::RenderPipeline,
+}
+
 /// Pipelines that draw into a colour target of one format.
 pub struct ColorPipelines {
     pub opaque: wgpu::RenderPipeline,
@@ -234,6 +242,13 @@ pub struct ColorPipelines {
 }
 
 impl ColorPipelines {
+    pub fn meshes(&self) -> MeshPipelines<'_> {
+        MeshPipelines {
+            opaque: &self.opaque,
+            foliage: &self.foliage,
+        }
+    }
+
     pub fn new(device: &wgpu::Device, layouts: &Layouts, format: wgpu::TextureFormat) -> Self {
         let geometry = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("geometry.wgsl"),

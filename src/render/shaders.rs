@@ -12,6 +12,7 @@ const SHADOW: &str = include_str!("../../shaders/shadow.wgsl");
 const SKY: &str = include_str!("../../shaders/sky.wgsl");
 const BTF: &str = include_str!("../../shaders/btf.wgsl");
 const GROUND_MAP: &str = include_str!("../../shaders/ground_map.wgsl");
+const TEXEL: &str = include_str!("../../shaders/texel.wgsl");
 
 /// A mesh pass's module: frame uniforms, instancing, then the pass's own file.
 fn with_instancing(pass: &str) -> String {
@@ -36,6 +37,7 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("sky", sky()),
         ("btf", btf()),
         ("ground_map", ground_map()),
+        ("texel", texel()),
     ]
 }
 
@@ -53,6 +55,11 @@ pub fn sky() -> String {
 
 pub fn btf() -> String {
     with_billboards(BTF)
+}
+
+/// The `texel` method's pass: frame uniforms, then its file.
+pub fn texel() -> String {
+    with_frame(TEXEL)
 }
 
 /// The ground shadow maps' pass: its terrain is drawn with `shadow()`'s vertex stage.

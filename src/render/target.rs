@@ -165,7 +165,7 @@ pub fn map_read(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>> {
     Ok(data)
 }
 
-fn srgb_to_linear(c: u8) -> f32 {
+pub fn srgb_to_linear(c: u8) -> f32 {
     let c = f32::from(c) / 255.0;
     if c <= 0.04045 {
         c / 12.92
@@ -174,7 +174,7 @@ fn srgb_to_linear(c: u8) -> f32 {
     }
 }
 
-fn linear_to_srgb(c: f32) -> u8 {
+pub fn linear_to_srgb(c: f32) -> u8 {
     let c = c.clamp(0.0, 1.0);
     let s = if c <= 0.003_130_8 {
         c * 12.92

@@ -7,7 +7,7 @@ use wgpu::util::DeviceExt;
 
 use super::GpuContext;
 use super::camera::Frustum;
-use super::pipelines::ColorPipelines;
+use super::pipelines::MeshPipelines;
 use crate::model::World;
 use crate::model::mesh::{Aabb, Mesh, Vertex};
 use crate::{Error, Result};
@@ -338,7 +338,7 @@ impl WorldGpu {
         &self,
         pass: &mut wgpu::RenderPass<'_>,
         runs: &[TreeRun],
-        pipes: Option<&ColorPipelines>,
+        pipes: Option<MeshPipelines<'_>>,
         terrain: bool,
         kinds: &[PartKind],
     ) -> (u64, u32, u32) {
@@ -346,7 +346,7 @@ impl WorldGpu {
         let mut calls = 0u32;
         let mut trees = 0u32;
         if let Some(p) = pipes {
-            pass.set_pipeline(&p.opaque);
+            pass.set_pipeline(p.opaque);
         }
         let mut draw = |pass: &mut wgpu::RenderPass<'_>, set: &PartSet, first: u32, n: u32| {
             pass.set_bind_group(2, &set.bind_group, &[]);
@@ -363,7 +363,7 @@ impl WorldGpu {
         // Opaque parts of every species first, then foliage, to switch pipelines twice only.
         for foliage in [false, true] {
             if let Some(p) = pipes {
-                pass.set_pipeline(if foliage { &p.foliage } else { &p.opaque });
+                pass.set_pipeline(if foliage { p.foliage } else { p.opaque });
             }
             for run in runs {
                 for set in self.species[run.species]

@@ -142,6 +142,18 @@ impl GeometryMethod {
         stats.draw_calls += calls;
     }
 
+    /// Draws the trees of `runs` whole (and the terrain when asked) with `pipes` (the
+    /// texel bake's voxelisation).
+    pub fn draw_with(
+        pass: &mut wgpu::RenderPass<'_>,
+        world: &WorldGpu,
+        runs: &[TreeRun],
+        pipes: pipelines::MeshPipelines<'_>,
+        terrain: bool,
+    ) {
+        world.draw(pass, runs, Some(pipes), terrain, &ALL_PARTS);
+    }
+
     /// Draws the camera's trees (`runs`), whole, and the terrain when asked, in the main
     /// pass.
     pub fn draw_main(
@@ -152,7 +164,8 @@ impl GeometryMethod {
         terrain: bool,
         stats: &mut FrameStats,
     ) {
-        let (tris, trees, calls) = world.draw(pass, runs, Some(pipes), terrain, &ALL_PARTS);
+        let (tris, trees, calls) =
+            world.draw(pass, runs, Some(pipes.meshes()), terrain, &ALL_PARTS);
         stats.triangles = tris;
         stats.trees_drawn = trees;
         stats.draw_calls += calls;

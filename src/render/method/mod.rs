@@ -10,3 +10,4 @@
 pub mod billboard;
 pub mod btf;
 pub mod geometry;
+pub mod texel;

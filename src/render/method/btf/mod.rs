@@ -249,11 +249,17 @@ impl BtfAssets {
         terrain: bool,
         stats: &mut FrameStats,
     ) {
-        let (t0, _, c0) = world.draw(pass, &runs[0], Some(pipes), terrain, &[PartKind::Trunk]);
+        let (t0, _, c0) = world.draw(
+            pass,
+            &runs[0],
+            Some(pipes.meshes()),
+            terrain,
+            &[PartKind::Trunk],
+        );
         let (t1, _, c1) = world.draw(
             pass,
             &runs[1],
-            Some(pipes),
+            Some(pipes.meshes()),
             false,
             &[PartKind::Trunk, PartKind::Limbs],
         );

@@ -238,6 +238,16 @@ impl BtfScene {
         Some((s.layer_base, s.center, s.radius))
     }
 
+    /// Tree instance `t`'s tree-level VCM shading for the current sun (its sun and sky
+    /// factors at the 8 corners of its species' tree box) and that box in the object frame;
+    /// None without visibility cube maps.
+    pub fn tree_shade(&self, t: usize, species: usize, model: &Mat4) -> Option<(Shade, Aabb)> {
+        let parts = self.species.get(species)?;
+        let vcm = self.vcm.as_ref()?;
+        let shade = vcm.for_tree(t, species, model, &parts.frames).tree();
+        Some((shade, parts.frames.tree.bounds))
+    }
+
     /// Reads every tree's cube maps in the sun's direction if it moved; true if it did.
     pub fn update_sun(&mut self, to_sun: Vec3) -> bool {
         self.vcm.as_mut().is_some_and(|v| v.set_sun(to_sun))

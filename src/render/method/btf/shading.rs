@@ -397,9 +397,11 @@ mod tests {
                 resolution: 32,
                 supersample: 1,
                 vcm_resolution: 8,
+                texel_resolution: 0,
             },
             btf: Vec::new(),
             vcm,
+            texels: Vec::new(),
         }
     }
 

@@ -1,0 +1,173 @@
+// The `texel` method, slices parallel to the screen (Decaudin-Neyret 2009, "Volumetric
+// Billboards"): each tree is a box holding its species' baked volumes in one 3D texture.
+// The box's faces are drawn; each fragment walks the eye's ray through the box and samples
+// the volume where the ray crosses planes parallel to the screen, `spacing` metres of view
+// depth apart, so that every box is cut by the same family of slices and no stack ever
+// switches. Opacity is corrected for the step (alpha' = 1 - (1 - alpha)^(s / voxel)), the
+// slices are composited front to back, and the result is blended over what lies behind
+// with premultiplied alpha. `TexelGpu` in src/render/method/texel.rs mirrors the record
+// byte for byte (checked by tests/gpu_layout.rs).
+
+struct Texel {
+    // Object to world (rotation x uniform scale + translation), and its inverse.
+    model: mat4x4<f32>,
+    world_to_object: mat4x4<f32>,
+    // The box in the object frame.
+    box_min: vec3<f32>,
+    // View depth between two slices (m).
+    spacing: f32,
+    box_size: vec3<f32>,
+    // Side of one voxel in the object frame (the baked slab thickness).
+    voxel: f32,
+    // Where volume 0 of the species starts in the 3D texture (uvw), and how far apart
+    // (in w) its volumes lie: light k at k * volume_dw, the sky at lights * volume_dw.
+    atlas_origin: vec3<f32>,
+    volume_dw: f32,
+    // The extent of one volume in uvw.
+    atlas_extent: vec3<f32>,
+    // Mip level to sample (from the voxel's projected size).
+    lod: f32,
+    // The 3 nearest baked lights of the sun in the object frame, and their weights.
+    light_index: vec3<u32>,
+    // MODE_VOLUME or MODE_SLICES.
+    mode: u32,
+    light_weight: vec3<f32>,
+    // Light samples of the bake (the sky volume's index).
+    lights: u32,
+    tint: vec3<f32>,
+    // Object-to-world scale.
+    scale: f32,
+    // The tree-level VCM box (object frame): its lowest corner and 1 / its size.
+    vcm_min: vec3<f32>,
+    // Most samples one ray may take.
+    max_steps: f32,
+    vcm_inv_size: vec3<f32>,
+    // Slices this texel was given (for the overlay).
+    slices: f32,
+    // Sun and sky visibility at the 8 box corners (corner k: bit 0 = max x, bit 1 = max y,
+    // bit 2 = max z).
+    vcm_direct: array<vec4<f32>, 2>,
+    vcm_sky: array<vec4<f32>, 2>,
+}
+
+const MODE_VOLUME: u32 = 0u;
+// The slice count as a colour, times coverage (the "show slice count" overlay).
+const MODE_SLICES: u32 = 1u;
+
+@group(1) @binding(0) var<storage, read> texels: array<Texel>;
+@group(1) @binding(1) var volumes: texture_3d<f32>;
+@group(1) @binding(2) var volume_sampler: sampler;
+
+struct TexelOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) @interpolate(flat) instance: u32,
+}
+
+@vertex
+fn vs_texel(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance: u32) -> TexelOut {
+    // 12 triangles of the unit cube, counter-clockwise seen from outside.
+    var corners = array<vec3<f32>, 36>(
+        vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(1.0, 1.0, 0.0), vec3<f32>(1.0, 1.0, 1.0),
+        vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(1.0, 1.0, 1.0), vec3<f32>(1.0, 0.0, 1.0),
+        vec3<f32>(0.0, 0.0, 1.0), vec3<f32>(0.0, 1.0, 1.0), vec3<f32>(0.0, 1.0, 0.0),
+        vec3<f32>(0.0, 0.0, 1.0), vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(0.0, 0.0, 0.0),
+        vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(0.0, 1.0, 1.0), vec3<f32>(1.0, 1.0, 1.0),
+        vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(1.0, 1.0, 1.0), vec3<f32>(1.0, 1.0, 0.0),
+        vec3<f32>(0.0, 0.0, 1.0), vec3<f32>(0.0, 0.0, 0.0), vec3<f32>(1.0, 0.0, 0.0),
+        vec3<f32>(0.0, 0.0, 1.0), vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(1.0, 0.0, 1.0),
+        vec3<f32>(0.0, 0.0, 1.0), vec3<f32>(1.0, 0.0, 1.0), vec3<f32>(1.0, 1.0, 1.0),
+        vec3<f32>(0.0, 0.0, 1.0), vec3<f32>(1.0, 1.0, 1.0), vec3<f32>(0.0, 1.0, 1.0),
+        vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0),
+        vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(1.0, 1.0, 0.0),
+    );
+    let t = texels[instance];
+    let p = t.box_min + corners[vi % 36u] * t.box_size;
+    let world = (t.model * vec4<f32>(p, 1.0)).xyz;
+    var out: TexelOut;
+    out.clip = frame.view_proj * vec4<f32>(world, 1.0);
+    out.world = world;
+    out.instance = instance;
+    return out;
+}
+
+// Trilinear interpolation of 8 corner values at box coordinates u.
+fn corners_at(lo: vec4<f32>, hi: vec4<f32>, u_in: vec3<f32>) -> f32 {
+    let u = clamp(u_in, vec3<f32>(0.0), vec3<f32>(1.0));
+    let z0 = mix(mix(lo.x, lo.y, u.x), mix(lo.z, lo.w, u.x), u.y);
+    let z1 = mix(mix(hi.x, hi.y, u.x), mix(hi.z, hi.w, u.x), u.y);
+    return mix(z0, z1, u.z);
+}
+
+fn sample_volume(t: Texel, uvw: vec3<f32>, volume: u32) -> vec4<f32> {
+    let at = t.atlas_origin + uvw * t.atlas_extent + vec3<f32>(0.0, 0.0, f32(volume) * t.volume_dw);
+    return textureSampleLevel(volumes, volume_sampler, at, t.lod);
+}
+
+@fragment
+fn fs_texel(in: TexelOut) -> @location(0) vec4<f32> {
+    let t = texels[in.instance];
+    let eye = (t.world_to_object * vec4<f32>(frame.camera_pos, 1.0)).xyz;
+    let through = (t.world_to_object * vec4<f32>(in.world, 1.0)).xyz;
+    let dir = normalize(through - eye);
+    // The ray's stretch inside the box (object units along `dir`), from the eye on.
+    let inv = 1.0 / select(dir, vec3<f32>(1e-8), abs(dir) < vec3<f32>(1e-8));
+    let a = (t.box_min - eye) * inv;
+    let b = (t.box_min + t.box_size - eye) * inv;
+    let lo = min(a, b);
+    let hi = max(a, b);
+    let t_in = max(max(max(lo.x, lo.y), lo.z), 0.0);
+    let t_out = min(min(hi.x, hi.y), hi.z);
+    if t_out <= t_in {
+        discard;
+    }
+    // View depth per unit of `dir`: the slices are planes of constant view depth.
+    let dir_world = normalize(in.world - frame.camera_pos);
+    let depth_per_t = t.scale * max(dot(dir_world, frame.camera_forward), 0.05);
+    let dt = t.spacing / depth_per_t;
+    // The first slice plane past the entry point, then every `dt`.
+    let first = (floor(t_in * depth_per_t / t.spacing) + 1.0) * dt;
+    // The baked alpha covers one voxel of depth; this step covers dt.
+    let thickness = dt / t.voxel;
+    let steps = min(ceil((t_out - first) / dt), t.max_steps);
+    let inv_size = 1.0 / t.box_size;
+    let half = 0.5 / (t.box_size / t.voxel);
+    var color = vec3<f32>(0.0);
+    var alpha = 0.0;
+    for (var k = 0.0; k < steps; k += 1.0) {
+        let p = eye + dir * (first + k * dt);
+        let uvw = clamp((p - t.box_min) * inv_size, half, vec3<f32>(1.0) - half);
+        let sky = sample_volume(t, uvw, t.lights);
+        if sky.a < 0.002 {
+            continue;
+        }
+        var direct = vec3<f32>(0.0);
+        for (var j = 0; j < 3; j++) {
+            let w = t.light_weight[j];
+            if w > 0.0 {
+                direct += w * sample_volume(t, uvw, t.light_index[j]).rgb;
+            }
+        }
+        let u = (p - t.vcm_min) * t.vcm_inv_size;
+        let f_sun = corners_at(t.vcm_direct[0], t.vcm_direct[1], u);
+        let f_sky = corners_at(t.vcm_sky[0], t.vcm_sky[1], u);
+        let c = direct * frame.sun_color * f_sun + sky.rgb * frame.sky_ambient * f_sky;
+        let a_step = 1.0 - pow(1.0 - min(sky.a, 0.999), thickness);
+        color += (1.0 - alpha) * c * (a_step / sky.a);
+        alpha += (1.0 - alpha) * a_step;
+        if alpha > 0.995 {
+            break;
+        }
+    }
+    if alpha <= 0.0 {
+        discard;
+    }
+    var shown = color * t.tint;
+    if t.mode == MODE_SLICES {
+        // Blue (few slices) through green to red (the cap).
+        let x = clamp(t.slices / max(t.max_steps, 1.0), 0.0, 1.0);
+        shown = vec3<f32>(smoothstep(0.5, 1.0, x), 1.0 - abs(2.0 * x - 1.0), 1.0 - smoothstep(0.0, 0.5, x)) * alpha;
+    }
+    let dist = t_in * t.scale;
+    return vec4<f32>(fog_and_exposure(shown, alpha, dist), alpha);
+}

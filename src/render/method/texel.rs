@@ -1,0 +1,769 @@
+//! The `texel` method: every tree as a volumetric texel, its species' baked volumes
+//! (`bake::texel`) in one 3D texture, drawn with slices parallel to the screen
+//! (Decaudin-Neyret 2009; `shaders/texel.wgsl`). Per frame, on the CPU ([`prepare`]): each
+//! visible tree's box, its slice count from the criteria of [`crate::slices`] (the box's
+//! depth along the view against d0 metres and d1 pixels), the mip level its voxels project
+//! to, the 3 nearest baked lights of the sun in its frame with their weights, the tree-level
+//! VCM factors at its box corners; sorted back to front. On the GPU: one instanced draw of
+//! boxes (a second for the boxes the eye is inside, drawn from their far faces).
+//!
+//! Not yet here (issue 11): the seeds' axis stacks with pre-composited levels
+//! (`--texel-mode stacks`), forest-cover tiles, texels in the ground alpha shadow map.
+
+use std::collections::HashMap;
+
+use glam::{Mat3, Mat4, UVec3, Vec3};
+
+use crate::format::{Baked, TexelVolume};
+use crate::model::World;
+use crate::model::mesh::Aabb;
+use crate::render::GpuContext;
+use crate::render::camera::{Camera, Frustum};
+use crate::render::frame::FrameStats;
+use crate::render::method::btf::BtfScene;
+use crate::render::target::{linear_to_srgb, srgb_to_linear};
+use crate::render::world_gpu::{TreeGpu, WorldGpu};
+use crate::slices::{self, SliceBounds};
+use crate::sphere::DirectionSet;
+use crate::{Error, Result};
+
+/// How the volumes are sliced.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TexelMode {
+    /// Slices parallel to the screen through a 3D texture (Decaudin-Neyret 2009).
+    #[default]
+    Slices3d,
+}
+
+impl TexelMode {
+    pub fn name(self) -> &'static str {
+        match self {
+            TexelMode::Slices3d => "slices3d",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<TexelMode> {
+        match s {
+            "slices3d" => Some(TexelMode::Slices3d),
+            _ => None,
+        }
+    }
+}
+
+/// The `texel` method's knobs.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct TexelSettings {
+    pub mode: TexelMode,
+    pub bounds: SliceBounds,
+    /// Shade with the trees' visibility cube maps (when the bake has them).
+    pub vcm: bool,
+    /// Show each texel's slice count as a colour.
+    pub show_slices: bool,
+}
+
+impl Default for TexelSettings {
+    fn default() -> Self {
+        Self {
+            mode: TexelMode::Slices3d,
+            bounds: SliceBounds::default(),
+            vcm: true,
+            show_slices: false,
+        }
+    }
+}
+
+/// What the `texel` method did in a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct TexelStats {
+    pub texel_mode: TexelMode,
+    /// Trees drawn as texels.
+    pub texels: u32,
+    /// Forest-cover tiles drawn (none yet).
+    pub tiles: u32,
+    pub slices_mean: f32,
+    pub slices_max: u32,
+    /// Bytes of the volumes on the GPU, mipmaps included.
+    pub texel_bytes: u64,
+    /// Texels left out because the instance buffer was full (the farthest).
+    pub dropped: u32,
+}
+
+/// One texel as `texel.wgsl` reads it (`struct Texel`), byte for byte.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TexelGpu {
+    pub model: [[f32; 4]; 4],
+    pub world_to_object: [[f32; 4]; 4],
+    pub box_min: [f32; 3],
+    pub spacing: f32,
+    pub box_size: [f32; 3],
+    pub voxel: f32,
+    pub atlas_origin: [f32; 3],
+    pub volume_dw: f32,
+    pub atlas_extent: [f32; 3],
+    pub lod: f32,
+    pub light_index: [u32; 3],
+    pub mode: u32,
+    pub light_weight: [f32; 3],
+    pub lights: u32,
+    pub tint: [f32; 3],
+    pub scale: f32,
+    pub vcm_min: [f32; 3],
+    pub max_steps: f32,
+    pub vcm_inv_size: [f32; 3],
+    pub slices: f32,
+    pub vcm_direct: [[f32; 4]; 2],
+    pub vcm_sky: [[f32; 4]; 2],
+}
+
+/// Where one species' volumes lie, in its frame and in the 3D texture.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpeciesVolume {
+    pub box_min: Vec3,
+    pub box_size: Vec3,
+    pub voxel: f32,
+    pub dims: UVec3,
+    /// uvw of volume 0's first voxel corner, uvw extent of one volume, w between volumes.
+    pub atlas_origin: Vec3,
+    pub atlas_extent: Vec3,
+    pub volume_dw: f32,
+}
+
+/// What the `texel` method knows of a scene on the CPU.
+pub struct TexelScene {
+    species: Vec<Option<SpeciesVolume>>,
+    lights: DirectionSet,
+    /// The 3D texture's size in voxels and its mip levels.
+    atlas: UVec3,
+    mips: u32,
+    /// Per species, where each of its volumes starts in the texture (voxels).
+    slots: Vec<Vec<UVec3>>,
+}
+
+/// Slot sizes are rounded up to a multiple of this, so that the mip levels of one volume
+/// never mix with its neighbours'.
+const SLOT_ALIGN: u32 = 8;
+/// Mip levels of the volumes (level k halves each side k times; 8 = 2^3).
+const MIPS: u32 = 4;
+
+impl TexelScene {
+    /// The layout of `baked`'s texel volumes for `world`, or an error naming what does not
+    /// fit (a species without volumes, a light count unlike the bake's, too large a
+    /// texture for `max_dim`).
+    pub fn new(baked: &Baked, world: &World, max_dim: u32) -> Result<Self> {
+        let lights = baked.settings.lights;
+        let mut species = vec![None; world.species.len()];
+        let mut volumes: Vec<&TexelVolume> = Vec::new();
+        for t in &baked.texels {
+            let s = t.species as usize;
+            if s >= species.len() {
+                return Err(Error::BadInput(format!(
+                    "the bake has a texel volume for species {s} but the scene has {}",
+                    species.len()
+                )));
+            }
+            if t.lights != lights {
+                return Err(Error::BadInput(format!(
+                    "a texel volume has {} lights where the bake has {lights}",
+                    t.lights
+                )));
+            }
+            volumes.push(t);
+        }
+        if volumes.len() != world.species.len() {
+            return Err(Error::BadInput(format!(
+                "the bake has texel volumes for {} of the scene's {} species: bake again with texel_resolution above 0",
+                volumes.len(),
+                world.species.len()
+            )));
+        }
+        let round = |v: u32| v.div_ceil(SLOT_ALIGN) * SLOT_ALIGN;
+        let slot = volumes
+            .iter()
+            .fold(UVec3::ZERO, |m, t| m.max(UVec3::from(t.dims)))
+            .map(round);
+        let per_species = lights + 1;
+        let count = volumes.len() as u32 * per_species;
+        // Volumes along w, then further columns along u.
+        let per_column = (max_dim / slot.z.max(1)).max(1);
+        let columns = count.div_ceil(per_column);
+        let atlas = UVec3::new(slot.x * columns, slot.y, slot.z * count.min(per_column));
+        if atlas.max_element() > max_dim {
+            return Err(Error::BadInput(format!(
+                "the texel volumes need a {}x{}x{} texture but this GPU allows {max_dim} per side; bake with a lower texel_resolution",
+                atlas.x, atlas.y, atlas.z
+            )));
+        }
+        let lights_set = DirectionSet::with_count(lights as usize)
+            .map_err(|e| Error::BadInput(e.to_string()))?;
+        let mut slots = vec![Vec::new(); world.species.len()];
+        let size = atlas.as_vec3();
+        for (k, t) in volumes.iter().enumerate() {
+            let s = t.species as usize;
+            let mut starts = Vec::with_capacity(per_species as usize);
+            for v in 0..per_species {
+                let i = k as u32 * per_species + v;
+                starts.push(UVec3::new(
+                    (i / per_column) * slot.x,
+                    0,
+                    (i % per_column) * slot.z,
+                ));
+            }
+            let dims = UVec3::from(t.dims);
+            let first = starts[0];
+            // A species' volumes sit in one column when they fit; otherwise w steps are
+            // not uniform and the shader's volume_dw would be wrong.
+            if starts.iter().any(|p| p.x != first.x) {
+                return Err(Error::BadInput(format!(
+                    "the texel volumes of species {s} do not fit one column of a {max_dim}-voxel texture; bake with a lower texel_resolution"
+                )));
+            }
+            species[s] = Some(SpeciesVolume {
+                box_min: Vec3::from(t.box_min),
+                box_size: dims.as_vec3() * t.voxel,
+                voxel: t.voxel,
+                dims,
+                atlas_origin: first.as_vec3() / size,
+                atlas_extent: dims.as_vec3() / size,
+                volume_dw: slot.z as f32 / size.z,
+            });
+            slots[s] = starts;
+        }
+        Ok(Self {
+            species,
+            lights: lights_set,
+            atlas,
+            mips: MIPS,
+            slots,
+        })
+    }
+
+    pub fn species(&self, s: usize) -> Option<&SpeciesVolume> {
+        self.species.get(s).and_then(|v| v.as_ref())
+    }
+
+    /// The 3D texture's side in voxels.
+    pub fn atlas_size(&self) -> UVec3 {
+        self.atlas
+    }
+
+    /// Bytes of the 3D texture with its mip levels.
+    pub fn texture_bytes(&self) -> u64 {
+        (0..self.mips)
+            .map(|l| {
+                let d = (self.atlas >> l).max(UVec3::ONE);
+                u64::from(d.x) * u64::from(d.y) * u64::from(d.z) * 4
+            })
+            .sum()
+    }
+
+    /// The whole texture's level 0 then each mip level (RGBA8, sRGB, premultiplied), box
+    /// filtered in linear light. Slots are multiples of 8 voxels, so no level mixes two
+    /// volumes.
+    pub fn atlas_levels(&self, baked: &Baked) -> Vec<(UVec3, Vec<u8>)> {
+        let a = self.atlas;
+        let mut level0 = vec![0u8; (a.x * a.y * a.z * 4) as usize];
+        for t in &baked.texels {
+            let Some(starts) = self.slots.get(t.species as usize) else {
+                continue;
+            };
+            let d = UVec3::from(t.dims);
+            let per = (d.x * d.y * d.z * 4) as usize;
+            for (v, start) in starts.iter().enumerate() {
+                let Some(src) = t.voxels.get(v * per..(v + 1) * per) else {
+                    continue;
+                };
+                for z in 0..d.z {
+                    for y in 0..d.y {
+                        let from = (((z * d.y + y) * d.x) * 4) as usize;
+                        let to =
+                            ((((start.z + z) * a.y + start.y + y) * a.x + start.x) * 4) as usize;
+                        let row = (d.x * 4) as usize;
+                        level0[to..to + row].copy_from_slice(&src[from..from + row]);
+                    }
+                }
+            }
+        }
+        let mut levels = vec![(a, level0)];
+        let lut: Vec<f32> = (0..=255u8).map(srgb_to_linear).collect();
+        for _ in 1..self.mips {
+            let Some((size, prev)) = levels.last() else {
+                break;
+            };
+            let next = (*size >> 1u32).max(UVec3::ONE);
+            let mut out = vec![0u8; (next.x * next.y * next.z * 4) as usize];
+            for z in 0..next.z {
+                for y in 0..next.y {
+                    for x in 0..next.x {
+                        let mut acc = [0.0f32; 4];
+                        let mut n = 0.0;
+                        for dz in 0..2 {
+                            for dy in 0..2 {
+                                for dx in 0..2 {
+                                    let (sx, sy, sz) = (2 * x + dx, 2 * y + dy, 2 * z + dz);
+                                    if sx >= size.x || sy >= size.y || sz >= size.z {
+                                        continue;
+                                    }
+                                    let i = (((sz * size.y + sy) * size.x + sx) * 4) as usize;
+                                    for c in 0..3 {
+                                        acc[c] += lut[prev[i + c] as usize];
+                                    }
+                                    acc[3] += f32::from(prev[i + 3]) / 255.0;
+                                    n += 1.0;
+                                }
+                            }
+                        }
+                        let o = (((z * next.y + y) * next.x + x) * 4) as usize;
+                        for c in 0..3 {
+                            out[o + c] = linear_to_srgb(acc[c] / n);
+                        }
+                        out[o + 3] = (acc[3] / n * 255.0 + 0.5) as u8;
+                    }
+                }
+            }
+            levels.push((next, out));
+        }
+        levels
+    }
+}
+
+/// What [`prepare`] needs of the view.
+pub struct TexelView<'a> {
+    pub camera: &'a Camera,
+    pub focal_px: f32,
+    pub to_sun: Vec3,
+    pub frustum: &'a Frustum,
+}
+
+/// One frame's texels, back to front, and the count of those the eye is inside (the last
+/// `inside` records).
+pub struct TexelFrame {
+    pub records: Vec<TexelGpu>,
+    pub inside: u32,
+    pub stats: TexelStats,
+}
+
+/// The texels of the trees in `visible` (per species, indices into `trees`): slice counts,
+/// lights, VCM factors (from `vcm`, the `btf` method's scene, when given), back to front,
+/// at most `max` of them (the nearest kept).
+pub fn prepare(
+    scene: &TexelScene,
+    trees: &[TreeGpu],
+    visible: &[Vec<u32>],
+    view: &TexelView,
+    settings: &TexelSettings,
+    vcm: Option<&BtfScene>,
+    max: usize,
+) -> TexelFrame {
+    let bounds = settings.bounds.sanitized();
+    let cam = view.camera.position;
+    let forward = view.camera.forward();
+    let mut stats = TexelStats {
+        texel_mode: settings.mode,
+        ..Default::default()
+    };
+    let mut sorted: Vec<(f32, bool, TexelGpu)> = Vec::new();
+    for (sp, list) in visible.iter().enumerate() {
+        let Some(vol) = scene.species(sp) else {
+            continue;
+        };
+        for &t in list {
+            let Some(data) = trees.get(t as usize) else {
+                continue;
+            };
+            let m = Mat4::from_cols_array_2d(&data.model);
+            let scale = m.x_axis.truncate().length();
+            if !(scale > 0.0 && scale.is_finite()) {
+                continue;
+            }
+            let local = Aabb::new(vol.box_min, vol.box_min + vol.box_size);
+            let world_box = transformed(&local, &m);
+            if !view.frustum.intersects(&world_box) {
+                continue;
+            }
+            let inv = m.inverse();
+            // The box's depth along the view: its extent along the forward axis.
+            let rot = Mat3::from_mat4(m);
+            let f_obj = (rot.transpose() * forward) / scale;
+            let depth = (vol.box_size * f_obj.abs()).element_sum() * scale;
+            let center = m.transform_point3(local.center());
+            let z = (center - cam).dot(forward).max(view.camera.near.max(0.1));
+            let n = slices::screen_slices(view.focal_px, depth, z, &bounds);
+            let spacing = depth / n as f32;
+            // The mip level where one voxel covers about a pixel.
+            let voxel_px = view.focal_px * vol.voxel * scale / z;
+            let lod = (1.0 / voxel_px.max(1e-6))
+                .log2()
+                .clamp(0.0, (scene.mips - 1) as f32);
+            let sun_obj = (rot.transpose() * view.to_sun).normalize_or(Vec3::Y);
+            let blend = scene.lights.blend(sun_obj);
+            let mut record = TexelGpu {
+                model: m.to_cols_array_2d(),
+                world_to_object: inv.to_cols_array_2d(),
+                box_min: vol.box_min.to_array(),
+                spacing,
+                box_size: vol.box_size.to_array(),
+                voxel: vol.voxel,
+                atlas_origin: vol.atlas_origin.to_array(),
+                volume_dw: vol.volume_dw,
+                atlas_extent: vol.atlas_extent.to_array(),
+                lod,
+                light_index: blend.index,
+                mode: u32::from(settings.show_slices),
+                light_weight: blend.weight,
+                lights: scene.lights.len() as u32,
+                tint: [data.tint[0], data.tint[1], data.tint[2]],
+                scale,
+                vcm_min: vol.box_min.to_array(),
+                max_steps: (n + 2) as f32,
+                vcm_inv_size: (1.0 / vol.box_size).to_array(),
+                slices: n as f32,
+                vcm_direct: [[1.0; 4]; 2],
+                vcm_sky: [[1.0; 4]; 2],
+            };
+            if let Some((shade, b)) = vcm
+                .filter(|_| settings.vcm)
+                .and_then(|v| v.tree_shade(t as usize, sp, &m))
+            {
+                let d = shade.direct;
+                let k = shade.sky;
+                record.vcm_min = b.min.to_array();
+                record.vcm_inv_size = (1.0 / (b.max - b.min).max(Vec3::splat(1e-6))).to_array();
+                record.vcm_direct = [[d[0], d[1], d[2], d[3]], [d[4], d[5], d[6], d[7]]];
+                record.vcm_sky = [[k[0], k[1], k[2], k[3]], [k[4], k[5], k[6], k[7]]];
+            }
+            // The eye inside the box (with a margin for the near plane): drawn from its far
+            // faces.
+            let eye_obj = inv.transform_point3(cam);
+            let margin = Vec3::splat(view.camera.near.max(0.1) * 2.0 / scale);
+            let inside =
+                eye_obj.cmpge(local.min - margin).all() && eye_obj.cmple(local.max + margin).all();
+            stats.texels += 1;
+            stats.slices_max = stats.slices_max.max(n);
+            stats.slices_mean += n as f32;
+            sorted.push(((center - cam).dot(forward), inside, record));
+        }
+    }
+    // Back to front; the boxes the eye is inside last (they are the nearest).
+    sorted.sort_by(|a, b| a.1.cmp(&b.1).then(b.0.total_cmp(&a.0)));
+    if sorted.len() > max {
+        stats.dropped = (sorted.len() - max) as u32;
+        // The farthest outside boxes go first.
+        sorted.drain(..sorted.len() - max);
+    }
+    if stats.texels > 0 {
+        stats.slices_mean /= stats.texels as f32;
+    }
+    let inside = sorted.iter().filter(|s| s.1).count() as u32;
+    TexelFrame {
+        records: sorted.into_iter().map(|s| s.2).collect(),
+        inside,
+        stats,
+    }
+}
+
+/// The world box of `b` moved by `m`.
+fn transformed(b: &Aabb, m: &Mat4) -> Aabb {
+    Aabb::from_points(b.corners().iter().map(|&c| m.transform_point3(c)))
+}
+
+/// The texel volumes on the GPU and the per-frame instance buffer.
+pub struct TexelAssets {
+    scene: TexelScene,
+    _texture: wgpu::Texture,
+    view: wgpu::TextureView,
+    sampler: wgpu::Sampler,
+    layout: wgpu::BindGroupLayout,
+    records: wgpu::Buffer,
+    capacity: usize,
+    bind_group: wgpu::BindGroup,
+    pipelines: HashMap<wgpu::TextureFormat, [wgpu::RenderPipeline; 2]>,
+    /// Bytes of the 3D texture, mipmaps included.
+    pub bytes: u64,
+}
+
+/// Most texels drawn in one frame.
+pub const MAX_TEXELS: usize = 1 << 17;
+
+impl TexelAssets {
+    pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
+        let max_dim = ctx.device.limits().max_texture_dimension_3d;
+        let scene = TexelScene::new(baked, world, max_dim)?;
+        let size = scene.atlas_size();
+        let texture = ctx.checked("allocating the texel volumes", || {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("texel volumes"),
+                size: wgpu::Extent3d {
+                    width: size.x,
+                    height: size.y,
+                    depth_or_array_layers: size.z,
+                },
+                mip_level_count: scene.mips,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            })
+        })?;
+        for (level, (d, data)) in scene.atlas_levels(baked).iter().enumerate() {
+            ctx.queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &texture,
+                    mip_level: level as u32,
+                    origin: wgpu::Origin3d::ZERO,
+                    aspect: wgpu::TextureAspect::All,
+                },
+                data,
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(4 * d.x),
+                    rows_per_image: Some(d.y),
+                },
+                wgpu::Extent3d {
+                    width: d.x,
+                    height: d.y,
+                    depth_or_array_layers: d.z,
+                },
+            );
+        }
+        let view = texture.create_view(&Default::default());
+        let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("texel volumes"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            address_mode_w: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let fragment = wgpu::ShaderStages::VERTEX_FRAGMENT;
+        let layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("texel"),
+                entries: &[
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 0,
+                        visibility: fragment,
+                        ty: wgpu::BindingType::Buffer {
+                            ty: wgpu::BufferBindingType::Storage { read_only: true },
+                            has_dynamic_offset: false,
+                            min_binding_size: None,
+                        },
+                        count: None,
+                    },
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 1,
+                        visibility: wgpu::ShaderStages::FRAGMENT,
+                        ty: wgpu::BindingType::Texture {
+                            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                            view_dimension: wgpu::TextureViewDimension::D3,
+                            multisampled: false,
+                        },
+                        count: None,
+                    },
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 2,
+                        visibility: wgpu::ShaderStages::FRAGMENT,
+                        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                        count: None,
+                    },
+                ],
+            });
+        let capacity = 64;
+        let records = record_buffer(ctx, capacity);
+        let bind_group = make_bind_group(ctx, &layout, &records, &view, &sampler);
+        Ok(Self {
+            bytes: scene.texture_bytes(),
+            scene,
+            _texture: texture,
+            view,
+            sampler,
+            layout,
+            records,
+            capacity,
+            bind_group,
+            pipelines: HashMap::new(),
+        })
+    }
+
+    pub fn scene(&self) -> &TexelScene {
+        &self.scene
+    }
+
+    /// Prepares the frame's texels and uploads them (growing the buffer when needed).
+    pub fn prepare_frame(
+        &mut self,
+        ctx: &GpuContext,
+        world: &WorldGpu,
+        visible: &[Vec<u32>],
+        view: &TexelView,
+        settings: &TexelSettings,
+        vcm: Option<&BtfScene>,
+    ) -> TexelFrame {
+        let mut f = prepare(
+            &self.scene,
+            &world.tree_data,
+            visible,
+            view,
+            settings,
+            vcm,
+            MAX_TEXELS,
+        );
+        f.stats.texel_bytes = self.bytes;
+        if f.records.len() > self.capacity {
+            self.capacity = f.records.len().next_power_of_two().min(MAX_TEXELS);
+            self.records = record_buffer(ctx, self.capacity);
+            self.bind_group =
+                make_bind_group(ctx, &self.layout, &self.records, &self.view, &self.sampler);
+        }
+        if !f.records.is_empty() {
+            ctx.queue
+                .write_buffer(&self.records, 0, bytemuck::cast_slice(&f.records));
+        }
+        f
+    }
+
+    /// The pipelines for `format`: boxes seen from outside (front faces) and from inside
+    /// (far faces).
+    pub fn pipelines(
+        &mut self,
+        device: &wgpu::Device,
+        frame_layout: &wgpu::BindGroupLayout,
+        format: wgpu::TextureFormat,
+    ) -> &[wgpu::RenderPipeline; 2] {
+        let layout = &self.layout;
+        self.pipelines.entry(format).or_insert_with(|| {
+            [
+                build_pipeline(device, frame_layout, layout, format, wgpu::Face::Back),
+                build_pipeline(device, frame_layout, layout, format, wgpu::Face::Front),
+            ]
+        })
+    }
+
+    /// Draws the frame's texels (the pass has group 0 bound).
+    pub fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        pipelines: &[wgpu::RenderPipeline; 2],
+        frame: &TexelFrame,
+        stats: &mut FrameStats,
+    ) {
+        let n = frame.records.len() as u32;
+        let outside = n - frame.inside.min(n);
+        pass.set_bind_group(1, &self.bind_group, &[]);
+        if outside > 0 {
+            pass.set_pipeline(&pipelines[0]);
+            pass.draw(0..36, 0..outside);
+            stats.draw_calls += 1;
+        }
+        if outside < n {
+            pass.set_pipeline(&pipelines[1]);
+            pass.draw(0..36, outside..n);
+            stats.draw_calls += 1;
+        }
+        stats.trees_drawn = n;
+        stats.triangles += u64::from(n) * 12;
+    }
+}
+
+fn record_buffer(ctx: &GpuContext, capacity: usize) -> wgpu::Buffer {
+    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("texels"),
+        size: (capacity.max(1) * std::mem::size_of::<TexelGpu>()) as u64,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+fn make_bind_group(
+    ctx: &GpuContext,
+    layout: &wgpu::BindGroupLayout,
+    records: &wgpu::Buffer,
+    view: &wgpu::TextureView,
+    sampler: &wgpu::Sampler,
+) -> wgpu::BindGroup {
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("texel"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: records.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::Sampler(sampler),
+            },
+        ],
+    })
+}
+
+fn build_pipeline(
+    device: &wgpu::Device,
+    frame_layout: &wgpu::BindGroupLayout,
+    texel_layout: &wgpu::BindGroupLayout,
+    format: wgpu::TextureFormat,
+    cull: wgpu::Face,
+) -> wgpu::RenderPipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("texel.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(crate::render::shaders::texel().into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("texel"),
+        bind_group_layouts: &[Some(frame_layout), Some(texel_layout)],
+        immediate_size: 0,
+    });
+    // Premultiplied "over".
+    let over = wgpu::BlendComponent {
+        src_factor: wgpu::BlendFactor::One,
+        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+        operation: wgpu::BlendOperation::Add,
+    };
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("texel"),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs_texel"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            cull_mode: Some(cull),
+            ..Default::default()
+        },
+        // Reversed Z; tested against the terrain, never written.
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: crate::render::DEPTH_FORMAT,
+            depth_write_enabled: Some(false),
+            depth_compare: Some(wgpu::CompareFunction::Greater),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs_texel"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format,
+                blend: Some(wgpu::BlendState {
+                    color: over,
+                    alpha: over,
+                }),
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}

@@ -1,0 +1,245 @@
+//! The texel bake's voxelisation on the GPU: the geometry method's shading drawn from an
+//! orthographic view with `fs_voxel` (shaders/geometry.wgsl), which adds every fragment's
+//! pixel and lit colour to the voxel of a grid it lies in (no depth test: hidden surfaces
+//! count; bark's back faces are culled as in every pass). One pass gives what one pass per
+//! voxel-thick slab (near and far planes around it) would: where a pixel sees one surface
+//! in a slab, the same coverage and colour; where it sees several, their sum (clamped to
+//! full coverage by the reader) where the slab's picture keeps the nearest.
+
+use glam::{UVec3, Vec3};
+
+use super::pipelines::Layouts;
+use super::world_gpu::vertex_layout;
+use super::{DEPTH_FORMAT, GpuContext, shaders};
+use crate::{Error, Result};
+
+/// Fixed-point scale of the colour sums (1.0 = this many units).
+pub const COLOR_SCALE: f32 = 1024.0;
+
+/// The uniform block `VoxelGrid` of geometry.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct VoxelGridUniform {
+    box_min: [f32; 3],
+    voxel: f32,
+    dims: [u32; 3],
+    scale: f32,
+}
+
+/// Largest grid voxelised in one pass (16 bytes of sums per voxel: 64 MiB).
+pub const MAX_VOXELS: u64 = 1 << 22;
+
+/// The voxel pipelines (bark with its back faces culled, as the colour pass draws it, and
+/// two-sided foliage) and their bind group layout (group 3), built once per renderer.
+pub struct VoxelPipeline {
+    opaque: wgpu::RenderPipeline,
+    foliage: wgpu::RenderPipeline,
+    layout: wgpu::BindGroupLayout,
+}
+
+impl VoxelPipeline {
+    pub fn new(device: &wgpu::Device, layouts: &Layouts) -> Self {
+        let fragment = wgpu::ShaderStages::FRAGMENT;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("voxel grid"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: fragment,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: fragment,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: false },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+            ],
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("geometry.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::geometry().into()),
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("voxelise"),
+            bind_group_layouts: &[
+                Some(&layouts.frame),
+                Some(&layouts.trees),
+                Some(&layouts.parts),
+                Some(&layout),
+            ],
+            immediate_size: 0,
+        });
+        let pipeline = |cull_mode| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("voxelise"),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(vertex_layout())],
+                },
+                // Every face, hidden or not: each is in some slab.
+                primitive: wgpu::PrimitiveState {
+                    cull_mode,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(false),
+                    depth_compare: Some(wgpu::CompareFunction::Always),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("fs_voxel"),
+                    compilation_options: Default::default(),
+                    targets: &[],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        Self {
+            opaque: pipeline(Some(wgpu::Face::Back)),
+            foliage: pipeline(None),
+            layout,
+        }
+    }
+
+    pub fn meshes(&self) -> super::pipelines::MeshPipelines<'_> {
+        super::pipelines::MeshPipelines {
+            opaque: &self.opaque,
+            foliage: &self.foliage,
+        }
+    }
+}
+
+/// A grid of voxels the GPU adds fragments into, and its sums read back.
+pub struct VoxelTarget {
+    pub dims: UVec3,
+    sums: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    pub(super) bind_group: wgpu::BindGroup,
+    bytes: u64,
+}
+
+/// What one voxel received: fragments (pixels of the pass) and their summed colour.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct VoxelSum {
+    pub fragments: u32,
+    /// Linear colour summed over the fragments.
+    pub color: Vec3,
+}
+
+impl VoxelTarget {
+    /// A grid of `dims` voxels of side `voxel` from `box_min` (world frame of the pass).
+    pub fn new(
+        ctx: &GpuContext,
+        pipeline: &VoxelPipeline,
+        box_min: Vec3,
+        dims: UVec3,
+        voxel: f32,
+    ) -> Result<Self> {
+        let count = u64::from(dims.x) * u64::from(dims.y) * u64::from(dims.z);
+        if count == 0 || count > MAX_VOXELS {
+            return Err(Error::BadInput(format!(
+                "a voxel grid of {}x{}x{} is outside 1..={MAX_VOXELS} voxels",
+                dims.x, dims.y, dims.z
+            )));
+        }
+        let bytes = count * 16;
+        let device = &ctx.device;
+        let sums = ctx.checked("allocating the voxel sums", || {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("voxel sums"),
+                size: bytes,
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        })?;
+        let readback = ctx.checked("allocating the voxel readback", || {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("voxel readback"),
+                size: bytes,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        })?;
+        let uniform = VoxelGridUniform {
+            box_min: box_min.to_array(),
+            voxel,
+            dims: dims.to_array(),
+            scale: COLOR_SCALE,
+        };
+        let grid = wgpu::util::DeviceExt::create_buffer_init(
+            device,
+            &wgpu::util::BufferInitDescriptor {
+                label: Some("voxel grid"),
+                contents: bytemuck::bytes_of(&uniform),
+                usage: wgpu::BufferUsages::UNIFORM,
+            },
+        );
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("voxel grid"),
+            layout: &pipeline.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: grid.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: sums.as_entire_binding(),
+                },
+            ],
+        });
+        Ok(Self {
+            dims,
+            sums,
+            readback,
+            bind_group,
+            bytes,
+        })
+    }
+
+    /// Zeroes the sums (encoded before a pass).
+    pub(super) fn clear(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.clear_buffer(&self.sums, 0, None);
+    }
+
+    /// Copies the sums for [`Self::read`] (encoded after a pass).
+    pub(super) fn copy_out(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.copy_buffer_to_buffer(&self.sums, 0, &self.readback, 0, self.bytes);
+    }
+
+    /// The sums of the last pass, x fastest, then y, then z.
+    pub fn read(&self, ctx: &GpuContext) -> Result<Vec<VoxelSum>> {
+        let data = super::target::map_read(ctx, &self.readback)?;
+        let words: Vec<u32> = data
+            .chunks_exact(4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        Ok(words
+            .chunks_exact(4)
+            .map(|w| VoxelSum {
+                fragments: w[0],
+                color: Vec3::new(w[1] as f32, w[2] as f32, w[3] as f32) / COLOR_SCALE,
+            })
+            .collect())
+    }
+}
