@@ -14,8 +14,10 @@ use canopy::model::summary::WorldSummary;
 use canopy::progress;
 use canopy::render::btf::PlaneMode;
 use canopy::render::measure::{self, FrameReport, MeasureOptions};
+use canopy::render::method::texel::{TexelMode, TexelSettings};
 use canopy::render::{AdapterPreference, Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
+use canopy::slices::SliceBounds;
 
 #[derive(Parser)]
 #[command(
@@ -100,10 +102,10 @@ struct BenchArgs {
     #[arg(long, default_value = "walk")]
     flight: String,
     /// Methods to measure, comma-separated.
-    #[arg(long, value_delimiter = ',', value_parser = parse_method, default_value = "geometry,btf,billboard")]
+    #[arg(long, value_delimiter = ',', value_parser = parse_method, default_value = "geometry,btf,billboard,texel")]
     methods: Vec<Method>,
-    /// Sweep a btf knob: KEY=V1,V2,... (lod_scale, weight_threshold, lod_fade, planes, vcm);
-    /// repeat for a grid.
+    /// Sweep a knob: KEY=V1,V2,... (btf: lod_scale, weight_threshold, lod_fade, planes,
+    /// vcm; texel: slice_d0, slice_d1, max_slices); repeat for a grid.
     #[arg(long, value_parser = parse_sweep)]
     sweep: Vec<canopy::bench::run::Sweep>,
     /// Image size, WIDTHxHEIGHT.
@@ -246,12 +248,35 @@ struct RenderArgs {
     /// (default: the scene's [render] table, else 0.2).
     #[arg(long, value_parser = parse_unit)]
     lod_fade: Option<f32>,
+    /// texel: how volumes are sliced (slices3d: parallel to the screen through a 3D
+    /// texture).
+    #[arg(long, default_value = "slices3d", value_parser = parse_texel_mode)]
+    texel_mode: TexelMode,
+    /// texel: largest visible depth between slices, metres (criterion C1).
+    #[arg(long, default_value_t = SliceBounds::default().d0, value_parser = parse_positive)]
+    slice_d0: f32,
+    /// texel: largest projected spacing between slices, pixels (criterion C2).
+    #[arg(long, default_value_t = SliceBounds::default().d1, value_parser = parse_positive)]
+    slice_d1: f32,
+    /// texel: most slices per texel.
+    #[arg(long, default_value_t = SliceBounds::default().max_slices,
+          value_parser = clap::value_parser!(u32).range(1..=1024))]
+    max_slices: u32,
+    /// texel: colour each texel by its slice count (blue few, red the cap).
+    #[arg(long)]
+    show_slices: bool,
     /// Prefer the CPU (software) adapter.
     #[arg(long)]
     cpu: bool,
     /// Print one JSON object with the frame's statistics on stdout.
     #[arg(long)]
     json: bool,
+}
+
+fn parse_texel_mode(s: &str) -> Result<TexelMode, String> {
+    TexelMode::parse(s).ok_or_else(|| {
+        format!("unknown texel mode {s:?}; expected slices3d (stacks is not built yet)")
+    })
 }
 
 fn parse_method(s: &str) -> Result<Method, String> {
@@ -443,6 +468,16 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         show_shadow: args.show_shadow,
         vcm_sky: args.vcm_sky,
     };
+    frame.texel = TexelSettings {
+        mode: args.texel_mode,
+        bounds: SliceBounds {
+            d0: args.slice_d0,
+            d1: args.slice_d1,
+            max_slices: args.max_slices,
+        },
+        vcm: args.vcm,
+        show_slices: args.show_slices,
+    };
     let (w, h) = args.size;
     canopy::render::target::check_size(
         w.saturating_mul(args.supersample),
@@ -463,7 +498,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.baked {
         if !args.method.needs_bake() {
             return Err(canopy::Error::BadInput(format!(
-                "--baked is for the methods that draw baked images (btf, billboard), not {}",
+                "--baked is for the methods that draw baked images (btf, billboard, texel), not {}",
                 args.method.name()
             ))
             .into());

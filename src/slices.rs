@@ -85,7 +85,7 @@ pub fn screen_slices(focal_px: f32, depth: f32, z: f32, bounds: &SliceBounds) ->
 
 /// The smallest power of two at or above `n` (1 for n <= 1, saturating).
 pub fn ceil_pow2(n: f32) -> u32 {
-    if !(n > 1.0) {
+    if n.is_nan() || n <= 1.0 {
         return 1;
     }
     if n >= (1u32 << 31) as f32 {

@@ -181,9 +181,11 @@ fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
             .args(["--flight", "orbit", "--frames", "3", "--size", "64x48"])
             .args([
                 "--methods",
-                "geometry,btf,billboard",
+                "geometry,btf,billboard,texel",
                 "--sweep",
                 "lod_scale=1,2",
+                "--sweep",
+                "slice_d1=2,4",
             ])
             .args([
                 "--repeats",
@@ -218,7 +220,9 @@ fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
             "geometry",
             "btf lod_scale=1",
             "btf lod_scale=2",
-            "billboard"
+            "billboard",
+            "texel slice_d1=2",
+            "texel slice_d1=4"
         ]
     );
     for (i, c) in configs.iter().enumerate() {
@@ -234,6 +238,7 @@ fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
         assert!(c["flicker_ratio"].as_f64().unwrap().is_finite(), "{c}");
     }
     assert_eq!(configs[1]["settings"]["lod_scale"], 1.0);
+    assert_eq!(configs[5]["texel_settings"]["bounds"]["d1"], 4.0);
     assert_eq!(configs[0]["speedup_vs_geometry"], 1.0);
     assert_eq!(
         (
@@ -243,13 +248,13 @@ fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
         (Some(3), Some(0))
     );
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
-    assert_eq!(csv.lines().count(), 1 + 3 * 4, "{csv}");
+    assert_eq!(csv.lines().count(), 1 + 3 * 6, "{csv}");
     for f in [
         "summary.json",
         "chart.png",
         "flight.png",
         "worst-0.png",
-        "worst-3.png",
+        "worst-5.png",
     ] {
         assert!(out.join(f).is_file(), "{f} written");
     }

@@ -157,3 +157,37 @@ fn instancing_structs_match_instancing_wgsl() {
         }),
     );
 }
+
+#[test]
+fn texel_record_matches_texel_wgsl() {
+    use canopy::render::method::texel::TexelGpu;
+    let rust = rust_layout!(TexelGpu {
+        model,
+        world_to_object,
+        box_min,
+        spacing,
+        box_size,
+        voxel,
+        atlas_origin,
+        volume_dw,
+        atlas_extent,
+        lod,
+        light_index,
+        mode,
+        light_weight,
+        lights,
+        tint,
+        scale,
+        vcm_min,
+        max_steps,
+        vcm_inv_size,
+        slices,
+        vcm_direct,
+        vcm_sky,
+    });
+    check(
+        "Texel",
+        wgsl_layout(&canopy::render::shaders::texel(), "Texel"),
+        rust,
+    );
+}

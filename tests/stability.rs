@@ -76,6 +76,7 @@ fn btf(label: &str, f: impl FnOnce(&mut BtfSettings)) -> Config {
         label: label.into(),
         method: Method::Btf,
         btf,
+        texel: Default::default(),
     }
 }
 

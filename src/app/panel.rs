@@ -19,6 +19,8 @@ pub struct PanelStats {
     pub camera_speed: f32,
     /// What the btf method did last frame.
     pub btf: Option<crate::render::btf::BtfStats>,
+    /// What the `texel` method drew in the last frame.
+    pub texel: Option<crate::render::method::texel::TexelStats>,
     /// Bytes of BTF images on the GPU.
     pub btf_bytes: u64,
     /// Bytes of visibility cube maps in main memory.
@@ -169,6 +171,9 @@ pub fn controls(
             });
         }
     }
+    if frame.method == Method::Texel {
+        texel_controls(ui, frame, stats);
+    }
     ui.separator();
 
     ui.label("Sun (Ctrl + left drag in the view)");
@@ -244,6 +249,44 @@ fn format_count(n: u64) -> String {
         0..1_000 => n.to_string(),
         1_000..1_000_000 => format!("{:.1} k", n as f64 / 1e3),
         _ => format!("{:.2} M", n as f64 / 1e6),
+    }
+}
+
+/// The `texel` method's knobs and what it drew.
+fn texel_controls(ui: &mut egui::Ui, frame: &mut FrameDesc, stats: &PanelStats) {
+    let t = &mut frame.texel;
+    ui.label("slices parallel to the screen (3D texture)");
+    ui.add(
+        egui::Slider::new(&mut t.bounds.d0, 0.05..=5.0)
+            .logarithmic(true)
+            .text("slice depth d0 m"),
+    );
+    ui.add(
+        egui::Slider::new(&mut t.bounds.d1, 0.25..=16.0)
+            .logarithmic(true)
+            .text("slice spacing d1 px"),
+    );
+    ui.add(
+        egui::Slider::new(&mut t.bounds.max_slices, 1..=512)
+            .logarithmic(true)
+            .text("max slices"),
+    );
+    ui.checkbox(&mut t.vcm, "VCM shading (trees shade each other)");
+    ui.checkbox(&mut t.show_slices, "show slice count");
+    if let Some(s) = &stats.texel {
+        egui::Grid::new("texel stats")
+            .num_columns(2)
+            .show(ui, |ui| {
+                ui.label("texels drawn");
+                ui.label(s.texels.to_string());
+                ui.end_row();
+                ui.label("slices mean / max");
+                ui.label(format!("{:.1} / {}", s.slices_mean, s.slices_max));
+                ui.end_row();
+                ui.label("texel memory");
+                ui.label(format!("{:.1} MB", s.texel_bytes as f64 / 1e6));
+                ui.end_row();
+            });
     }
 }
 

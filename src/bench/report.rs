@@ -61,6 +61,9 @@ struct ConfigJson<'a> {
     summary: &'a ConfigSummary,
     /// The btf knobs (absent for the other methods).
     settings: Option<Settings>,
+    /// The texel knobs (absent for the other methods).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    texel_settings: Option<crate::render::method::texel::TexelSettings>,
 }
 
 #[derive(serde::Serialize)]
@@ -79,6 +82,7 @@ pub fn summary_json(run: &RunInfo, results: &BenchResults) -> String {
         .map(|(summary, c)| ConfigJson {
             summary,
             settings: (c.method == crate::render::Method::Btf).then(|| Settings::from(&c.btf)),
+            texel_settings: (c.method == crate::render::Method::Texel).then_some(c.texel),
         })
         .collect();
     serde_json::to_string_pretty(&SummaryJson {

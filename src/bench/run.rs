@@ -13,6 +13,7 @@ use super::truth_key::{TruthKey, TruthLookup, TruthRequest};
 use crate::metrics;
 use crate::render::btf::{BtfSettings, PlaneMode};
 use crate::render::measure::TimeSource;
+use crate::render::method::texel::TexelSettings;
 use crate::render::{FrameDesc, GpuContext, Method, Renderer};
 use crate::{Error, Result};
 
@@ -24,16 +25,33 @@ pub enum Knob {
     LodFade,
     Planes,
     Vcm,
+    /// texel: C1's bound (m).
+    SliceD0,
+    /// texel: C2's bound (pixels).
+    SliceD1,
+    /// texel: the slice cap.
+    MaxSlices,
 }
 
 impl Knob {
-    pub const ALL: [Knob; 5] = [
+    pub const ALL: [Knob; 8] = [
         Knob::LodScale,
         Knob::WeightThreshold,
         Knob::LodFade,
         Knob::Planes,
         Knob::Vcm,
+        Knob::SliceD0,
+        Knob::SliceD1,
+        Knob::MaxSlices,
     ];
+
+    /// The method this knob belongs to.
+    pub fn method(self) -> Method {
+        match self {
+            Knob::SliceD0 | Knob::SliceD1 | Knob::MaxSlices => Method::Texel,
+            _ => Method::Btf,
+        }
+    }
 
     pub fn name(self) -> &'static str {
         match self {
@@ -42,11 +60,15 @@ impl Knob {
             Knob::LodFade => "lod_fade",
             Knob::Planes => "planes",
             Knob::Vcm => "vcm",
+            Knob::SliceD0 => "slice_d0",
+            Knob::SliceD1 => "slice_d1",
+            Knob::MaxSlices => "max_slices",
         }
     }
 
-    /// Sets this knob of `s` to `value`, or says what values it takes.
-    pub fn apply(self, value: &str, s: &mut BtfSettings) -> Result<()> {
+    /// Sets this knob to `value` (in `s` or `t`, whichever method it belongs to), or says
+    /// what values it takes.
+    pub fn apply(self, value: &str, s: &mut BtfSettings, t: &mut TexelSettings) -> Result<()> {
         let bad = |what: &str| Error::BadInput(format!("--sweep {}={value}: {what}", self.name()));
         let number = |lo: f32, hi: f32| -> Result<f32> {
             let v: f32 = value
@@ -71,6 +93,9 @@ impl Knob {
                     _ => return Err(bad("give on or off")),
                 }
             }
+            Knob::SliceD0 => t.bounds.d0 = number(0.01, 100.0)?,
+            Knob::SliceD1 => t.bounds.d1 = number(0.05, 100.0)?,
+            Knob::MaxSlices => t.bounds.max_slices = number(1.0, 1024.0)?.round() as u32,
         }
         Ok(())
     }
@@ -110,28 +135,29 @@ impl Sweep {
         if values.is_empty() {
             return Err(Error::BadInput(format!("--sweep {s}: no values")));
         }
-        let mut probe = BtfSettings::default();
+        let (mut probe, mut texel) = (BtfSettings::default(), TexelSettings::default());
         for v in &values {
-            knob.apply(v, &mut probe)?;
+            knob.apply(v, &mut probe, &mut texel)?;
         }
         Ok(Sweep { knob, values })
     }
 }
 
-/// One configuration: a method and, for `btf`, its knobs.
+/// One configuration: a method and, for `btf` and `texel`, their knobs.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Config {
     /// e.g. `btf lod_scale=2 weight_threshold=0.1`, or the method's name.
     pub label: String,
     pub method: Method,
     pub btf: BtfSettings,
+    pub texel: TexelSettings,
 }
 
 /// Most configurations one bench may run.
 pub const MAX_CONFIGS: usize = 256;
 
-/// Every method, `btf` once per combination of the swept values (the others do not have
-/// these knobs and run once).
+/// Every method, `btf` and `texel` once per combination of the values swept of their own
+/// knobs (the others have no knobs and run once).
 pub fn configurations(
     methods: &[Method],
     sweeps: &[Sweep],
@@ -139,22 +165,15 @@ pub fn configurations(
 ) -> Result<Vec<Config>> {
     let mut out = Vec::new();
     for &method in methods {
-        if method != Method::Btf {
-            out.push(Config {
-                label: method.name().to_string(),
-                method,
-                btf: base,
-            });
-            continue;
-        }
-        let mut combos: Vec<(String, BtfSettings)> = vec![(String::new(), base)];
-        for sweep in sweeps {
+        let mut combos: Vec<(String, BtfSettings, TexelSettings)> =
+            vec![(String::new(), base, TexelSettings::default())];
+        for sweep in sweeps.iter().filter(|s| s.knob.method() == method) {
             let mut next = Vec::new();
-            for (label, s) in &combos {
+            for (label, s, t) in &combos {
                 for v in &sweep.values {
-                    let mut s = *s;
-                    sweep.knob.apply(v, &mut s)?;
-                    next.push((format!("{label} {}={v}", sweep.knob.name()), s));
+                    let (mut s, mut t) = (*s, *t);
+                    sweep.knob.apply(v, &mut s, &mut t)?;
+                    next.push((format!("{label} {}={v}", sweep.knob.name()), s, t));
                 }
             }
             combos = next;
@@ -164,11 +183,12 @@ pub fn configurations(
                 )));
             }
         }
-        for (label, btf) in combos {
+        for (label, btf, texel) in combos {
             out.push(Config {
-                label: format!("btf{label}"),
+                label: format!("{}{label}", method.name()),
                 method,
                 btf,
+                texel,
             });
         }
     }
@@ -407,6 +427,7 @@ pub fn run(
             let mut d = desc;
             d.method = config.method;
             d.btf = config.btf;
+            d.texel = config.texel;
             // The flight's own knobs win over the configuration's.
             f.apply(&mut d);
             if i == 0 {

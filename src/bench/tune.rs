@@ -78,6 +78,7 @@ pub fn bake_knob_candidates(base: BtfSettings) -> Vec<Config> {
                 label: label(&btf),
                 method: Method::Btf,
                 btf,
+                texel: Default::default(),
             });
         }
     }
@@ -191,6 +192,7 @@ pub fn candidates(base: BtfSettings) -> Vec<Config> {
                         label: label(&btf),
                         method: Method::Btf,
                         btf,
+                        texel: Default::default(),
                     });
                 }
             }

@@ -201,6 +201,21 @@ pub struct FrameReport {
     /// What the `btf` method did and with which settings (absent for other methods).
     #[serde(flatten)]
     pub btf: Option<BtfReport>,
+    /// What the `texel` method did and with which settings (absent for other methods).
+    #[serde(flatten)]
+    pub texel: Option<TexelReport>,
+}
+
+/// The `texel` part of a [`FrameReport`]: `texels`, `tiles`, `slices_mean`, `slices_max`,
+/// `texel_bytes`, `texel_mode`, and the knobs.
+#[derive(Clone, Debug, Serialize)]
+pub struct TexelReport {
+    #[serde(flatten)]
+    pub stats: crate::render::method::texel::TexelStats,
+    pub slice_d0: f32,
+    pub slice_d1: f32,
+    pub max_slices: u32,
+    pub texel_vcm: bool,
 }
 
 /// The `btf` part of a [`FrameReport`].
@@ -257,6 +272,13 @@ impl FrameReport {
             adapter: ctx.adapter_name(),
             out: None,
             btf,
+            texel: m.stats.texel.map(|stats| TexelReport {
+                stats,
+                slice_d0: frame.texel.bounds.d0,
+                slice_d1: frame.texel.bounds.d1,
+                max_slices: frame.texel.bounds.max_slices,
+                texel_vcm: frame.texel.vcm,
+            }),
         }
     }
 }
