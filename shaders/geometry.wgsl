@@ -178,14 +178,21 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) ve
 }
 
 // The texel bake's voxelisation (src/render/voxelize.rs): every fragment of an
-// orthographic view adds its pixel's coverage and its lit colour to the voxel it lies in,
-// so that one pass gives every slab at once. Sums in fixed point: 4 words per voxel
-// (fragments, then red, green, blue times `scale`).
+// orthographic view marks its pixel as covered in the voxel it lies in and adds its lit
+// colour there, so that one pass gives every slab at once. 6 words per voxel: fragments,
+// red, green, blue (sums in fixed point, times `scale`), then a mask of the voxel's
+// `ss` x `ss` pixels covered (64 bits: ss <= 8), so that two surfaces over one pixel of a
+// voxel cover it once, as in a picture of the slab.
 struct VoxelGrid {
     box_min: vec3<f32>,
     voxel: f32,
     dims: vec3<u32>,
     scale: f32,
+    // Pixels per voxel side.
+    ss: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 @group(3) @binding(0) var<uniform> voxel_grid: VoxelGrid;
 @group(3) @binding(1) var<storage, read_write> voxel_sums: array<atomic<u32>>;
@@ -198,9 +205,18 @@ fn fs_voxel(in: VertexOut, @builtin(front_facing) front: bool) {
     }
     let c = max(shade(in, front), vec3<f32>(0.0)) * voxel_grid.scale;
     let d = voxel_grid.dims;
-    let i = 4u * ((u32(cell.z) * d.y + u32(cell.y)) * d.x + u32(cell.x));
+    let i = 6u * ((u32(cell.z) * d.y + u32(cell.y)) * d.x + u32(cell.x));
     atomicAdd(&voxel_sums[i], 1u);
     atomicAdd(&voxel_sums[i + 1u], u32(c.r + 0.5));
     atomicAdd(&voxel_sums[i + 2u], u32(c.g + 0.5));
     atomicAdd(&voxel_sums[i + 3u], u32(c.b + 0.5));
+    // The image holds `ss` pixels per voxel side, aligned with the grid.
+    let ss = max(voxel_grid.ss, 1u);
+    let px = vec2<u32>(in.clip.xy);
+    let bit = (px.y % ss) * ss + px.x % ss;
+    if bit < 32u {
+        atomicOr(&voxel_sums[i + 4u], 1u << bit);
+    } else {
+        atomicOr(&voxel_sums[i + 5u], 1u << (bit - 32u));
+    }
 }

@@ -171,3 +171,41 @@ fn fs_texel(in: TexelOut) -> @location(0) vec4<f32> {
     let dist = t_in * t.scale;
     return vec4<f32>(fog_and_exposure(shown, alpha, dist), alpha);
 }
+
+// The ground alpha shadow map (drawn from the sun with the ground pass's uniforms, where
+// `view_proj` is the sun's view): how much light each texel lets through along the sun's
+// rays, one sample per voxel, multiplied into the map (blend: dst x (1 - alpha)). Only the
+// fragment where the ray enters the box counts (the box's far faces are discarded, whatever
+// their winding in the light's view).
+@fragment
+fn fs_texel_opacity(in: TexelOut) -> @location(0) vec4<f32> {
+    let t = texels[in.instance];
+    let p = (t.world_to_object * vec4<f32>(in.world, 1.0)).xyz;
+    let dir = normalize((t.world_to_object * vec4<f32>(-frame.sun_dir, 0.0)).xyz);
+    let inv = 1.0 / select(dir, vec3<f32>(1e-8), abs(dir) < vec3<f32>(1e-8));
+    let a = (t.box_min - p) * inv;
+    let b = (t.box_min + t.box_size - p) * inv;
+    let lo = min(a, b);
+    let hi = max(a, b);
+    let t_in = max(max(lo.x, lo.y), lo.z);
+    let t_out = min(min(hi.x, hi.y), hi.z);
+    // This fragment is on the box (t = 0): keep it only where the ray enters.
+    if t_in < -0.01 * t.voxel || t_out <= t_in {
+        discard;
+    }
+    let dt = t.voxel;
+    let steps = min(ceil((t_out - t_in) / dt), t.max_steps);
+    let inv_size = 1.0 / t.box_size;
+    let half = 0.5 / (t.box_size / t.voxel);
+    var transmit = 1.0;
+    for (var k = 0.0; k < steps; k += 1.0) {
+        let q = p + dir * (t_in + (k + 0.5) * dt);
+        let uvw = clamp((q - t.box_min) * inv_size, half, vec3<f32>(1.0) - half);
+        let a_step = sample_volume(t, uvw, t.lights).a;
+        transmit *= 1.0 - a_step;
+        if transmit < 0.005 {
+            break;
+        }
+    }
+    return vec4<f32>(0.0, 0.0, 0.0, 1.0 - transmit);
+}

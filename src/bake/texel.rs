@@ -17,9 +17,10 @@
 //! whole tree per slab, shot and side: a fir at 64 voxels took 148 s on lavapipe from one
 //! side. [`bake_volume`] instead draws each view once and lets every fragment add its
 //! pixel's coverage and colour to the voxel it lies in (`render::voxelize`): every slab in
-//! one pass. Where a pixel sees one surface per slab the two agree exactly (tests/texel.rs
-//! checks it against [`bake_volume_by_slabs`]); where it sees several in one voxel their
-//! coverages add (clamped to 1) where the slab picture keeps the nearest.
+//! one pass. The coverage is the same (each voxel keeps a mask of its pixels covered); the
+//! colour is the mean of every surface in the voxel where the slab picture keeps the
+//! nearest, so the two agree exactly where a pixel sees one surface per slab (tests/
+//! texel.rs checks it against [`bake_volume_by_slabs`]).
 
 use glam::{UVec3, Vec3};
 
@@ -241,11 +242,11 @@ pub fn bake_volume(
     let studio = studio_world(tree.clone());
     let mut renderer = Renderer::new(ctx, &studio)?;
     renderer.prepare_reference(ctx, &studio, SKY_DIRECTIONS, false)?;
-    let ss = supersample.max(1);
+    let ss = supersample.clamp(1, crate::render::voxelize::MAX_SUPERSAMPLE);
     let shots = shots(lights);
     let n = grid.voxel_count();
     let mut acc = Accumulator::new(shots.len(), n);
-    let target = renderer.voxel_target(ctx, grid.box_min, grid.dims, grid.voxel)?;
+    let target = renderer.voxel_target(ctx, grid.box_min, grid.dims, grid.voxel, ss)?;
     let shadow_map = (2 * grid.dims.max_element() * ss).clamp(256, 2048);
     let per_pixel = 1.0 / (ss * ss) as f32;
     for (ax, side) in AXES.iter().flat_map(|ax| [(ax, 1.0), (ax, -1.0)]) {
@@ -258,7 +259,7 @@ pub fn bake_volume(
                 if s.fragments == 0 {
                     continue;
                 }
-                let coverage = (s.fragments as f32 * per_pixel).min(1.0);
+                let coverage = s.covered as f32 * per_pixel;
                 acc.add(v, i, coverage, s.color / s.fragments as f32 * coverage);
             }
             progress();

@@ -31,6 +31,8 @@ pub struct GroundKey {
     pub to_sun: glam::Vec3,
     /// The trees are in it (not while only terrain and sky are shown).
     pub trees: bool,
+    /// The trees are texels (else BTF billboards).
+    pub texels: bool,
     /// Side of the part of the textures in use.
     pub size: u32,
 }
@@ -100,6 +102,8 @@ pub struct GroundBillboards<'a> {
     pub pipeline: &'a wgpu::RenderPipeline,
     pub bind_group: &'a wgpu::BindGroup,
     pub count: u32,
+    /// Vertices per instance (6 for a billboard's quad, 36 for a texel's box).
+    pub vertices: u32,
 }
 
 /// The ground shadow maps and what they were last built for.
@@ -162,7 +166,13 @@ impl GroundMaps {
 
     /// The key of the maps a frame needs, and whether the ones held must be rebuilt for
     /// it: the sun moved, the trees came or went, or the sun was let go after a preview.
-    pub fn wanted(&self, to_sun: glam::Vec3, trees: bool, held: bool) -> (GroundKey, bool) {
+    pub fn wanted(
+        &self,
+        to_sun: glam::Vec3,
+        trees: bool,
+        texels: bool,
+        held: bool,
+    ) -> (GroundKey, bool) {
         let capacity = self.textures.capacity;
         let size = if held {
             GROUND_PREVIEW_SIZE.min(capacity)
@@ -172,11 +182,17 @@ impl GroundMaps {
         let want = GroundKey {
             to_sun,
             trees,
+            texels,
             size,
         };
         let rebuild = match self.built {
             None => true,
-            Some(k) => k.to_sun != to_sun || k.trees != trees || (!held && k.size != size),
+            Some(k) => {
+                k.to_sun != to_sun
+                    || k.trees != trees
+                    || k.texels != texels
+                    || (!held && k.size != size)
+            }
         };
         (want, rebuild)
     }
@@ -261,7 +277,7 @@ impl GroundMaps {
         if let Some(b) = billboards.filter(|b| b.count > 0) {
             pass.set_pipeline(b.pipeline);
             pass.set_bind_group(1, b.bind_group, &[]);
-            pass.draw(0..6, 0..b.count);
+            pass.draw(0..b.vertices, 0..b.count);
         }
         drop(pass);
         if let Some(t) = &self.timer {

@@ -328,6 +328,7 @@ impl Renderer {
         }
         let studio = frame.stage == Stage::Studio;
         let is_btf = frame.method == Method::Btf;
+        let is_texel = frame.method == Method::Texel;
         // The reference: sky visibility, and sun cascades with larger maps reaching
         // every point of the scene.
         let reference = frame.reference.filter(|_| frame.method == Method::Geometry);
@@ -375,7 +376,10 @@ impl Renderer {
         // The btf method's trees are not geometry, so their shadows on the ground come from
         // the alpha shadow map, and the terrain's own shadows from the terrain depth drawn
         // with it, both rebuilt only when the sun moves.
-        let ground_on = is_btf && frame.ground_shadows && frame.sun.elevation_deg > 0.0 && !studio;
+        let ground_on = (is_btf || is_texel)
+            && frame.ground_shadows
+            && frame.sun.elevation_deg > 0.0
+            && !studio;
         let terrain_depth_on = ground_on && frame.shadows.enabled;
         if ground_on && self.ground.is_none() {
             self.ground = Some(GroundMaps::new(ctx, &self.layouts)?);
@@ -499,28 +503,36 @@ impl Renderer {
         // The ground shadow maps follow the sun, not the camera. They are submitted on their
         // own so that their cost can be timed (blocking, when measuring).
         if let Some(ground) = self.ground.as_mut().filter(|_| ground_on) {
-            let (want, rebuild) = ground.wanted(to_sun, frame.trees, frame.sun_held);
+            let (want, rebuild) = ground.wanted(to_sun, frame.trees, is_texel, frame.sun_held);
             if rebuild {
                 let t0 = std::time::Instant::now();
-                let sun_billboards = match self.btf.as_mut() {
-                    Some(b) if want.trees => {
+                // The trees' opacity from the sun: the texels' boxes, or the BTF billboards.
+                let sun_casters = match (is_texel, self.texel.as_mut(), self.btf.as_mut()) {
+                    _ if !want.trees => None,
+                    (true, Some(t), _) => {
+                        let count = t.prepare_sun(ctx, &self.world);
+                        let pipeline = t
+                            .opacity_pipeline(&ctx.device, &self.layouts.shadow_frame)
+                            .clone();
+                        Some((pipeline, count, t.sun_bind_group().clone(), 36))
+                    }
+                    (false, _, Some(b)) => {
                         let count = b.prepare_sun(ctx, &self.world, want.to_sun);
                         let pipeline = b
                             .opacity_pipeline(&ctx.device, &self.layouts.shadow_frame)
                             .clone();
-                        Some((pipeline, count))
+                        Some((pipeline, count, b.sun_bind_group().clone(), 6))
                     }
                     _ => None,
                 };
-                let billboards =
-                    sun_billboards
-                        .as_ref()
-                        .zip(self.btf.as_ref())
-                        .map(|((pipeline, count), b)| GroundBillboards {
-                            pipeline,
-                            bind_group: b.sun_bind_group(),
-                            count: *count,
-                        });
+                let billboards = sun_casters
+                    .as_ref()
+                    .map(|(pipeline, count, bind_group, v)| GroundBillboards {
+                        pipeline,
+                        bind_group,
+                        count: *count,
+                        vertices: *v,
+                    });
                 ground.build(ctx, &self.world, &uniforms, want, billboards);
                 if measure_gpu {
                     let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
@@ -705,6 +717,7 @@ impl Renderer {
         box_min: glam::Vec3,
         dims: glam::UVec3,
         voxel: f32,
+        ss: u32,
     ) -> Result<voxelize::VoxelTarget> {
         if self.voxel_pipeline.is_none() {
             let p = ctx.checked("building the voxel pipeline", || {
@@ -715,7 +728,7 @@ impl Renderer {
         let Some(p) = &self.voxel_pipeline else {
             return Err(Error::Gpu("the voxel pipeline was not built".into()));
         };
-        voxelize::VoxelTarget::new(ctx, p, box_min, dims, voxel)
+        voxelize::VoxelTarget::new(ctx, p, box_min, dims, voxel, ss)
     }
 
     /// The texel bake's voxelisation: the trees of `frame` (a `geometry` frame in the

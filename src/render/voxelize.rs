@@ -2,9 +2,9 @@
 //! orthographic view with `fs_voxel` (shaders/geometry.wgsl), which adds every fragment's
 //! pixel and lit colour to the voxel of a grid it lies in (no depth test: hidden surfaces
 //! count; bark's back faces are culled as in every pass). One pass gives what one pass per
-//! voxel-thick slab (near and far planes around it) would: where a pixel sees one surface
-//! in a slab, the same coverage and colour; where it sees several, their sum (clamped to
-//! full coverage by the reader) where the slab's picture keeps the nearest.
+//! voxel-thick slab (near and far planes around it) would: the same pixels covered (a
+//! mask per voxel, so two surfaces over one pixel cover it once); the colour is the mean
+//! of every surface in the voxel where the slab's picture keeps the nearest.
 
 use glam::{UVec3, Vec3};
 
@@ -24,10 +24,16 @@ struct VoxelGridUniform {
     voxel: f32,
     dims: [u32; 3],
     scale: f32,
+    ss: u32,
+    _pad: [u32; 3],
 }
 
-/// Largest grid voxelised in one pass (16 bytes of sums per voxel: 64 MiB).
+/// Largest grid voxelised in one pass (24 bytes per voxel: 96 MiB).
 pub const MAX_VOXELS: u64 = 1 << 22;
+/// Most pixels per voxel side (the coverage mask has 64 bits).
+pub const MAX_SUPERSAMPLE: u32 = 8;
+/// Words per voxel: fragments, red, green, blue, coverage mask (2).
+const WORDS: usize = 6;
 
 /// The voxel pipelines (bark with its back faces culled, as the colour pass draws it, and
 /// two-sided foliage) and their bind group layout (group 3), built once per renderer.
@@ -136,23 +142,32 @@ pub struct VoxelTarget {
     bytes: u64,
 }
 
-/// What one voxel received: fragments (pixels of the pass) and their summed colour.
+/// What one voxel received: fragments, their summed colour, and the pixels they covered.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct VoxelSum {
     pub fragments: u32,
     /// Linear colour summed over the fragments.
     pub color: Vec3,
+    /// Of the voxel's ss x ss pixels, those covered by at least one fragment.
+    pub covered: u32,
 }
 
 impl VoxelTarget {
-    /// A grid of `dims` voxels of side `voxel` from `box_min` (world frame of the pass).
+    /// A grid of `dims` voxels of side `voxel` from `box_min` (world frame of the pass),
+    /// drawn at `ss` pixels per voxel side.
     pub fn new(
         ctx: &GpuContext,
         pipeline: &VoxelPipeline,
         box_min: Vec3,
         dims: UVec3,
         voxel: f32,
+        ss: u32,
     ) -> Result<Self> {
+        if !(1..=MAX_SUPERSAMPLE).contains(&ss) {
+            return Err(Error::BadInput(format!(
+                "voxelising at {ss} pixels per voxel side: give 1 to {MAX_SUPERSAMPLE}"
+            )));
+        }
         let count = u64::from(dims.x) * u64::from(dims.y) * u64::from(dims.z);
         if count == 0 || count > MAX_VOXELS {
             return Err(Error::BadInput(format!(
@@ -160,7 +175,7 @@ impl VoxelTarget {
                 dims.x, dims.y, dims.z
             )));
         }
-        let bytes = count * 16;
+        let bytes = count * (WORDS as u64) * 4;
         let device = &ctx.device;
         let sums = ctx.checked("allocating the voxel sums", || {
             device.create_buffer(&wgpu::BufferDescriptor {
@@ -185,6 +200,8 @@ impl VoxelTarget {
             voxel,
             dims: dims.to_array(),
             scale: COLOR_SCALE,
+            ss,
+            _pad: [0; 3],
         };
         let grid = wgpu::util::DeviceExt::create_buffer_init(
             device,
@@ -235,10 +252,11 @@ impl VoxelTarget {
             .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
             .collect();
         Ok(words
-            .chunks_exact(4)
+            .chunks_exact(WORDS)
             .map(|w| VoxelSum {
                 fragments: w[0],
                 color: Vec3::new(w[1] as f32, w[2] as f32, w[3] as f32) / COLOR_SCALE,
+                covered: w[4].count_ones() + w[5].count_ones(),
             })
             .collect())
     }

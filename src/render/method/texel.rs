@@ -479,6 +479,11 @@ pub struct TexelAssets {
     capacity: usize,
     bind_group: wgpu::BindGroup,
     pipelines: HashMap<wgpu::TextureFormat, [wgpu::RenderPipeline; 2]>,
+    /// Every tree's texel seen from the sun, for the ground alpha shadow map.
+    sun_records: wgpu::Buffer,
+    sun_capacity: usize,
+    sun_bind_group: wgpu::BindGroup,
+    opacity_pipeline: Option<wgpu::RenderPipeline>,
     /// Bytes of the 3D texture, mipmaps included.
     pub bytes: u64,
 }
@@ -576,7 +581,14 @@ impl TexelAssets {
         let capacity = 64;
         let records = record_buffer(ctx, capacity);
         let bind_group = make_bind_group(ctx, &layout, &records, &view, &sampler);
+        let sun_capacity = world.forest.instances.len().clamp(1, MAX_TEXELS);
+        let sun_records = record_buffer(ctx, sun_capacity);
+        let sun_bind_group = make_bind_group(ctx, &layout, &sun_records, &view, &sampler);
         Ok(Self {
+            sun_records,
+            sun_capacity,
+            sun_bind_group,
+            opacity_pipeline: None,
             bytes: scene.texture_bytes(),
             scene,
             _texture: texture,
@@ -627,6 +639,86 @@ impl TexelAssets {
         f
     }
 
+    /// Every tree's texel for the ground alpha shadow map (the sun's 3 nearest lights do not
+    /// matter there: only opacity is read), uploaded; returns how many.
+    pub fn prepare_sun(&mut self, ctx: &GpuContext, world: &WorldGpu) -> u32 {
+        let mut out = Vec::with_capacity(world.tree_data.len().min(self.sun_capacity));
+        for (data, &sp) in world.tree_data.iter().zip(&world.tree_species) {
+            if out.len() >= self.sun_capacity {
+                break;
+            }
+            let Some(vol) = self.scene.species(sp as usize) else {
+                continue;
+            };
+            let m = Mat4::from_cols_array_2d(&data.model);
+            let scale = m.x_axis.truncate().length();
+            if !(scale > 0.0 && scale.is_finite()) {
+                continue;
+            }
+            let d = vol.dims;
+            out.push(TexelGpu {
+                model: m.to_cols_array_2d(),
+                world_to_object: m.inverse().to_cols_array_2d(),
+                box_min: vol.box_min.to_array(),
+                spacing: vol.voxel * scale,
+                box_size: vol.box_size.to_array(),
+                voxel: vol.voxel,
+                atlas_origin: vol.atlas_origin.to_array(),
+                volume_dw: vol.volume_dw,
+                atlas_extent: vol.atlas_extent.to_array(),
+                lod: 0.0,
+                light_index: [0; 3],
+                mode: 0,
+                light_weight: [1.0, 0.0, 0.0],
+                lights: self.scene.lights.len() as u32,
+                tint: [1.0; 3],
+                scale,
+                vcm_min: vol.box_min.to_array(),
+                // A ray crosses at most the sum of the sides in voxels.
+                max_steps: (d.x + d.y + d.z) as f32,
+                vcm_inv_size: (1.0 / vol.box_size).to_array(),
+                slices: 0.0,
+                vcm_direct: [[1.0; 4]; 2],
+                vcm_sky: [[1.0; 4]; 2],
+            });
+        }
+        if !out.is_empty() {
+            ctx.queue
+                .write_buffer(&self.sun_records, 0, bytemuck::cast_slice(&out));
+        }
+        out.len() as u32
+    }
+
+    /// The pipeline multiplying the texels' transmittance into the ground alpha map.
+    pub fn opacity_pipeline(
+        &mut self,
+        device: &wgpu::Device,
+        shadow_frame: &wgpu::BindGroupLayout,
+    ) -> &wgpu::RenderPipeline {
+        let layout = &self.layout;
+        self.opacity_pipeline.get_or_insert_with(|| {
+            // dst = dst * (1 - alpha): transmittance multiplies.
+            let transmit = wgpu::BlendComponent {
+                src_factor: wgpu::BlendFactor::Zero,
+                dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+                operation: wgpu::BlendOperation::Add,
+            };
+            texel_pipeline(
+                device,
+                [shadow_frame, layout],
+                "fs_texel_opacity",
+                crate::render::GROUND_FORMAT,
+                transmit,
+                None,
+                (crate::render::SHADOW_FORMAT, wgpu::CompareFunction::Less),
+            )
+        })
+    }
+
+    pub fn sun_bind_group(&self) -> &wgpu::BindGroup {
+        &self.sun_bind_group
+    }
+
     /// The pipelines for `format`: boxes seen from outside (front faces) and from inside
     /// (far faces).
     pub fn pipelines(
@@ -636,11 +728,26 @@ impl TexelAssets {
         format: wgpu::TextureFormat,
     ) -> &[wgpu::RenderPipeline; 2] {
         let layout = &self.layout;
+        // Premultiplied "over".
+        let over = wgpu::BlendComponent {
+            src_factor: wgpu::BlendFactor::One,
+            dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+            operation: wgpu::BlendOperation::Add,
+        };
+        // Reversed Z; tested against the terrain, never written.
+        let depth = (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater);
         self.pipelines.entry(format).or_insert_with(|| {
-            [
-                build_pipeline(device, frame_layout, layout, format, wgpu::Face::Back),
-                build_pipeline(device, frame_layout, layout, format, wgpu::Face::Front),
-            ]
+            [wgpu::Face::Back, wgpu::Face::Front].map(|cull| {
+                texel_pipeline(
+                    device,
+                    [frame_layout, layout],
+                    "fs_texel",
+                    format,
+                    over,
+                    Some(cull),
+                    depth,
+                )
+            })
         })
     }
 
@@ -706,30 +813,28 @@ fn make_bind_group(
     })
 }
 
-fn build_pipeline(
+/// A pipeline drawing the texel boxes with `fragment` of texel.wgsl into one `format`
+/// target blended by `blend`, faces `cull`ed, depth-tested (never written) against `depth`.
+fn texel_pipeline(
     device: &wgpu::Device,
-    frame_layout: &wgpu::BindGroupLayout,
-    texel_layout: &wgpu::BindGroupLayout,
+    layouts: [&wgpu::BindGroupLayout; 2],
+    fragment: &str,
     format: wgpu::TextureFormat,
-    cull: wgpu::Face,
+    blend: wgpu::BlendComponent,
+    cull: Option<wgpu::Face>,
+    depth: (wgpu::TextureFormat, wgpu::CompareFunction),
 ) -> wgpu::RenderPipeline {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("texel.wgsl"),
         source: wgpu::ShaderSource::Wgsl(crate::render::shaders::texel().into()),
     });
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("texel"),
-        bind_group_layouts: &[Some(frame_layout), Some(texel_layout)],
+        label: Some(fragment),
+        bind_group_layouts: &[Some(layouts[0]), Some(layouts[1])],
         immediate_size: 0,
     });
-    // Premultiplied "over".
-    let over = wgpu::BlendComponent {
-        src_factor: wgpu::BlendFactor::One,
-        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-        operation: wgpu::BlendOperation::Add,
-    };
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("texel"),
+        label: Some(fragment),
         layout: Some(&layout),
         vertex: wgpu::VertexState {
             module: &module,
@@ -738,27 +843,26 @@ fn build_pipeline(
             buffers: &[],
         },
         primitive: wgpu::PrimitiveState {
-            cull_mode: Some(cull),
+            cull_mode: cull,
             ..Default::default()
         },
-        // Reversed Z; tested against the terrain, never written.
         depth_stencil: Some(wgpu::DepthStencilState {
-            format: crate::render::DEPTH_FORMAT,
+            format: depth.0,
             depth_write_enabled: Some(false),
-            depth_compare: Some(wgpu::CompareFunction::Greater),
+            depth_compare: Some(depth.1),
             stencil: Default::default(),
             bias: Default::default(),
         }),
         multisample: Default::default(),
         fragment: Some(wgpu::FragmentState {
             module: &module,
-            entry_point: Some("fs_texel"),
+            entry_point: Some(fragment),
             compilation_options: Default::default(),
             targets: &[Some(wgpu::ColorTargetState {
                 format,
                 blend: Some(wgpu::BlendState {
-                    color: over,
-                    alpha: over,
+                    color: blend,
+                    alpha: blend,
                 }),
                 write_mask: wgpu::ColorWrites::ALL,
             })],
