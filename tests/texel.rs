@@ -330,3 +330,56 @@ fn slices_parallel_to_the_screen_hold_from_the_side_to_straight_down() {
     // Measured 0.047, 0.039, 0.039, 0.034 at 5, 30, 60, 85 degrees.
     assert!(worst < 0.06, "{figures:?}");
 }
+
+/// Where the seeds' stacks switch (the view crossing the diagonal between two axes, here
+/// 45 degrees between +X and +Z), slices parallel to the screen change nothing: orbiting a
+/// lone fir across it in 5-degree steps, the texel's change from one frame to the next stays
+/// close to the reference's own change (no pop).
+#[test]
+fn orbiting_across_a_stack_switch_does_not_pop() {
+    let ctx = gpu();
+    let scene = lone_tree("fir");
+    let world = scene.build_world().unwrap();
+    let baked = bake_of(&scene);
+    let tree = world.forest.instances[0];
+    let centre = world.species[0]
+        .tree_bounds
+        .transformed(Mat4::from_translation(tree.position))
+        .center();
+    let mut r = Renderer::new(&ctx, &world).unwrap();
+    r.attach_btf(&ctx, &baked, &world).unwrap();
+    r.prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
+        .unwrap();
+    let (w, h) = (160, 160);
+    let mut frames = Vec::new();
+    for step in 0..7 {
+        let a = (30.0 + 5.0 * step as f32).to_radians();
+        let dir = Vec3::new(a.sin(), 0.25, a.cos()).normalize();
+        let mut frame = FrameDesc::from_scene(&scene);
+        frame.camera = Camera::look_at(centre + dir * 40.0, centre, 35.0);
+        frame.fog_density = 0.0;
+        let mut reference = frame;
+        reference.reference = Some(Reference::default());
+        let truth = rgb(&r.render_image(&ctx, &reference, w, h, 2).unwrap().0);
+        frame.method = Method::Texel;
+        let texel = rgb(&r.render_image(&ctx, &frame, w, h, 1).unwrap().0);
+        frames.push((truth, texel));
+    }
+    let flip =
+        |a: &image::RgbImage, b: &image::RgbImage| canopy::metrics::flip(a, b).unwrap().stats.mean;
+    let mut excess: f32 = 0.0;
+    let mut figures = Vec::new();
+    for pair in frames.windows(2) {
+        let truth_change = flip(&pair[0].0, &pair[1].0);
+        let texel_change = flip(&pair[0].1, &pair[1].1);
+        figures.push(format!("{texel_change:.4}/{truth_change:.4}"));
+        excess = excess.max(texel_change - truth_change);
+    }
+    eprintln!(
+        "orbit 30-60 degrees, texel/reference change per 5-degree step: {}; worst excess {excess:.4}",
+        figures.join(", ")
+    );
+    // Measured: every step changes the texel a little less than the reference (0.037-0.040
+    // against 0.037-0.041), the 45-degree crossing no more than the others.
+    assert!(excess < 0.005, "{figures:?}");
+}
