@@ -383,3 +383,26 @@ fn orbiting_across_a_stack_switch_does_not_pop() {
     // against 0.037-0.041), the 45-degree crossing no more than the others.
     assert!(excess < 0.005, "{figures:?}");
 }
+
+/// Texel volumes that do not fit the scene leave the other methods working, and the texel
+/// method says why it cannot draw.
+#[test]
+fn volumes_that_do_not_fit_the_scene_disable_only_the_texel_method() {
+    let ctx = gpu();
+    let scene = lone_tree("fir");
+    let world = scene.build_world().unwrap();
+    let mut baked = bake_of(&scene);
+    baked.texels[0].species = 5;
+    let mut r = Renderer::new(&ctx, &world).unwrap();
+    r.attach_btf(&ctx, &baked, &world).unwrap();
+    assert!(!r.has_texels());
+    let mut frame = FrameDesc::from_scene(&scene);
+    frame.method = Method::Btf;
+    r.render_image(&ctx, &frame, 32, 32, 1).unwrap();
+    frame.method = Method::Texel;
+    let e = r
+        .render_image(&ctx, &frame, 32, 32, 1)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("species 5"), "{e}");
+}

@@ -87,8 +87,10 @@ pub struct Renderer {
     timer: Option<GpuTimer>,
     geometry: GeometryMethod,
     btf: Option<btf::BtfAssets>,
-    /// The bake's texel volumes, when it has them.
+    /// The bake's texel volumes, when it has them and they could be loaded.
     texel: Option<method::texel::TexelAssets>,
+    /// Why the bake's texel volumes could not be loaded (the other methods still draw).
+    texel_problem: Option<String>,
     /// The ground shadow maps, once a method has used them.
     ground: Option<GroundMaps>,
     /// What group 0 binds in their place until then.
@@ -135,6 +137,7 @@ impl Renderer {
             timer: GpuTimer::new(ctx),
             btf: None,
             texel: None,
+            texel_problem: None,
             voxel_pipeline: None,
         })
     }
@@ -148,11 +151,18 @@ impl Renderer {
         world: &World,
     ) -> Result<()> {
         self.btf = Some(btf::BtfAssets::new(ctx, baked, world)?);
-        self.texel = if baked.texels.is_empty() {
-            None
-        } else {
-            Some(method::texel::TexelAssets::new(ctx, baked, world)?)
-        };
+        self.texel = None;
+        self.texel_problem = None;
+        if !baked.texels.is_empty() {
+            // Volumes that cannot be loaded leave btf and billboard working.
+            match method::texel::TexelAssets::new(ctx, baked, world) {
+                Ok(t) => self.texel = Some(t),
+                Err(e) => {
+                    log::warn!("the texel method is unavailable: {e}");
+                    self.texel_problem = Some(e.to_string());
+                }
+            }
+        }
         if let Some(g) = &mut self.ground {
             g.invalidate();
         }
@@ -369,9 +379,10 @@ impl Renderer {
             )));
         }
         if frame.method == Method::Texel && self.texel.is_none() {
-            return Err(Error::BadInput(
-                "the texel method needs baked texel volumes, and this bake has none: set texel_resolution above 0 in the scene's [bake] table and bake again".into(),
-            ));
+            return Err(Error::BadInput(match &self.texel_problem {
+                Some(p) => format!("the texel method cannot draw this bake's volumes: {p}"),
+                None => "the texel method needs baked texel volumes, and this bake has none: set texel_resolution above 0 in the scene's [bake] table and bake again".into(),
+            }));
         }
         // The btf method's trees are not geometry, so their shadows on the ground come from
         // the alpha shadow map, and the terrain's own shadows from the terrain depth drawn
