@@ -42,8 +42,29 @@ fn render_then_compare_end_to_end() {
     assert!(json["frame_ms"].as_f64().unwrap() > 0.0);
     assert!(json["trees_drawn"].as_u64().unwrap() > 0);
     assert!(json["triangles"].as_u64().unwrap() > 0);
+    assert_eq!(json["reference"], false);
+    assert!(json.get("sky_volume_bytes").is_none());
     let img = image::open(&out).unwrap();
     assert_eq!((img.width(), img.height()), (96, 64));
+
+    // The reference says so, with its sky visibility's directions, cell and bytes.
+    let o = canopy()
+        .args(["render"])
+        .arg(&scene)
+        .args(["--out"])
+        .arg(tmp("small-reference.png"))
+        .args(["--size", "32x24", "--frames", "1", "--cpu", "--json"])
+        .args(["--reference", "--sky-directions", "8"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(json["reference"], true);
+    assert_eq!(json["sky_directions"], 8);
+    assert!(json["sky_cell_m"].as_f64().unwrap() >= 0.5, "{json}");
+    let bytes = json["sky_volume_bytes"].as_u64().unwrap();
+    // About 2 M cells at most, one byte each (2.14 MB measured on this scene).
+    assert!(bytes > 1 && bytes <= 3_000_000, "{json}");
 
     // The same image against itself: zero error.
     let o = canopy()

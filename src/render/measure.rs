@@ -204,6 +204,22 @@ pub struct FrameReport {
     /// What the `texel` method did and with which settings (absent for other methods).
     #[serde(flatten)]
     pub texel: Option<TexelReport>,
+    /// The frame was the reference (`geometry` with sky visibility and whole-scene sun
+    /// shadows).
+    pub reference: bool,
+    /// The reference's sky visibility (absent for other frames).
+    #[serde(flatten)]
+    pub sky: Option<SkyReport>,
+}
+
+/// The reference's sky visibility in a [`FrameReport`].
+#[derive(Clone, Debug, Serialize)]
+pub struct SkyReport {
+    pub sky_directions: u32,
+    /// Side of one cell of the sky visibility volume (m).
+    pub sky_cell_m: f32,
+    /// Bytes of the sky visibility volume on the GPU.
+    pub sky_volume_bytes: u64,
 }
 
 /// The `texel` part of a [`FrameReport`]: `texels`, `tiles`, `slices_mean`, `slices_max`,
@@ -247,6 +263,10 @@ impl FrameReport {
         renderer: &Renderer,
         ctx: &GpuContext,
     ) -> Self {
+        // The render core draws the reference only for `geometry`.
+        let reference = frame
+            .reference
+            .filter(|_| frame.method == crate::render::Method::Geometry);
         let btf = m.stats.btf.map(|stats| BtfReport {
             stats,
             lod_scale: frame.btf.lod_scale,
@@ -279,6 +299,14 @@ impl FrameReport {
                 max_slices: frame.texel.bounds.max_slices,
                 texel_vcm: frame.texel.vcm,
             }),
+            reference: reference.is_some(),
+            sky: reference.and_then(|_| renderer.sky_visibility()).map(
+                |(sky_directions, sky_cell_m, sky_volume_bytes)| SkyReport {
+                    sky_directions,
+                    sky_cell_m,
+                    sky_volume_bytes,
+                },
+            ),
         }
     }
 }

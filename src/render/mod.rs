@@ -178,6 +178,12 @@ impl Renderer {
         self.texel.is_some()
     }
 
+    /// The reference's sky visibility, once prepared: (directions, cell side in metres,
+    /// bytes on the GPU).
+    pub fn sky_visibility(&self) -> Option<(u32, f32, u64)> {
+        self.sky_vis.as_ref().map(|s| (s.count, s.cell, s.bytes))
+    }
+
     /// Bytes of texel volumes on the GPU (0 without them).
     pub fn texel_bytes(&self) -> u64 {
         self.texel.as_ref().map_or(0, |t| t.bytes)

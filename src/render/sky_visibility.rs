@@ -370,6 +370,8 @@ pub struct SkyVolumeGpu {
 pub struct SkyVisibility {
     pub count: u32,
     pub cell: f32,
+    /// Bytes of the 3D texture (one per cell).
+    pub bytes: u64,
     pub view: wgpu::TextureView,
     pub placement: wgpu::Buffer,
 }
@@ -444,6 +446,7 @@ impl SkyVisibility {
         Ok(Self {
             count,
             cell: volume.cell,
+            bytes: data.len() as u64,
             view,
             placement,
         })
@@ -455,6 +458,7 @@ impl SkyVisibility {
         Ok(Self {
             count: 0,
             cell: 1.0,
+            bytes: 1,
             view,
             placement: placement_buffer(
                 ctx,
