@@ -6,14 +6,6 @@
 // ray meets each at this pixel, so they too are blended as annex A says, never one plane
 // "over" another.
 
-// Trilinear interpolation of 8 corner values at box coordinates u.
-fn trilinear(lo: vec4<f32>, hi: vec4<f32>, u_in: vec3<f32>) -> f32 {
-    let u = clamp(u_in, vec3<f32>(0.0), vec3<f32>(1.0));
-    let z0 = mix(mix(lo.x, lo.y, u.x), mix(lo.z, lo.w, u.x), u.y);
-    let z1 = mix(mix(hi.x, hi.y, u.x), mix(hi.z, hi.w, u.x), u.y);
-    return mix(z0, z1, u.z);
-}
-
 // The VCM sun and sky factors at `p` (object frame, radii): the billboard's own level per
 // point, times the coarser levels' from its centre.
 fn vcm_factors(b: Billboard, p: vec3<f32>) -> vec2<f32> {

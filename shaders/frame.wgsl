@@ -67,3 +67,12 @@ fn fog_and_exposure(c: vec3<f32>, coverage: f32, dist: f32) -> vec3<f32> {
     let fog = 1.0 - exp(-dist * frame.fog_density);
     return mix(c, frame.sky_horizon * coverage, fog) * frame.exposure;
 }
+
+// Trilinear interpolation of 8 box-corner values (corner k: bit 0 = max x, bit 1 = max y,
+// bit 2 = max z; corners 0-3 in `lo`, 4-7 in `hi`) at box coordinates u: the VCM factors.
+fn trilinear(lo: vec4<f32>, hi: vec4<f32>, u_in: vec3<f32>) -> f32 {
+    let u = clamp(u_in, vec3<f32>(0.0), vec3<f32>(1.0));
+    let z0 = mix(mix(lo.x, lo.y, u.x), mix(lo.z, lo.w, u.x), u.y);
+    let z1 = mix(mix(hi.x, hi.y, u.x), mix(hi.z, hi.w, u.x), u.y);
+    return mix(z0, z1, u.z);
+}

@@ -91,14 +91,6 @@ fn vs_texel(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance: u
     return out;
 }
 
-// Trilinear interpolation of 8 corner values at box coordinates u.
-fn corners_at(lo: vec4<f32>, hi: vec4<f32>, u_in: vec3<f32>) -> f32 {
-    let u = clamp(u_in, vec3<f32>(0.0), vec3<f32>(1.0));
-    let z0 = mix(mix(lo.x, lo.y, u.x), mix(lo.z, lo.w, u.x), u.y);
-    let z1 = mix(mix(hi.x, hi.y, u.x), mix(hi.z, hi.w, u.x), u.y);
-    return mix(z0, z1, u.z);
-}
-
 fn sample_volume(t: Texel, uvw: vec3<f32>, volume: u32) -> vec4<f32> {
     let at = t.atlas_origin + uvw * t.atlas_extent + vec3<f32>(0.0, 0.0, f32(volume) * t.volume_dw);
     return textureSampleLevel(volumes, volume_sampler, at, t.lod);
@@ -149,8 +141,8 @@ fn fs_texel(in: TexelOut) -> @location(0) vec4<f32> {
             }
         }
         let u = (p - t.vcm_min) * t.vcm_inv_size;
-        let f_sun = corners_at(t.vcm_direct[0], t.vcm_direct[1], u);
-        let f_sky = corners_at(t.vcm_sky[0], t.vcm_sky[1], u);
+        let f_sun = trilinear(t.vcm_direct[0], t.vcm_direct[1], u);
+        let f_sky = trilinear(t.vcm_sky[0], t.vcm_sky[1], u);
         let c = direct * frame.sun_color * f_sun + sky.rgb * frame.sky_ambient * f_sky;
         let a_step = 1.0 - pow(1.0 - min(sky.a, 0.999), thickness);
         color += (1.0 - alpha) * c * (a_step / sky.a);

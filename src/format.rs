@@ -684,30 +684,42 @@ fn show_len(len: Option<u64>) -> String {
     len.map_or_else(|| "more than 2^64".to_owned(), |l| l.to_string())
 }
 
-fn check_unique_texels(volumes: &[TexelVolume]) -> Result<(), FormatError> {
-    let mut seen = HashSet::with_capacity(volumes.len());
-    for (i, t) in volumes.iter().enumerate() {
-        if !seen.insert(t.species) {
+/// The first record whose `key` was seen before, as malformed content (`what` names a
+/// record; `of` what the repeated key means).
+fn check_unique<T, K: std::hash::Hash + Eq>(
+    records: &[T],
+    key: impl Fn(&T) -> K,
+    what: impl Fn(usize, &T) -> String,
+    of: &str,
+) -> Result<(), FormatError> {
+    let mut seen = HashSet::with_capacity(records.len());
+    for (i, r) in records.iter().enumerate() {
+        if !seen.insert(key(r)) {
             return Err(FormatError::MalformedContent {
-                section: format!("texel volume {i} (species {})", t.species),
-                reason: "a texel volume of this species appears twice".into(),
+                section: what(i, r),
+                reason: format!("{of} appears twice"),
             });
         }
     }
     Ok(())
 }
 
+fn check_unique_texels(volumes: &[TexelVolume]) -> Result<(), FormatError> {
+    check_unique(
+        volumes,
+        |t| t.species,
+        |i, t| format!("texel volume {i} (species {})", t.species),
+        "a texel volume of this species",
+    )
+}
+
 fn check_unique_btf(sets: &[BtfImageSet]) -> Result<(), FormatError> {
-    let mut seen = HashSet::with_capacity(sets.len());
-    for (i, set) in sets.iter().enumerate() {
-        if !seen.insert((set.species, set.level)) {
-            return Err(FormatError::MalformedContent {
-                section: format!("btf set {i} (species {}, {:?})", set.species, set.level),
-                reason: "a btf set of this species and level appears twice".into(),
-            });
-        }
-    }
-    Ok(())
+    check_unique(
+        sets,
+        |s| (s.species, s.level),
+        |i, s| format!("btf set {i} (species {}, {:?})", s.species, s.level),
+        "a btf set of this species and level",
+    )
 }
 
 // ---------------------------------------------------------------------------------------

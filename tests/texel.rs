@@ -224,36 +224,88 @@ fn the_voxelisation_gives_the_occupancy_of_a_box_and_a_sphere_and_agrees_with_th
     assert_eq!(far, 0.0, "nothing away from the surface");
 }
 
+/// A lone tree of one species, baked (with texels) and ready to draw: the renderer with
+/// the bake attached and the reference prepared, and the crown's centre.
+struct LoneTree {
+    ctx: canopy::render::GpuContext,
+    scene: Scene,
+    renderer: Renderer,
+    centre: Vec3,
+}
+
+impl LoneTree {
+    fn new(species: &str) -> Self {
+        let ctx = gpu();
+        let scene = lone_tree(species);
+        let world = scene.build_world().unwrap();
+        let baked = bake_of(&scene);
+        assert_eq!(baked.texels.len(), 1, "one species, one set of volumes");
+        let tree = world.forest.instances[0];
+        let centre = world.species[0]
+            .tree_bounds
+            .transformed(Mat4::from_translation(tree.position))
+            .center();
+        let mut renderer = Renderer::new(&ctx, &world).unwrap();
+        renderer.attach_btf(&ctx, &baked, &world).unwrap();
+        assert!(renderer.has_texels());
+        renderer
+            .prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
+            .unwrap();
+        Self {
+            ctx,
+            scene,
+            renderer,
+            centre,
+        }
+    }
+
+    /// The crown seen from `offset` away through a `fov`-degree lens, no fog.
+    fn view(&self, offset: Vec3, fov: f32) -> FrameDesc {
+        let mut frame = FrameDesc::from_scene(&self.scene);
+        frame.camera = Camera::look_at(self.centre + offset, self.centre, fov);
+        frame.fog_density = 0.0;
+        frame
+    }
+
+    /// `frame` drawn with `method` (and its stats), at `w` x `h`.
+    fn draw(
+        &mut self,
+        frame: FrameDesc,
+        method: Method,
+        w: u32,
+        h: u32,
+    ) -> (image::RgbImage, canopy::render::FrameStats) {
+        let frame = FrameDesc { method, ..frame };
+        let (img, stats) = self
+            .renderer
+            .render_image(&self.ctx, &frame, w, h, 1)
+            .unwrap();
+        (rgb(&img), stats)
+    }
+
+    /// `frame` drawn as the reference, supersampled x2.
+    fn truth(&mut self, frame: FrameDesc, w: u32, h: u32) -> image::RgbImage {
+        let reference = FrameDesc {
+            reference: Some(Reference::default()),
+            ..frame
+        };
+        rgb(&self
+            .renderer
+            .render_image(&self.ctx, &reference, w, h, 2)
+            .unwrap()
+            .0)
+    }
+}
+
 /// A lone tree from the side at 40 m, sun at 45 degrees: the texel against the reference
 /// (and btf, for scale). Returns (texel, btf) mean FLIP.
 fn lone_tree_flip(species: &str) -> (f32, f32) {
-    let ctx = gpu();
-    let scene = lone_tree(species);
-    let world = scene.build_world().unwrap();
-    let baked = bake_of(&scene);
-    assert_eq!(baked.texels.len(), 1, "one species, one set of volumes");
-    let tree = world.forest.instances[0];
-    let bounds = world.species[0]
-        .tree_bounds
-        .transformed(Mat4::from_translation(tree.position));
-    let centre = bounds.center();
-    let mut frame = FrameDesc::from_scene(&scene);
-    frame.camera = Camera::look_at(centre + Vec3::new(30.0, 6.0, 28.0), centre, 40.0);
-    frame.fog_density = 0.0;
-    let mut r = Renderer::new(&ctx, &world).unwrap();
-    r.attach_btf(&ctx, &baked, &world).unwrap();
-    assert!(r.has_texels());
-    r.prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
-        .unwrap();
+    let mut lone = LoneTree::new(species);
+    let frame = lone.view(Vec3::new(30.0, 6.0, 28.0), 40.0);
     let (w, h) = (240, 240);
-    let mut reference = frame;
-    reference.reference = Some(Reference::default());
-    let truth = rgb(&r.render_image(&ctx, &reference, w, h, 2).unwrap().0);
-    frame.method = Method::Texel;
-    let (texel, stats) = r.render_image(&ctx, &frame, w, h, 1).unwrap();
-    let texel = rgb(&texel);
-    frame.method = Method::Btf;
-    let btf = rgb(&r.render_image(&ctx, &frame, w, h, 1).unwrap().0);
+    let truth = lone.truth(frame, w, h);
+    let (texel, stats) = lone.draw(frame, Method::Texel, w, h);
+    let (btf, _) = lone.draw(frame, Method::Btf, w, h);
     let flip =
         |a: &image::RgbImage, b: &image::RgbImage| canopy::metrics::flip(a, b).unwrap().stats.mean;
     let (f_texel, f_btf) = (flip(&truth, &texel), flip(&truth, &btf));
@@ -292,33 +344,16 @@ fn a_lone_broadleaf_as_a_texel_is_close_to_the_reference() {
 /// the reference at every elevation.
 #[test]
 fn slices_parallel_to_the_screen_hold_from_the_side_to_straight_down() {
-    let ctx = gpu();
-    let scene = lone_tree("fir");
-    let world = scene.build_world().unwrap();
-    let baked = bake_of(&scene);
-    let tree = world.forest.instances[0];
-    let centre = world.species[0]
-        .tree_bounds
-        .transformed(Mat4::from_translation(tree.position))
-        .center();
-    let mut r = Renderer::new(&ctx, &world).unwrap();
-    r.attach_btf(&ctx, &baked, &world).unwrap();
-    r.prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
-        .unwrap();
+    let mut lone = LoneTree::new("fir");
     let (w, h) = (160, 160);
     let mut worst: f32 = 0.0;
     let mut figures = Vec::new();
     for elevation in [5.0f32, 30.0, 60.0, 85.0] {
         let e = elevation.to_radians();
         let dir = Vec3::new(e.cos() * 0.6, e.sin(), e.cos() * 0.8);
-        let mut frame = FrameDesc::from_scene(&scene);
-        frame.camera = Camera::look_at(centre + dir * 40.0, centre, 35.0);
-        frame.fog_density = 0.0;
-        let mut reference = frame;
-        reference.reference = Some(Reference::default());
-        let truth = rgb(&r.render_image(&ctx, &reference, w, h, 2).unwrap().0);
-        frame.method = Method::Texel;
-        let texel = rgb(&r.render_image(&ctx, &frame, w, h, 1).unwrap().0);
+        let frame = lone.view(dir * 40.0, 35.0);
+        let truth = lone.truth(frame, w, h);
+        let (texel, _) = lone.draw(frame, Method::Texel, w, h);
         let f = canopy::metrics::flip(&truth, &texel).unwrap().stats.mean;
         figures.push(format!("{elevation}°: {f:.4}"));
         worst = worst.max(f);
@@ -337,32 +372,15 @@ fn slices_parallel_to_the_screen_hold_from_the_side_to_straight_down() {
 /// close to the reference's own change (no pop).
 #[test]
 fn orbiting_across_a_stack_switch_does_not_pop() {
-    let ctx = gpu();
-    let scene = lone_tree("fir");
-    let world = scene.build_world().unwrap();
-    let baked = bake_of(&scene);
-    let tree = world.forest.instances[0];
-    let centre = world.species[0]
-        .tree_bounds
-        .transformed(Mat4::from_translation(tree.position))
-        .center();
-    let mut r = Renderer::new(&ctx, &world).unwrap();
-    r.attach_btf(&ctx, &baked, &world).unwrap();
-    r.prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
-        .unwrap();
+    let mut lone = LoneTree::new("fir");
     let (w, h) = (160, 160);
     let mut frames = Vec::new();
     for step in 0..7 {
         let a = (30.0 + 5.0 * step as f32).to_radians();
         let dir = Vec3::new(a.sin(), 0.25, a.cos()).normalize();
-        let mut frame = FrameDesc::from_scene(&scene);
-        frame.camera = Camera::look_at(centre + dir * 40.0, centre, 35.0);
-        frame.fog_density = 0.0;
-        let mut reference = frame;
-        reference.reference = Some(Reference::default());
-        let truth = rgb(&r.render_image(&ctx, &reference, w, h, 2).unwrap().0);
-        frame.method = Method::Texel;
-        let texel = rgb(&r.render_image(&ctx, &frame, w, h, 1).unwrap().0);
+        let frame = lone.view(dir * 40.0, 35.0);
+        let truth = lone.truth(frame, w, h);
+        let (texel, _) = lone.draw(frame, Method::Texel, w, h);
         frames.push((truth, texel));
     }
     let flip =

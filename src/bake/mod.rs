@@ -196,15 +196,7 @@ pub fn bake_btf(
                 let (_, up) = billboard_axes(v);
                 let camera = Camera::orthographic(center + v * (2.0 * radius), -v, up, radius);
                 // The view's direct images (sun only, one per light), then its sky-lit one.
-                let shots = lights
-                    .directions()
-                    .iter()
-                    .map(|&l| (Sun::from_direction(l, Vec3::ONE, 1.0), 0.0))
-                    .chain(std::iter::once((
-                        Sun::from_direction(Vec3::Y, Vec3::ZERO, 0.0),
-                        1.0,
-                    )));
-                for (i, (sun, sky)) in shots.enumerate() {
+                for (i, (sun, sky)) in studio_shots(&lights).into_iter().enumerate() {
                     let frame = studio_frame(camera, sun, sky, shadow_map);
                     let (img, _) =
                         renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
@@ -243,6 +235,20 @@ pub fn bake_btf(
         vcm: Vec::new(),
         texels: Vec::new(),
     })
+}
+
+/// The lighting of one set of studio pictures: the sun alone from each of `lights` (white,
+/// intensity 1, no sky), then the sky alone (sky intensity 1, no sun): (sun, sky).
+fn studio_shots(lights: &DirectionSet) -> Vec<(Sun, f32)> {
+    lights
+        .directions()
+        .iter()
+        .map(|&l| (Sun::from_direction(l, Vec3::ONE, 1.0), 0.0))
+        .chain(std::iter::once((
+            Sun::from_direction(Vec3::Y, Vec3::ZERO, 0.0),
+            1.0,
+        )))
+        .collect()
 }
 
 /// A studio frame: the object alone, lit by the sun only (`sky` = 0) or the sky only.

@@ -29,12 +29,12 @@ use crate::model::World;
 use crate::model::mesh::Aabb;
 use crate::model::tree::TreeModel;
 use crate::render::sky_visibility::SKY_DIRECTIONS;
-use crate::render::target::{linear_to_srgb, srgb_to_linear};
-use crate::render::{Camera, GpuContext, Renderer, Sun};
+use crate::render::target::{linear_to_srgb, srgb_lut};
+use crate::render::{Camera, GpuContext, Renderer};
 use crate::sphere::DirectionSet;
 use crate::{Error, Result};
 
-use super::{studio_frame, studio_world};
+use super::{studio_frame, studio_shots, studio_world};
 
 /// Where a species' volume lies: its box (object frame), grid and voxel side.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -76,11 +76,6 @@ impl TexelGrid {
     /// Voxels in one volume.
     pub fn voxel_count(&self) -> usize {
         (self.dims.x * self.dims.y * self.dims.z) as usize
-    }
-
-    /// Slabs photographed: one per voxel layer along each of the three axes.
-    pub fn slab_count(&self) -> u64 {
-        u64::from(self.dims.x + self.dims.y + self.dims.z)
     }
 }
 
@@ -171,19 +166,6 @@ impl Accumulator {
     }
 }
 
-/// The studio shots of one volume set: sun only from each light, then the sky alone.
-fn shots(lights: &DirectionSet) -> Vec<(Sun, f32)> {
-    lights
-        .directions()
-        .iter()
-        .map(|&l| (Sun::from_direction(l, Vec3::ONE, 1.0), 0.0))
-        .chain(std::iter::once((
-            Sun::from_direction(Vec3::Y, Vec3::ZERO, 0.0),
-            1.0,
-        )))
-        .collect()
-}
-
 /// One axis' view of the grid: the camera looking down it from outside the box, the image's
 /// right and up axes, and the image's size in voxels.
 struct AxisView {
@@ -243,7 +225,7 @@ pub fn bake_volume(
     let mut renderer = Renderer::new(ctx, &studio)?;
     renderer.prepare_reference(ctx, &studio, SKY_DIRECTIONS, false)?;
     let ss = supersample.clamp(1, crate::render::voxelize::MAX_SUPERSAMPLE);
-    let shots = shots(lights);
+    let shots = studio_shots(lights);
     let n = grid.voxel_count();
     let mut acc = Accumulator::new(shots.len(), n);
     let target = renderer.voxel_target(ctx, grid.box_min, grid.dims, grid.voxel, ss)?;
@@ -285,10 +267,10 @@ pub fn bake_volume_by_slabs(
     let studio = studio_world(tree.clone());
     let mut renderer = Renderer::new(ctx, &studio)?;
     renderer.prepare_reference(ctx, &studio, SKY_DIRECTIONS, false)?;
-    let shots = shots(lights);
+    let shots = studio_shots(lights);
     let n = grid.voxel_count();
     let mut acc = Accumulator::new(shots.len(), n);
-    let lut: Vec<f32> = (0..=255u8).map(srgb_to_linear).collect();
+    let lut = srgb_lut();
     let shadow_map = (2 * grid.dims.max_element() * supersample).clamp(256, 2048);
     for (ax, side) in AXES.iter().flat_map(|ax| [(ax, 1.0), (ax, -1.0)]) {
         let a = ax.axis;
@@ -430,7 +412,6 @@ mod tests {
         // It holds the bounds, centred.
         assert!(g.box_min.cmple(b.min).all() && g.box_max().cmpge(b.max).all());
         assert!((0.5 * (g.box_min + g.box_max()) - b.center()).length() < 1e-5);
-        assert_eq!(g.slab_count(), 15 + 64 + 22);
         assert!(TexelGrid::around(&Aabb::EMPTY, 64).is_none());
         assert!(TexelGrid::around(&b, 0).is_none());
     }

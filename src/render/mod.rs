@@ -473,7 +473,7 @@ impl Renderer {
                         ctx,
                         &self.world,
                         &visible,
-                        &method::texel::TexelView {
+                        &btf::PrepareView {
                             camera: cam,
                             focal_px: cam.focal_px(height),
                             to_sun,
@@ -509,13 +509,8 @@ impl Renderer {
         };
         // The sun-dependent VCM reads inside the prepare step are the sun update's.
         let prepare_ms = prepare_start.elapsed().as_secs_f64() * 1e3 - sun_update_ms;
-        let mut uniform_frame = *frame;
-        uniform_frame.shadows.enabled = shadows_on;
-        let mut uniforms = FrameUniforms::new(&uniform_frame, aspect, &cascades);
-        if let Some(s) = self.sky_vis.as_ref().filter(|_| reference.is_some()) {
-            uniforms.sky_vis_count = s.count;
-            uniforms.sky_vis_texel_world = s.cell;
-        }
+        let mut uniforms =
+            self.frame_uniforms_for(frame, aspect, &cascades, shadows_on, reference.is_some());
 
         // The ground shadow maps follow the sun, not the camera. They are submitted on their
         // own so that their cost can be timed (blocking, when measuring).
@@ -727,6 +722,26 @@ impl Renderer {
         Ok(stats)
     }
 
+    /// The uniforms of `frame` with its sun shadows on or off as prepared, and the sky
+    /// visibility in them when the frame is a reference.
+    fn frame_uniforms_for(
+        &self,
+        frame: &FrameDesc,
+        aspect: f32,
+        cascades: &Cascades,
+        shadows_on: bool,
+        reference: bool,
+    ) -> FrameUniforms {
+        let mut uniform_frame = *frame;
+        uniform_frame.shadows.enabled = shadows_on;
+        let mut uniforms = FrameUniforms::new(&uniform_frame, aspect, cascades);
+        if let Some(s) = self.sky_vis.as_ref().filter(|_| reference) {
+            uniforms.sky_vis_count = s.count;
+            uniforms.sky_vis_texel_world = s.cell;
+        }
+        uniforms
+    }
+
     /// A voxel grid for [`Self::voxelize`] (building the voxel pipeline on first use).
     pub fn voxel_target(
         &mut self,
@@ -770,13 +785,13 @@ impl Renderer {
         let visible = self.world.cull(&frame.camera.frustum(aspect));
         let g = GeometryFrame::prepare(&self.world, frame, aspect, visible);
         let runs = self.world.upload_lists(ctx, &g.lists);
-        let mut uniform_frame = *frame;
-        uniform_frame.shadows.enabled = g.shadows_on;
-        let mut uniforms = FrameUniforms::new(&uniform_frame, aspect, &g.cascades);
-        if let Some(s) = self.sky_vis.as_ref().filter(|_| frame.reference.is_some()) {
-            uniforms.sky_vis_count = s.count;
-            uniforms.sky_vis_texel_world = s.cell;
-        }
+        let uniforms = self.frame_uniforms_for(
+            frame,
+            aspect,
+            &g.cascades,
+            g.shadows_on,
+            frame.reference.is_some(),
+        );
         ctx.queue
             .write_buffer(&self.frame_uniforms, 0, bytemuck::bytes_of(&uniforms));
         self.geometry.write_uniforms(ctx, &uniforms, &g);

@@ -12,12 +12,17 @@ pub struct Layouts {
     pub parts: wgpu::BindGroupLayout,
 }
 
-fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+/// A layout entry for a buffer of kind `ty` seen by `visibility`.
+pub(crate) fn buffer_entry(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+    ty: wgpu::BufferBindingType,
+) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility,
         ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
+            ty,
             has_dynamic_offset: false,
             min_binding_size: None,
         },
@@ -25,17 +30,16 @@ fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGrou
     }
 }
 
+fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    buffer_entry(binding, visibility, wgpu::BufferBindingType::Uniform)
+}
+
 fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
+    buffer_entry(
         binding,
-        visibility: wgpu::ShaderStages::VERTEX,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only: true },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
+        wgpu::ShaderStages::VERTEX,
+        wgpu::BufferBindingType::Storage { read_only: true },
+    )
 }
 
 impl Layouts {
@@ -345,4 +349,69 @@ impl ColorPipelines {
             sky,
         }
     }
+}
+
+/// A pipeline drawing procedural instances (no vertex buffers) over the frame, blended
+/// into one colour target and depth-tested, never depth-written: the image-based methods'
+/// billboards and texel boxes, into the view or into the ground alpha map.
+pub struct Blended<'a> {
+    /// Label, and the name of the WGSL module.
+    pub label: &'a str,
+    pub layouts: [&'a wgpu::BindGroupLayout; 2],
+    pub source: String,
+    pub vertex: &'a str,
+    pub fragment: &'a str,
+    pub format: wgpu::TextureFormat,
+    pub blend: wgpu::BlendComponent,
+    pub cull: Option<wgpu::Face>,
+    pub depth: (wgpu::TextureFormat, wgpu::CompareFunction),
+}
+
+pub fn blended_pipeline(device: &wgpu::Device, p: Blended<'_>) -> wgpu::RenderPipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(p.label),
+        source: wgpu::ShaderSource::Wgsl(p.source.into()),
+    });
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(p.fragment),
+        bind_group_layouts: &[Some(p.layouts[0]), Some(p.layouts[1])],
+        immediate_size: 0,
+    });
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(p.fragment),
+        layout: Some(&layout),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some(p.vertex),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            cull_mode: p.cull,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: p.depth.0,
+            depth_write_enabled: Some(false),
+            depth_compare: Some(p.depth.1),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some(p.fragment),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: p.format,
+                blend: Some(wgpu::BlendState {
+                    color: p.blend,
+                    alpha: p.blend,
+                }),
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }

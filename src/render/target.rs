@@ -165,6 +165,11 @@ pub fn map_read(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>> {
     Ok(data)
 }
 
+/// [`srgb_to_linear`] of every byte, for decoding many pixels.
+pub fn srgb_lut() -> Vec<f32> {
+    (0..=255u8).map(srgb_to_linear).collect()
+}
+
 pub fn srgb_to_linear(c: u8) -> f32 {
     let c = f32::from(c) / 255.0;
     if c <= 0.04045 {
@@ -191,7 +196,7 @@ pub fn downsample(img: &RgbaImage, factor: u32) -> RgbaImage {
         return img.clone();
     }
     let (w, h) = (img.width() / factor, img.height() / factor);
-    let lut: Vec<f32> = (0..=255u8).map(srgb_to_linear).collect();
+    let lut = srgb_lut();
     let n = (factor * factor) as f32;
     RgbaImage::from_fn(w, h, |x, y| {
         let mut acc = [0.0f32; 4];

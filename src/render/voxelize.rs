@@ -8,7 +8,7 @@
 
 use glam::{UVec3, Vec3};
 
-use super::pipelines::Layouts;
+use super::pipelines::{Layouts, buffer_entry};
 use super::world_gpu::vertex_layout;
 use super::{DEPTH_FORMAT, GpuContext, shaders};
 use crate::{Error, Result};
@@ -49,26 +49,12 @@ impl VoxelPipeline {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("voxel grid"),
             entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: fragment,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: fragment,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: false },
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
+                buffer_entry(0, fragment, wgpu::BufferBindingType::Uniform),
+                buffer_entry(
+                    1,
+                    fragment,
+                    wgpu::BufferBindingType::Storage { read_only: false },
+                ),
             ],
         });
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {

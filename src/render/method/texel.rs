@@ -18,10 +18,9 @@ use crate::format::{Baked, TexelVolume};
 use crate::model::World;
 use crate::model::mesh::Aabb;
 use crate::render::GpuContext;
-use crate::render::camera::{Camera, Frustum};
 use crate::render::frame::FrameStats;
-use crate::render::method::btf::BtfScene;
-use crate::render::target::{linear_to_srgb, srgb_to_linear};
+use crate::render::method::btf::{BtfScene, PrepareView};
+use crate::render::target::{linear_to_srgb, srgb_lut};
 use crate::render::world_gpu::{TreeGpu, WorldGpu};
 use crate::slices::{self, SliceBounds};
 use crate::sphere::DirectionSet;
@@ -286,7 +285,7 @@ impl TexelScene {
             }
         }
         let mut levels = vec![(a, level0)];
-        let lut: Vec<f32> = (0..=255u8).map(srgb_to_linear).collect();
+        let lut = srgb_lut();
         for _ in 1..self.mips {
             let Some((size, prev)) = levels.last() else {
                 break;
@@ -328,14 +327,6 @@ impl TexelScene {
     }
 }
 
-/// What [`prepare`] needs of the view.
-pub struct TexelView<'a> {
-    pub camera: &'a Camera,
-    pub focal_px: f32,
-    pub to_sun: Vec3,
-    pub frustum: &'a Frustum,
-}
-
 /// One frame's texels, back to front, and the count of those the eye is inside (the last
 /// `inside` records).
 pub struct TexelFrame {
@@ -351,7 +342,7 @@ pub fn prepare(
     scene: &TexelScene,
     trees: &[TreeGpu],
     visible: &[Vec<u32>],
-    view: &TexelView,
+    view: &PrepareView,
     settings: &TexelSettings,
     vcm: Option<&BtfScene>,
     max: usize,
@@ -378,7 +369,7 @@ pub fn prepare(
                 continue;
             }
             let local = Aabb::new(vol.box_min, vol.box_min + vol.box_size);
-            let world_box = transformed(&local, &m);
+            let world_box = local.transformed(m);
             if !view.frustum.intersects(&world_box) {
                 continue;
             }
@@ -463,11 +454,6 @@ pub fn prepare(
     }
 }
 
-/// The world box of `b` moved by `m`.
-fn transformed(b: &Aabb, m: &Mat4) -> Aabb {
-    Aabb::from_points(b.corners().iter().map(|&c| m.transform_point3(c)))
-}
-
 /// The texel volumes on the GPU and the per-frame instance buffer.
 pub struct TexelAssets {
     scene: TexelScene,
@@ -544,22 +530,16 @@ impl TexelAssets {
             mipmap_filter: wgpu::MipmapFilterMode::Linear,
             ..Default::default()
         });
-        let fragment = wgpu::ShaderStages::VERTEX_FRAGMENT;
         let layout = ctx
             .device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("texel"),
                 entries: &[
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 0,
-                        visibility: fragment,
-                        ty: wgpu::BindingType::Buffer {
-                            ty: wgpu::BufferBindingType::Storage { read_only: true },
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                        count: None,
-                    },
+                    crate::render::pipelines::buffer_entry(
+                        0,
+                        wgpu::ShaderStages::VERTEX_FRAGMENT,
+                        wgpu::BufferBindingType::Storage { read_only: true },
+                    ),
                     wgpu::BindGroupLayoutEntry {
                         binding: 1,
                         visibility: wgpu::ShaderStages::FRAGMENT,
@@ -612,7 +592,7 @@ impl TexelAssets {
         ctx: &GpuContext,
         world: &WorldGpu,
         visible: &[Vec<u32>],
-        view: &TexelView,
+        view: &PrepareView,
         settings: &TexelSettings,
         vcm: Option<&BtfScene>,
     ) -> TexelFrame {
@@ -824,50 +804,18 @@ fn texel_pipeline(
     cull: Option<wgpu::Face>,
     depth: (wgpu::TextureFormat, wgpu::CompareFunction),
 ) -> wgpu::RenderPipeline {
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("texel.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(crate::render::shaders::texel().into()),
-    });
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(fragment),
-        bind_group_layouts: &[Some(layouts[0]), Some(layouts[1])],
-        immediate_size: 0,
-    });
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(fragment),
-        layout: Some(&layout),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs_texel"),
-            compilation_options: Default::default(),
-            buffers: &[],
+    crate::render::pipelines::blended_pipeline(
+        device,
+        crate::render::pipelines::Blended {
+            label: "texel.wgsl",
+            layouts,
+            source: crate::render::shaders::texel(),
+            vertex: "vs_texel",
+            fragment,
+            format,
+            blend,
+            cull,
+            depth,
         },
-        primitive: wgpu::PrimitiveState {
-            cull_mode: cull,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: depth.0,
-            depth_write_enabled: Some(false),
-            depth_compare: Some(depth.1),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some(fragment),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format,
-                blend: Some(wgpu::BlendState {
-                    color: blend,
-                    alpha: blend,
-                }),
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+    )
 }

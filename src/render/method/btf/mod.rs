@@ -515,50 +515,18 @@ fn billboard_pipeline(
     blend: wgpu::BlendComponent,
     depth: (wgpu::TextureFormat, wgpu::CompareFunction),
 ) -> wgpu::RenderPipeline {
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(source.0),
-        source: wgpu::ShaderSource::Wgsl(source.1.into()),
-    });
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(fragment),
-        bind_group_layouts: &[Some(layouts[0]), Some(layouts[1])],
-        immediate_size: 0,
-    });
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(fragment),
-        layout: Some(&layout),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs_billboard"),
-            compilation_options: Default::default(),
-            buffers: &[],
+    crate::render::pipelines::blended_pipeline(
+        device,
+        crate::render::pipelines::Blended {
+            label: source.0,
+            layouts,
+            source: source.1,
+            vertex: "vs_billboard",
+            fragment,
+            format,
+            blend,
+            cull: None,
+            depth,
         },
-        primitive: wgpu::PrimitiveState {
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: depth.0,
-            depth_write_enabled: Some(false),
-            depth_compare: Some(depth.1),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some(fragment),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format,
-                blend: Some(wgpu::BlendState {
-                    color: blend,
-                    alpha: blend,
-                }),
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+    )
 }
