@@ -64,6 +64,13 @@ struct TexelOut {
     @location(1) @interpolate(flat) instance: u32,
 }
 
+// The "show slice count" overlay's colour: blue for 1 slice through green (11) to red
+// (128 or more), on a log scale.
+fn slice_count_colour(slices: f32) -> vec3<f32> {
+    let x = clamp(log2(max(slices, 1.0)) / 7.0, 0.0, 1.0);
+    return vec3<f32>(smoothstep(0.5, 1.0, x), 1.0 - abs(2.0 * x - 1.0), 1.0 - smoothstep(0.0, 0.5, x));
+}
+
 @vertex
 fn vs_texel(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance: u32) -> TexelOut {
     // 12 triangles of the unit cube, counter-clockwise seen from outside.
@@ -156,9 +163,7 @@ fn fs_texel(in: TexelOut) -> @location(0) vec4<f32> {
     }
     var shown = color * t.tint;
     if t.mode == MODE_SLICES {
-        // Blue (few slices) through green to red (the cap).
-        let x = clamp(t.slices / max(t.max_steps, 1.0), 0.0, 1.0);
-        shown = vec3<f32>(smoothstep(0.5, 1.0, x), 1.0 - abs(2.0 * x - 1.0), 1.0 - smoothstep(0.0, 0.5, x)) * alpha;
+        shown = slice_count_colour(t.slices) * alpha;
     }
     let dist = t_in * t.scale;
     return vec4<f32>(fog_and_exposure(shown, alpha, dist), alpha);
@@ -200,4 +205,113 @@ fn fs_texel_opacity(in: TexelOut) -> @location(0) vec4<f32> {
         }
     }
     return vec4<f32>(0.0, 0.0, 0.0, 1.0 - transmit);
+}
+
+// ---------------------------------------------------------------------------------------
+// The seeds' stacks (`--texel-mode stacks`; src/render/method/texel/stacks.rs): each texel
+// drawn as the slices of its stack most facing the eye, one quad per slice, back to front,
+// each slice a tile of the stack atlas (pre-composited levels: a slice of level k is the
+// "over" of 2^k voxel slices, so no opacity correction). `StackGpu` mirrors `Stack`.
+
+struct Stack {
+    // uv of the species' group's first tile, of one tile, of a tile's used part.
+    origin: vec2<f32>,
+    tile: vec2<f32>,
+    used: vec2<f32>,
+    // The used part in texels (level 0).
+    texels: vec2<f32>,
+    // The stack's axis (0 x, 1 y, 2 z); tiles per row of the group; tiles per volume.
+    axis: u32,
+    cols: u32,
+    per_volume: u32,
+    // First tile of the drawn level and order within a volume; the level (2^level voxel
+    // slices per drawn slice); the viewing order (0: lower slices in front).
+    level_offset: u32,
+    level: u32,
+    order: u32,
+    // Slices drawn.
+    slices: u32,
+    pad: u32,
+}
+
+@group(1) @binding(3) var stack_atlas: texture_2d<f32>;
+@group(1) @binding(4) var<storage, read> stacks: array<Stack>;
+// Per drawn quad: the texel and the slice of its level, back to front.
+@group(1) @binding(5) var<storage, read> stack_quads: array<vec2<u32>>;
+
+struct StackOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) object: vec3<f32>,
+    @location(2) uv: vec2<f32>,
+    @location(3) @interpolate(flat) texel: u32,
+    @location(4) @interpolate(flat) slice: u32,
+}
+
+@vertex
+fn vs_stack(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance: u32) -> StackOut {
+    var quad = array<vec2<f32>, 6>(
+        vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 0.0), vec2<f32>(1.0, 1.0),
+        vec2<f32>(0.0, 0.0), vec2<f32>(1.0, 1.0), vec2<f32>(0.0, 1.0),
+    );
+    let pick = stack_quads[instance];
+    let t = texels[pick.x];
+    let s = stacks[pick.x];
+    let c = quad[vi % 6u];
+    // Across the axis: the middle of the 2^level voxel slices this slice stands for.
+    let along = (f32(pick.y) + 0.5) * f32(1u << s.level) * t.voxel;
+    var p: vec3<f32>;
+    if s.axis == 0u {
+        p = vec3<f32>(along, c.x * t.box_size.y, c.y * t.box_size.z);
+    } else if s.axis == 1u {
+        p = vec3<f32>(c.x * t.box_size.x, along, c.y * t.box_size.z);
+    } else {
+        p = vec3<f32>(c.x * t.box_size.x, c.y * t.box_size.y, along);
+    }
+    p += t.box_min;
+    let world = (t.model * vec4<f32>(p, 1.0)).xyz;
+    var out: StackOut;
+    out.clip = frame.view_proj * vec4<f32>(world, 1.0);
+    out.world = world;
+    out.object = p;
+    out.uv = c;
+    out.texel = pick.x;
+    out.slice = pick.y;
+    return out;
+}
+
+fn stack_sample(s: Stack, volume: u32, slice: u32, uv: vec2<f32>, lod: f32) -> vec4<f32> {
+    let index = volume * s.per_volume + s.level_offset + slice;
+    let cell = vec2<f32>(f32(index % s.cols), f32(index / s.cols));
+    // Half a texel of the sampled mip level in from the used part's edges.
+    let half = min(vec2<f32>(0.5), 0.5 * exp2(ceil(lod)) / s.texels);
+    let at = s.origin + cell * s.tile + clamp(uv, half, vec2<f32>(1.0) - half) * s.used;
+    return textureSampleLevel(stack_atlas, volume_sampler, at, lod);
+}
+
+@fragment
+fn fs_stack(in: StackOut) -> @location(0) vec4<f32> {
+    let t = texels[in.texel];
+    let s = stacks[in.texel];
+    let sky = stack_sample(s, t.lights, in.slice, in.uv, t.lod);
+    if sky.a < 0.002 {
+        discard;
+    }
+    var direct = vec3<f32>(0.0);
+    for (var j = 0; j < 3; j++) {
+        let w = t.light_weight[j];
+        if w > 0.0 {
+            direct += w * stack_sample(s, t.light_index[j], in.slice, in.uv, t.lod).rgb;
+        }
+    }
+    let u = (in.object - t.vcm_min) * t.vcm_inv_size;
+    let f_sun = trilinear(t.vcm_direct[0], t.vcm_direct[1], u);
+    let f_sky = trilinear(t.vcm_sky[0], t.vcm_sky[1], u);
+    let alpha = sky.a;
+    var shown = (direct * frame.sun_color * f_sun + sky.rgb * frame.sky_ambient * f_sky) * t.tint;
+    if t.mode == MODE_SLICES {
+        shown = slice_count_colour(t.slices) * alpha;
+    }
+    let dist = length(in.world - frame.camera_pos);
+    return vec4<f32>(fog_and_exposure(shown, alpha, dist), alpha);
 }

@@ -105,7 +105,7 @@ struct BenchArgs {
     #[arg(long, value_delimiter = ',', value_parser = parse_method, default_value = "geometry,btf,billboard,texel")]
     methods: Vec<Method>,
     /// Sweep a knob: KEY=V1,V2,... (btf: lod_scale, weight_threshold, lod_fade, planes,
-    /// vcm; texel: slice_d0, slice_d1, max_slices); repeat for a grid.
+    /// vcm; texel: slice_d0, slice_d1, max_slices, texel_mode); repeat for a grid.
     #[arg(long, value_parser = parse_sweep)]
     sweep: Vec<canopy::bench::run::Sweep>,
     /// Image size, WIDTHxHEIGHT.
@@ -249,7 +249,8 @@ struct RenderArgs {
     #[arg(long, value_parser = parse_unit)]
     lod_fade: Option<f32>,
     /// texel: how volumes are sliced (slices3d: parallel to the screen through a 3D
-    /// texture).
+    /// texture; stacks: the seeds' three axis stacks of 2D slices with pre-composited
+    /// power-of-two levels).
     #[arg(long, default_value = "slices3d", value_parser = parse_texel_mode)]
     texel_mode: TexelMode,
     /// texel: largest visible depth between slices, metres (criterion C1).
@@ -275,7 +276,7 @@ struct RenderArgs {
 
 fn parse_texel_mode(s: &str) -> Result<TexelMode, String> {
     TexelMode::parse(s).ok_or_else(|| {
-        format!("unknown texel mode {s:?}; expected slices3d (stacks is not built yet)")
+        format!("unknown texel mode {s:?}; expected slices3d or stacks")
     })
 }
 

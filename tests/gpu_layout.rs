@@ -191,3 +191,27 @@ fn texel_record_matches_texel_wgsl() {
         rust,
     );
 }
+
+#[test]
+fn stack_record_matches_texel_wgsl() {
+    use canopy::render::method::texel::stacks::StackGpu;
+    let rust = rust_layout!(StackGpu {
+        origin,
+        tile,
+        used,
+        texels,
+        axis,
+        cols,
+        per_volume,
+        level_offset,
+        level,
+        order,
+        slices,
+        pad,
+    });
+    check(
+        "Stack",
+        wgsl_layout(&canopy::render::shaders::texel(), "Stack"),
+        rust,
+    );
+}

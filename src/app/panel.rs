@@ -254,8 +254,14 @@ fn format_count(n: u64) -> String {
 
 /// The `texel` method's knobs and what it drew.
 fn texel_controls(ui: &mut egui::Ui, frame: &mut FrameDesc, stats: &PanelStats) {
+    use crate::render::method::texel::TexelMode;
     let t = &mut frame.texel;
-    ui.label("slices parallel to the screen (3D texture)");
+    ui.horizontal(|ui| {
+        ui.radio_value(&mut t.mode, TexelMode::Slices3d, "slices3d")
+            .on_hover_text("slices parallel to the screen through a 3D texture (Decaudin-Neyret 2009)");
+        ui.radio_value(&mut t.mode, TexelMode::Stacks, "stacks")
+            .on_hover_text("the seeds' three axis stacks of 2D slices, pre-composited power-of-two levels (Meyer-Neyret 1998)");
+    });
     ui.add(
         egui::Slider::new(&mut t.bounds.d0, 0.05..=5.0)
             .logarithmic(true)

@@ -13,7 +13,7 @@ use super::truth_key::{TruthKey, TruthLookup, TruthRequest};
 use crate::metrics;
 use crate::render::btf::{BtfSettings, PlaneMode};
 use crate::render::measure::TimeSource;
-use crate::render::method::texel::TexelSettings;
+use crate::render::method::texel::{TexelMode, TexelSettings};
 use crate::render::{FrameDesc, GpuContext, Method, Renderer};
 use crate::{Error, Result};
 
@@ -31,10 +31,12 @@ pub enum Knob {
     SliceD1,
     /// texel: the slice cap.
     MaxSlices,
+    /// texel: slices3d or stacks.
+    TexelMode,
 }
 
 impl Knob {
-    pub const ALL: [Knob; 8] = [
+    pub const ALL: [Knob; 9] = [
         Knob::LodScale,
         Knob::WeightThreshold,
         Knob::LodFade,
@@ -43,12 +45,13 @@ impl Knob {
         Knob::SliceD0,
         Knob::SliceD1,
         Knob::MaxSlices,
+        Knob::TexelMode,
     ];
 
     /// The method this knob belongs to.
     pub fn method(self) -> Method {
         match self {
-            Knob::SliceD0 | Knob::SliceD1 | Knob::MaxSlices => Method::Texel,
+            Knob::SliceD0 | Knob::SliceD1 | Knob::MaxSlices | Knob::TexelMode => Method::Texel,
             _ => Method::Btf,
         }
     }
@@ -63,6 +66,7 @@ impl Knob {
             Knob::SliceD0 => "slice_d0",
             Knob::SliceD1 => "slice_d1",
             Knob::MaxSlices => "max_slices",
+            Knob::TexelMode => "texel_mode",
         }
     }
 
@@ -96,6 +100,9 @@ impl Knob {
             Knob::SliceD0 => t.bounds.d0 = number(0.01, 100.0)?,
             Knob::SliceD1 => t.bounds.d1 = number(0.05, 100.0)?,
             Knob::MaxSlices => t.bounds.max_slices = number(1.0, 1024.0)?.round() as u32,
+            Knob::TexelMode => {
+                t.mode = TexelMode::parse(value).ok_or_else(|| bad("give slices3d or stacks"))?
+            }
         }
         Ok(())
     }

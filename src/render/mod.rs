@@ -186,7 +186,7 @@ impl Renderer {
 
     /// Bytes of texel volumes on the GPU (0 without them).
     pub fn texel_bytes(&self) -> u64 {
-        self.texel.as_ref().map_or(0, |t| t.bytes)
+        self.texel.as_ref().map_or(0, |t| t.total_bytes())
     }
 
     /// Texel sizes of a species' three levels, from the attached bake.
@@ -481,7 +481,7 @@ impl Renderer {
                         },
                         &frame.texel,
                         vcm,
-                    )),
+                    )?),
                     None => return Err(Error::Gpu("the texel volumes are not loaded".into())),
                 }
             }

@@ -7,8 +7,10 @@
 //! VCM factors at its box corners; sorted back to front. On the GPU: one instanced draw of
 //! boxes (a second for the boxes the eye is inside, drawn from their far faces).
 //!
-//! Not yet here (issue 11): the seeds' axis stacks with pre-composited levels
-//! (`--texel-mode stacks`), forest-cover tiles, texels in the ground alpha shadow map.
+//! The seeds' own way, three axis stacks of 2D slices with pre-composited levels, is
+//! [`stacks`] (`--texel-mode stacks`). Not yet here (issue 11): forest-cover tiles.
+
+pub mod stacks;
 
 use std::collections::HashMap;
 
@@ -33,18 +35,23 @@ pub enum TexelMode {
     /// Slices parallel to the screen through a 3D texture (Decaudin-Neyret 2009).
     #[default]
     Slices3d,
+    /// The seeds' three axis stacks of 2D slices, the one most facing the eye drawn, with
+    /// power-of-two pre-composited levels (Meyer-Neyret 1998).
+    Stacks,
 }
 
 impl TexelMode {
     pub fn name(self) -> &'static str {
         match self {
             TexelMode::Slices3d => "slices3d",
+            TexelMode::Stacks => "stacks",
         }
     }
 
     pub fn parse(s: &str) -> Option<TexelMode> {
         match s {
             "slices3d" => Some(TexelMode::Slices3d),
+            "stacks" => Some(TexelMode::Stacks),
             _ => None,
         }
     }
@@ -82,7 +89,8 @@ pub struct TexelStats {
     pub tiles: u32,
     pub slices_mean: f32,
     pub slices_max: u32,
-    /// Bytes of the volumes on the GPU, mipmaps included.
+    /// Bytes of the volumes on the GPU, mipmaps included (with the stack atlas, once the
+    /// stacks mode has drawn).
     pub texel_bytes: u64,
     /// Texels left out because the instance buffer was full (the farthest).
     pub dropped: u32,
@@ -333,11 +341,16 @@ pub struct TexelFrame {
     pub records: Vec<TexelGpu>,
     pub inside: u32,
     pub stats: TexelStats,
+    /// In the stacks mode, each record's stack (same order) and the quads to draw.
+    pub stacks: Vec<stacks::StackGpu>,
+    pub quads: Vec<[u32; 2]>,
 }
 
 /// The texels of the trees in `visible` (per species, indices into `trees`): slice counts,
 /// lights, VCM factors (from `vcm`, the `btf` method's scene, when given), back to front,
-/// at most `max` of them (the nearest kept).
+/// at most `max` of them (the nearest kept). With `stack_atlas` (the stacks mode), each
+/// texel's stack and level too.
+#[allow(clippy::too_many_arguments)]
 pub fn prepare(
     scene: &TexelScene,
     trees: &[TreeGpu],
@@ -345,6 +358,7 @@ pub fn prepare(
     view: &PrepareView,
     settings: &TexelSettings,
     vcm: Option<&BtfScene>,
+    stack_atlas: Option<&stacks::StackAtlas>,
     max: usize,
 ) -> TexelFrame {
     let bounds = settings.bounds.sanitized();
@@ -354,7 +368,7 @@ pub fn prepare(
         texel_mode: settings.mode,
         ..Default::default()
     };
-    let mut sorted: Vec<(f32, bool, TexelGpu)> = Vec::new();
+    let mut sorted: Vec<(f32, bool, TexelGpu, Option<stacks::StackGpu>)> = Vec::new();
     for (sp, list) in visible.iter().enumerate() {
         let Some(vol) = scene.species(sp) else {
             continue;
@@ -380,7 +394,15 @@ pub fn prepare(
             let depth = (vol.box_size * f_obj.abs()).element_sum() * scale;
             let center = m.transform_point3(local.center());
             let z = (center - cam).dot(forward).max(view.camera.near.max(0.1));
-            let n = slices::screen_slices(view.focal_px, depth, z, &bounds);
+            let stack = stack_atlas.and_then(|a| {
+                let eye_to_box = inv.transform_vector3(center - cam);
+                a.choose(sp, eye_to_box, vol.voxel, scale, z, view.focal_px, &bounds)
+            });
+            let n = match &stack {
+                Some(c) => c.slices,
+                None if stack_atlas.is_some() => continue,
+                None => slices::screen_slices(view.focal_px, depth, z, &bounds),
+            };
             let spacing = depth / n as f32;
             // The mip level where one voxel covers about a pixel.
             let voxel_px = view.focal_px * vol.voxel * scale / z;
@@ -433,7 +455,14 @@ pub fn prepare(
             stats.texels += 1;
             stats.slices_max = stats.slices_max.max(n);
             stats.slices_mean += n as f32;
-            sorted.push(((center - cam).dot(forward), inside, record));
+            // Stacks have no inside: their quads are drawn in depth order whatever the eye.
+            let inside = inside && stack.is_none();
+            sorted.push((
+                (center - cam).dot(forward),
+                inside,
+                record,
+                stack.map(|c| c.record),
+            ));
         }
     }
     // Back to front; the boxes the eye is inside last (they are the nearest).
@@ -447,10 +476,14 @@ pub fn prepare(
         stats.slices_mean /= stats.texels as f32;
     }
     let inside = sorted.iter().filter(|s| s.1).count() as u32;
+    let stack_records: Vec<stacks::StackGpu> = sorted.iter().filter_map(|s| s.3).collect();
+    let quads = stacks::quads(&stack_records);
     TexelFrame {
         records: sorted.into_iter().map(|s| s.2).collect(),
         inside,
         stats,
+        stacks: stack_records,
+        quads,
     }
 }
 
@@ -472,6 +505,21 @@ pub struct TexelAssets {
     opacity_pipeline: Option<wgpu::RenderPipeline>,
     /// Bytes of the 3D texture, mipmaps included.
     pub bytes: u64,
+    /// The baked volumes, kept to build the stack atlas the first time the stacks mode
+    /// draws (most sessions never do).
+    volumes: Vec<TexelVolume>,
+    species_count: usize,
+    stacks: Option<stacks::StackAssets>,
+    /// Why the stack atlas could not be built (the slices3d mode still draws).
+    stack_problem: Option<String>,
+}
+
+/// The render pipelines of the `texel` method for one target format: boxes seen from
+/// outside and from inside (slices3d), and stack quads (stacks, once built).
+#[derive(Clone)]
+pub struct TexelPipelines {
+    pub boxes: [wgpu::RenderPipeline; 2],
+    pub stack: Option<wgpu::RenderPipeline>,
 }
 
 /// Most texels drawn in one frame.
@@ -579,7 +627,37 @@ impl TexelAssets {
             capacity,
             bind_group,
             pipelines: HashMap::new(),
+            volumes: baked.texels.clone(),
+            species_count: world.species.len(),
+            stacks: None,
+            stack_problem: None,
         })
+    }
+
+    /// Bytes of the volumes on the GPU: the 3D texture, and the stack atlas once built.
+    pub fn total_bytes(&self) -> u64 {
+        self.bytes + self.stacks.as_ref().map_or(0, |s| s.bytes)
+    }
+
+    /// Builds the stack atlas if it is not yet (or says why it cannot be).
+    fn ensure_stacks(&mut self, ctx: &GpuContext) -> Result<()> {
+        if let Some(p) = &self.stack_problem {
+            return Err(Error::BadInput(format!(
+                "the texel stacks cannot be built: {p}"
+            )));
+        }
+        if self.stacks.is_none() {
+            match stacks::StackAssets::new(ctx, &self.volumes, self.species_count) {
+                Ok(s) => self.stacks = Some(s),
+                Err(e) => {
+                    self.stack_problem = Some(e.to_string());
+                    return Err(Error::BadInput(format!(
+                        "the texel stacks cannot be built: {e}"
+                    )));
+                }
+            }
+        }
+        Ok(())
     }
 
     pub fn scene(&self) -> &TexelScene {
@@ -595,7 +673,14 @@ impl TexelAssets {
         view: &PrepareView,
         settings: &TexelSettings,
         vcm: Option<&BtfScene>,
-    ) -> TexelFrame {
+    ) -> Result<TexelFrame> {
+        if settings.mode == TexelMode::Stacks {
+            self.ensure_stacks(ctx)?;
+        }
+        let atlas = match settings.mode {
+            TexelMode::Stacks => self.stacks.as_ref().map(|s| &s.atlas),
+            TexelMode::Slices3d => None,
+        };
         let mut f = prepare(
             &self.scene,
             &world.tree_data,
@@ -603,9 +688,10 @@ impl TexelAssets {
             view,
             settings,
             vcm,
+            atlas,
             MAX_TEXELS,
         );
-        f.stats.texel_bytes = self.bytes;
+        f.stats.texel_bytes = self.total_bytes();
         if f.records.len() > self.capacity {
             self.capacity = f.records.len().next_power_of_two().min(MAX_TEXELS);
             self.records = record_buffer(ctx, self.capacity);
@@ -616,7 +702,10 @@ impl TexelAssets {
             ctx.queue
                 .write_buffer(&self.records, 0, bytemuck::cast_slice(&f.records));
         }
-        f
+        if let Some(s) = self.stacks.as_mut().filter(|_| settings.mode == TexelMode::Stacks) {
+            s.upload(ctx, &f.stacks, &f.quads, &self.records, &self.sampler);
+        }
+        Ok(f)
     }
 
     /// Every tree's texel for the ground alpha shadow map (the sun's 3 nearest lights do not
@@ -700,8 +789,24 @@ impl TexelAssets {
     }
 
     /// The pipelines for `format`: boxes seen from outside (front faces) and from inside
-    /// (far faces).
+    /// (far faces), and the stacks' when the atlas is built.
     pub fn pipelines(
+        &mut self,
+        device: &wgpu::Device,
+        frame_layout: &wgpu::BindGroupLayout,
+        format: wgpu::TextureFormat,
+    ) -> TexelPipelines {
+        let stack = self
+            .stacks
+            .as_mut()
+            .map(|s| s.pipeline(device, frame_layout, format).clone());
+        TexelPipelines {
+            boxes: self.box_pipelines(device, frame_layout, format).clone(),
+            stack,
+        }
+    }
+
+    fn box_pipelines(
         &mut self,
         device: &wgpu::Device,
         frame_layout: &wgpu::BindGroupLayout,
@@ -735,11 +840,22 @@ impl TexelAssets {
     pub fn draw(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
-        pipelines: &[wgpu::RenderPipeline; 2],
+        pipelines: &TexelPipelines,
         frame: &TexelFrame,
         stats: &mut FrameStats,
     ) {
         let n = frame.records.len() as u32;
+        if frame.stats.texel_mode == TexelMode::Stacks {
+            if let (Some(s), Some(p)) = (&self.stacks, &pipelines.stack) {
+                let quads = frame.quads.len() as u32;
+                s.draw(pass, p, quads);
+                stats.draw_calls += u32::from(quads > 0);
+                stats.trees_drawn = n;
+                stats.triangles += u64::from(quads) * 2;
+            }
+            return;
+        }
+        let pipelines = &pipelines.boxes;
         let outside = n - frame.inside.min(n);
         pass.set_bind_group(1, &self.bind_group, &[]);
         if outside > 0 {
