@@ -275,9 +275,8 @@ struct RenderArgs {
 }
 
 fn parse_texel_mode(s: &str) -> Result<TexelMode, String> {
-    TexelMode::parse(s).ok_or_else(|| {
-        format!("unknown texel mode {s:?}; expected slices3d or stacks")
-    })
+    TexelMode::parse(s)
+        .ok_or_else(|| format!("unknown texel mode {s:?}; expected slices3d or stacks"))
 }
 
 fn parse_method(s: &str) -> Result<Method, String> {

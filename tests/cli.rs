@@ -207,6 +207,8 @@ fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
                 "lod_scale=1,2",
                 "--sweep",
                 "slice_d1=2,4",
+                "--sweep",
+                "texel_mode=slices3d,stacks",
             ])
             .args([
                 "--repeats",
@@ -242,8 +244,10 @@ fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
             "btf lod_scale=1",
             "btf lod_scale=2",
             "billboard",
-            "texel slice_d1=2",
-            "texel slice_d1=4"
+            "texel slice_d1=2 texel_mode=slices3d",
+            "texel slice_d1=2 texel_mode=stacks",
+            "texel slice_d1=4 texel_mode=slices3d",
+            "texel slice_d1=4 texel_mode=stacks",
         ]
     );
     for (i, c) in configs.iter().enumerate() {
@@ -259,7 +263,9 @@ fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
         assert!(c["flicker_ratio"].as_f64().unwrap().is_finite(), "{c}");
     }
     assert_eq!(configs[1]["settings"]["lod_scale"], 1.0);
-    assert_eq!(configs[5]["texel_settings"]["bounds"]["d1"], 4.0);
+    assert_eq!(configs[6]["texel_settings"]["bounds"]["d1"], 4.0);
+    assert_eq!(configs[5]["texel_settings"]["mode"], "stacks");
+    assert_eq!(configs[6]["texel_settings"]["mode"], "slices3d");
     assert_eq!(configs[0]["speedup_vs_geometry"], 1.0);
     assert_eq!(
         (
@@ -269,7 +275,7 @@ fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
         (Some(3), Some(0))
     );
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
-    assert_eq!(csv.lines().count(), 1 + 3 * 6, "{csv}");
+    assert_eq!(csv.lines().count(), 1 + 3 * 8, "{csv}");
     for f in [
         "summary.json",
         "chart.png",

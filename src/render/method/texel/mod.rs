@@ -702,7 +702,11 @@ impl TexelAssets {
             ctx.queue
                 .write_buffer(&self.records, 0, bytemuck::cast_slice(&f.records));
         }
-        if let Some(s) = self.stacks.as_mut().filter(|_| settings.mode == TexelMode::Stacks) {
+        if let Some(s) = self
+            .stacks
+            .as_mut()
+            .filter(|_| settings.mode == TexelMode::Stacks)
+        {
             s.upload(ctx, &f.stacks, &f.quads, &self.records, &self.sampler);
         }
         Ok(f)

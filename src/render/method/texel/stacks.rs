@@ -48,7 +48,13 @@ pub fn halve(level: &[Vec<Rgba>], low_in_front: bool) -> Vec<Vec<Rgba>> {
             [a, b] => a
                 .iter()
                 .zip(b)
-                .map(|(&lo, &hi)| if low_in_front { over(lo, hi) } else { over(hi, lo) })
+                .map(|(&lo, &hi)| {
+                    if low_in_front {
+                        over(lo, hi)
+                    } else {
+                        over(hi, lo)
+                    }
+                })
                 .collect(),
             [a] => a.clone(),
             _ => Vec::new(),
@@ -432,7 +438,11 @@ pub struct StackAssets {
 }
 
 impl StackAssets {
-    pub fn new(ctx: &crate::render::GpuContext, volumes: &[TexelVolume], species: usize) -> Result<Self> {
+    pub fn new(
+        ctx: &crate::render::GpuContext,
+        volumes: &[TexelVolume],
+        species: usize,
+    ) -> Result<Self> {
         let max_dim = ctx.device.limits().max_texture_dimension_2d;
         let atlas = StackAtlas::new(volumes, species, max_dim)?;
         let levels = atlas.levels(volumes);
@@ -513,7 +523,11 @@ impl StackAssets {
             _texture: texture,
             view,
             layout,
-            records: stack_buffer(ctx, "texel stack records", 64 * std::mem::size_of::<StackGpu>()),
+            records: stack_buffer(
+                ctx,
+                "texel stack records",
+                64 * std::mem::size_of::<StackGpu>(),
+            ),
             quads: stack_buffer(ctx, "texel stack quads", 1024 * 8),
             bind_group: None,
             pipelines: Default::default(),
@@ -533,10 +547,18 @@ impl StackAssets {
         let records: &[u8] = bytemuck::cast_slice(stacks);
         let quad_bytes: &[u8] = bytemuck::cast_slice(quads);
         if records.len() as u64 > self.records.size() {
-            self.records = stack_buffer(ctx, "texel stack records", records.len().next_power_of_two());
+            self.records = stack_buffer(
+                ctx,
+                "texel stack records",
+                records.len().next_power_of_two(),
+            );
         }
         if quad_bytes.len() as u64 > self.quads.size() {
-            self.quads = stack_buffer(ctx, "texel stack quads", quad_bytes.len().next_power_of_two());
+            self.quads = stack_buffer(
+                ctx,
+                "texel stack quads",
+                quad_bytes.len().next_power_of_two(),
+            );
         }
         if !records.is_empty() {
             ctx.queue.write_buffer(&self.records, 0, records);
@@ -604,7 +626,12 @@ impl StackAssets {
     }
 
     /// Draws `quads` stack slices (the pass has group 0 bound).
-    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, pipeline: &wgpu::RenderPipeline, quads: u32) {
+    pub fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        pipeline: &wgpu::RenderPipeline,
+        quads: u32,
+    ) {
         if let (Some(bg), true) = (&self.bind_group, quads > 0) {
             pass.set_pipeline(pipeline);
             pass.set_bind_group(1, bg, &[]);
@@ -655,17 +682,14 @@ mod tests {
                 for (j, got) in level.iter().enumerate() {
                     for p in 0..pixels {
                         // The 2^k slices of the group, front to back, one by one.
-                        let group: Vec<Rgba> = (j * step..(j + 1) * step)
-                            .map(|i| slices[i][p])
-                            .collect();
+                        let group: Vec<Rgba> =
+                            (j * step..(j + 1) * step).map(|i| slices[i][p]).collect();
                         let ordered: Vec<Rgba> = if low_in_front {
                             group
                         } else {
                             group.into_iter().rev().collect()
                         };
-                        let want = ordered
-                            .iter()
-                            .fold([0.0; 4], |acc: Rgba, &s| over(acc, s));
+                        let want = ordered.iter().fold([0.0; 4], |acc: Rgba, &s| over(acc, s));
                         for c in 0..4 {
                             assert!(
                                 (got[p][c] - want[c]).abs() < 1e-5,
