@@ -366,6 +366,7 @@ impl StackAtlas {
     /// the eye toward the box) at view depth `z`: the facing axis and order, and the level
     /// holding n = max(C1, C2) slices (H the stack's height in metres, `scale` object to
     /// world), no more than the stack has.
+    #[allow(clippy::too_many_arguments)]
     pub fn choose(
         &self,
         species: usize,
