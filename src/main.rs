@@ -648,7 +648,12 @@ fn bake(
     });
     bar.finish_and_clear();
     let (baked, times) = baked?;
-    let r = BakeReport::new(&path, &baked, &times, &world);
+    let mut r = BakeReport::new(&path, &baked, &times, &world);
+    r.texel_source = match scene.texel.source {
+        canopy::scene::TexelSource::Slabs => "slabs",
+        canopy::scene::TexelSource::VoxelColouring => "voxel-colouring",
+    }
+    .into();
     if json {
         println!("{}", serde_json::to_string(&r).context("encoding JSON")?);
     } else {
@@ -676,8 +681,8 @@ fn bake(
             println!("  no texel volumes (texel_resolution = 0)");
         } else {
             println!(
-                "  texel volumes ({} voxels on the longest side, {} lights + sky each): {} bytes, {:.1} s",
-                r.texel_resolution, r.lights, r.texel_bytes, r.texel_seconds
+                "  texel volumes ({} voxels on the longest side, {} lights + sky each, from {}): {} bytes, {:.1} s",
+                r.texel_resolution, r.lights, r.texel_source, r.texel_bytes, r.texel_seconds
             );
         }
         for t in &r.texels {

@@ -12,8 +12,12 @@ use toml::de::{DeTable, DeValue};
 
 pub use crate::model::params::{
     BAKE_DIRECTIONS, BAKE_RESOLUTIONS, BakeParams, ForestParams, MAX_SPECIES, MAX_TREES,
-    SpeciesEntry, TERRAIN_RESOLUTION, TerrainParams,
+    SpeciesEntry, TERRAIN_RESOLUTION, TerrainParams, TexelParams, TexelSource,
 };
+
+fn is_default_texel(t: &TexelParams) -> bool {
+    *t == TexelParams::default()
+}
 use crate::model::species::{PRESET_NAMES, preset};
 use crate::model::{FieldError, ModelError, World, check};
 
@@ -46,6 +50,9 @@ pub struct Scene {
     /// `[bake]`: how BTF images are sampled. Optional, every key too.
     #[serde(default)]
     pub bake: BakeParams,
+    /// `[texel]`: how the texel volumes are made. Optional, every key too.
+    #[serde(default, skip_serializing_if = "is_default_texel")]
+    pub texel: TexelParams,
     /// `[render]`: the `btf` knobs the viewer and `render` start from (what `canopy tune`
     /// writes). Optional, every key too.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -356,6 +363,7 @@ impl Scene {
         }
         check::range("camera.fov_deg", cam.fov_deg, 1.0, 170.0)?;
         self.bake.check().map_err(|e| e.prefixed("bake"))?;
+        self.texel.check().map_err(|e| e.prefixed("texel"))?;
         if let Some(r) = &self.render {
             r.check().map_err(|e| e.prefixed("render"))?;
         }
@@ -795,6 +803,35 @@ fov_deg = 55.0
             assert!(msg.contains(w), "`{w}` missing: {msg}");
         }
         msg
+    }
+
+    #[test]
+    fn the_texel_table_picks_the_source_and_refuses_what_is_not_built() {
+        let (text, _) = edit(
+            "fov_deg = 55.0",
+            "fov_deg = 55.0\n[texel]\nsource = \"voxel-colouring\"\nviews = 6",
+        );
+        let s = Scene::parse(&text, "scene.toml").unwrap();
+        assert_eq!(s.texel.source, TexelSource::VoxelColouring);
+        let base = Scene::parse(BASE, "scene.toml").unwrap();
+        assert_eq!(base.texel, TexelParams::default());
+        expect_error(
+            "fov_deg = 55.0",
+            "fov_deg = 55.0\n[texel]\nviews = 12",
+            "texel.views",
+            &["must be 6", "12"],
+        );
+        let msg = error_of(
+            &edit(
+                "fov_deg = 55.0",
+                "fov_deg = 55.0\n[texel]\nsource = \"voxels\"",
+            )
+            .0,
+        );
+        assert!(
+            msg.contains("source") && msg.contains("voxel-colouring"),
+            "{msg}"
+        );
     }
 
     #[test]

@@ -4,9 +4,10 @@
 
 mod common;
 
-use canopy::bake::texel::{TexelGrid, bake_volume, bake_volume_by_slabs};
+use canopy::bake::texel::{TexelGrid, bake_volume, bake_volume_by_slabs, bake_volume_from};
 use canopy::format::{Baked, TexelVolume};
 use canopy::model::mesh::{Aabb, Mesh, Vertex};
+use canopy::model::params::TexelSource;
 use canopy::model::tree::TreeModel;
 use canopy::render::method::texel::TexelMode;
 use canopy::render::sky_visibility::SKY_DIRECTIONS;
@@ -225,11 +226,89 @@ fn the_voxelisation_gives_the_occupancy_of_a_box_and_a_sphere_and_agrees_with_th
     assert_eq!(far, 0.0, "nothing away from the surface");
 }
 
+/// Voxels occupied by `a` and not `b`, and by `b` and not `a`, as fractions of `a`'s
+/// occupied voxels (occupied: coverage at least `at`).
+fn occupancy_difference(a: &TexelVolume, b: &TexelVolume, at: f32) -> (f32, f32) {
+    let (ca, cb) = (coverage(a), coverage(b));
+    let occupied = ca.iter().filter(|&&c| c >= at).count().max(1) as f32;
+    let only_a = ca
+        .iter()
+        .zip(&cb)
+        .filter(|&(&x, &y)| x >= at && y < at)
+        .count() as f32;
+    let only_b = ca
+        .iter()
+        .zip(&cb)
+        .filter(|&(&x, &y)| x < at && y >= at)
+        .count() as f32;
+    (only_a / occupied, only_b / occupied)
+}
+
+/// Babahenini et al.'s voxel colouring (each depth pixel writes its colour, opaque, into
+/// the voxel at its depth) finds the same surfaces as the slabs on objects every one of
+/// whose surfaces some axis view sees first: a box shell and a sphere.
+#[test]
+fn voxel_colouring_finds_the_surfaces_the_slabs_find() {
+    let ctx = gpu();
+    let lights = DirectionSet::with_count(6).unwrap();
+    let grid = TexelGrid {
+        box_min: Vec3::new(-2.0, -0.2, -2.0),
+        dims: UVec3::splat(16),
+        voxel: 0.25,
+    };
+    let (lo, hi) = (
+        Vec3::new(-1.375, 0.425, -1.125),
+        Vec3::new(1.375, 2.175, 1.125),
+    );
+    let c = Vec3::new(0.0, 1.8, 0.0);
+    let r = 1.4;
+    let objects = [
+        ("box shell", object(box_mesh(lo, hi), Aabb::new(lo, hi))),
+        (
+            "sphere",
+            object(
+                sphere_mesh(c, r),
+                Aabb::new(c - Vec3::splat(r), c + Vec3::splat(r)),
+            ),
+        ),
+    ];
+    for (name, o) in &objects {
+        let slabs = bake_volume(&ctx, o, 0, &grid, &lights, 4, &mut || {}).unwrap();
+        let coloured = bake_volume_from(
+            &ctx,
+            o,
+            0,
+            &grid,
+            &lights,
+            4,
+            TexelSource::VoxelColouring,
+            &mut || {},
+        )
+        .unwrap();
+        // Every voxel colouring writes is opaque.
+        assert!(coverage(&coloured).iter().all(|&c| c == 0.0 || c == 1.0));
+        // Holes: voxels the slabs cover a quarter or more and voxel colouring leaves empty.
+        // False voxels: opaque where the slabs found nothing (under 1 % coverage).
+        // Thickened: opaque where the slabs cover less than a quarter (a surface grazing
+        // the voxel's corner), the price of writing alpha 255.
+        let (holes, thickened) = occupancy_difference(&slabs, &coloured, 0.25);
+        let (_, false_voxels) = occupancy_difference(&slabs, &coloured, 0.01);
+        eprintln!(
+            "{name}: voxel colouring against the slabs: holes {holes:.3}, false voxels {false_voxels:.3}, thickened {thickened:.3} (fractions of the voxels the slabs cover a quarter or more)"
+        );
+        // Measured: box shell 0.000, 0.000, 0.000; sphere 0.000, 0.000, 0.431.
+        assert!(holes < 0.02, "{name}: {holes}");
+        assert!(false_voxels < 0.02, "{name}: {false_voxels}");
+    }
+}
+
 /// A lone tree of one species, baked (with texels) and ready to draw: the renderer with
 /// the bake attached and the reference prepared, and the crown's centre.
 struct LoneTree {
     ctx: canopy::render::GpuContext,
     scene: Scene,
+    world: canopy::model::World,
+    baked: Baked,
     renderer: Renderer,
     centre: Vec3,
 }
@@ -255,9 +334,21 @@ impl LoneTree {
         Self {
             ctx,
             scene,
+            world,
+            baked,
             renderer,
             centre,
         }
+    }
+
+    /// Draws texels from `volume` instead of the bake's own.
+    fn use_volume(&mut self, volume: TexelVolume) {
+        let mut baked = self.baked.clone();
+        baked.texels = vec![volume];
+        self.renderer
+            .attach_btf(&self.ctx, &baked, &self.world)
+            .unwrap();
+        assert!(self.renderer.has_texels());
     }
 
     /// The crown seen from `offset` away through a `fov`-degree lens, no fog.
@@ -407,6 +498,59 @@ fn slices_parallel_to_the_screen_hold_from_the_side_to_straight_down() {
     // Stacks measured 0.041, 0.035, 0.038, 0.034: the seeds' grazing failure does not
     // show on a lone fir at 40 m (its slices are 0.29 m apart, under a pixel).
     assert!(worst_stacks < 0.08, "{figures:?}");
+}
+
+/// The two sources of a lone fir's volumes side by side: the voxel-colouring volume (from
+/// the same passes seen as depth images, opaque) against the slabs' (coverage), in voxels
+/// and drawn against the reference.
+#[test]
+fn voxel_colouring_of_a_lone_fir_against_the_slabs() {
+    let mut lone = LoneTree::new("fir");
+    let tree = &lone.world.species[0];
+    let grid = canopy::bake::texel::grid_of(tree, lone.scene.bake.texel_resolution).unwrap();
+    let lights = DirectionSet::with_count(lone.baked.settings.lights as usize).unwrap();
+    let ss = lone.baked.settings.supersample;
+    let t0 = std::time::Instant::now();
+    let coloured = bake_volume_from(
+        &lone.ctx,
+        tree,
+        0,
+        &grid,
+        &lights,
+        ss,
+        TexelSource::VoxelColouring,
+        &mut || {},
+    )
+    .unwrap();
+    let seconds = t0.elapsed().as_secs_f32();
+    let slabs = lone.baked.texels[0].clone();
+    let (holes, thickened) = occupancy_difference(&slabs, &coloured, 0.25);
+    let (_, false_voxels) = occupancy_difference(&slabs, &coloured, 0.01);
+    let count = |v: &TexelVolume| coverage(v).iter().filter(|&&c| c > 0.0).count();
+    let frame = lone.view(Vec3::new(30.0, 6.0, 28.0), 40.0);
+    let (w, h) = (240, 240);
+    let truth = lone.truth(frame, w, h);
+    let flip =
+        |a: &image::RgbImage, b: &image::RgbImage| canopy::metrics::flip(a, b).unwrap().stats.mean;
+    let (from_slabs, _) = lone.texel(frame, TexelMode::Slices3d, w, h);
+    lone.use_volume(coloured.clone());
+    let (from_colouring, _) = lone.texel(frame, TexelMode::Slices3d, w, h);
+    let (f_slabs, f_colouring) = (flip(&truth, &from_slabs), flip(&truth, &from_colouring));
+    eprintln!(
+        "lone fir, voxel colouring against the slabs: {} voxels against {}; holes {holes:.3}, false voxels {false_voxels:.3}, thickened {thickened:.3}; {seconds:.1} s; drawn against the reference {f_colouring:.4} against {f_slabs:.4}",
+        count(&coloured),
+        count(&slabs)
+    );
+    let dir = std::env::temp_dir().join("canopy-texel");
+    let _ = std::fs::create_dir_all(&dir);
+    let _ = from_colouring.save(dir.join("fir-voxel-colouring.png"));
+    // Measured: 1305 voxels against 1384; holes 0.057 (inner voxels no axis view sees
+    // first: "regions unseen in every view remain empty"), no false voxels, none
+    // thickened; 2.9 s, the slabs' passes; 0.055 against the reference where the slabs
+    // give 0.036: every voxel opaque makes the crown solid and its shadow dark.
+    assert!(holes < 0.1, "{holes}");
+    assert!(false_voxels < 0.01, "{false_voxels}");
+    assert!(f_colouring > f_slabs, "{f_colouring} against {f_slabs}");
 }
 
 /// Where the seeds' stacks switch (the view crossing the diagonal between two axes, here

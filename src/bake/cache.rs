@@ -58,6 +58,14 @@ pub fn scene_hash(scene: &Scene) -> u64 {
     ] {
         h = fnv1a(&v.to_le_bytes(), h);
     }
+    // How the texels are made, when not the default (so that default scenes keep their
+    // caches).
+    if scene.texel != crate::scene::TexelParams::default() {
+        h = fnv1a(
+            toml::to_string(&scene.texel).unwrap_or_default().as_bytes(),
+            h,
+        );
+    }
     h
 }
 
@@ -121,5 +129,8 @@ mod tests {
         let mut e = a.clone();
         e.species[0].seed += 1;
         assert_ne!(scene_hash(&a), scene_hash(&e));
+        let mut f = a.clone();
+        f.texel.source = crate::scene::TexelSource::VoxelColouring;
+        assert_ne!(scene_hash(&a), scene_hash(&f));
     }
 }

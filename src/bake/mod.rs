@@ -113,6 +113,7 @@ pub fn bake(
     ctx: &GpuContext,
     world: &World,
     settings: &BakeSettings,
+    texel_params: &crate::model::params::TexelParams,
     scene_hash: u64,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<(Baked, BakeTimes)> {
@@ -145,6 +146,7 @@ pub fn bake(
         settings.texel_resolution,
         settings.lights,
         settings.supersample,
+        texel_params,
         &mut |done, what| {
             progress(&Progress {
                 done: before_texels + done,
@@ -340,7 +342,14 @@ pub fn load_or_bake_at(
         None => {}
     }
     let settings = cache::settings_of(scene);
-    let (baked, _) = bake(ctx, world, &settings, cache::scene_hash(scene), progress)?;
+    let (baked, _) = bake(
+        ctx,
+        world,
+        &settings,
+        &scene.texel,
+        cache::scene_hash(scene),
+        progress,
+    )?;
     // A cache that cannot be written costs a re-bake next time, not this run.
     if let Err(e) = store(&path, &baked) {
         log::warn!("could not cache the bake at {}: {e}", path.display());
@@ -359,7 +368,14 @@ pub fn bake_to(
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<(Baked, BakeTimes)> {
     let settings = cache::settings_of(scene);
-    let (baked, times) = bake(ctx, world, &settings, cache::scene_hash(scene), progress)?;
+    let (baked, times) = bake(
+        ctx,
+        world,
+        &settings,
+        &scene.texel,
+        cache::scene_hash(scene),
+        progress,
+    )?;
     store(path, &baked)?;
     Ok((baked, times))
 }

@@ -25,6 +25,8 @@ pub struct BakeReport {
     pub texel_seconds: f64,
     /// Voxels along each species' longest side (0: no texels baked).
     pub texel_resolution: u32,
+    /// How the volumes were made (`[texel] source`: slabs or voxel-colouring).
+    pub texel_source: String,
     /// Bytes of texel volumes (all lights and the sky).
     pub texel_bytes: u64,
     /// One per species' texel volumes.
@@ -110,6 +112,7 @@ impl BakeReport {
             vcm_seconds: times.vcm_seconds,
             texel_seconds: times.texel_seconds,
             texel_resolution: settings.texel_resolution,
+            texel_source: "slabs".into(),
             texel_bytes: baked.texel_bytes(),
             texels,
             views: settings.views,

@@ -27,6 +27,7 @@ use glam::{UVec3, Vec3};
 use crate::format::TexelVolume;
 use crate::model::World;
 use crate::model::mesh::Aabb;
+use crate::model::params::{TexelParams, TexelSource};
 use crate::model::tree::TreeModel;
 use crate::render::sky_visibility::SKY_DIRECTIONS;
 use crate::render::target::{linear_to_srgb, srgb_lut};
@@ -166,6 +167,88 @@ impl Accumulator {
     }
 }
 
+/// Voxel colouring as Babahenini et al. implement it: every pixel of a depth image writes
+/// its colour, opaque, into the voxel at its depth. The depth images are the voxelisation
+/// passes' own views (one down each axis from either side, `ss` pixels per voxel side):
+/// per pixel, the nearest voxel along the view whose coverage mask holds that pixel is
+/// where its depth lies. Per volume and voxel: the colour seen there (premultiplied linear,
+/// weighted by the pixels that landed on it) and their weight.
+struct Colouring {
+    voxels: usize,
+    color: Vec<Vec3>,
+    weight: Vec<f32>,
+}
+
+impl Colouring {
+    fn new(volumes: usize, voxels: usize) -> Self {
+        Self {
+            voxels,
+            color: vec![Vec3::ZERO; volumes * voxels],
+            weight: vec![0.0; volumes * voxels],
+        }
+    }
+
+    /// One view of volume `v`: `samples` of the grid seen down `axis` from its + side
+    /// (`side` 1) or - side; each pixel lands on the first voxel along the view that
+    /// covers it.
+    fn add_view(
+        &mut self,
+        v: usize,
+        grid: &TexelGrid,
+        axis: usize,
+        side: f32,
+        samples: &[crate::render::voxelize::VoxelSum],
+        per_pixel: f32,
+    ) {
+        let (u, w) = match axis {
+            0 => (1, 2),
+            1 => (0, 2),
+            _ => (0, 1),
+        };
+        let d = grid.dims;
+        for cw in 0..d[w] {
+            for cu in 0..d[u] {
+                let mut seen = 0u64;
+                for step in 0..d[axis] {
+                    let layer = if side > 0.0 { d[axis] - 1 - step } else { step };
+                    let mut cell = glam::IVec3::ZERO;
+                    cell[axis] = layer as i32;
+                    cell[u] = cu as i32;
+                    cell[w] = cw as i32;
+                    let Some(i) = index_of(grid, cell) else {
+                        continue;
+                    };
+                    let s = &samples[i];
+                    let new = s.mask & !seen;
+                    if new != 0 && s.fragments > 0 {
+                        let weight = new.count_ones() as f32 * per_pixel;
+                        let k = v * self.voxels + i;
+                        self.color[k] += s.color / s.fragments as f32 * weight;
+                        self.weight[k] += weight;
+                    }
+                    seen |= s.mask;
+                }
+            }
+        }
+    }
+
+    /// RGBA8 (sRGB colour): opaque where any pixel landed, its mean colour.
+    fn into_rgba(self) -> Vec<u8> {
+        let mut out = vec![0u8; self.weight.len() * 4];
+        for (k, px) in out.chunks_exact_mut(4).enumerate() {
+            if self.weight[k] <= 0.0 {
+                continue;
+            }
+            let c = self.color[k] / self.weight[k];
+            px[0] = linear_to_srgb(c.x);
+            px[1] = linear_to_srgb(c.y);
+            px[2] = linear_to_srgb(c.z);
+            px[3] = 255;
+        }
+        out
+    }
+}
+
 /// One axis' view of the grid: the camera looking down it from outside the box, the image's
 /// right and up axes, and the image's size in voxels.
 struct AxisView {
@@ -221,6 +304,31 @@ pub fn bake_volume(
     supersample: u32,
     progress: &mut dyn FnMut(),
 ) -> Result<TexelVolume> {
+    bake_volume_from(
+        ctx,
+        tree,
+        species,
+        grid,
+        lights,
+        supersample,
+        TexelSource::Slabs,
+        progress,
+    )
+}
+
+/// [`bake_volume`] with the volumes made the `source` way: the slabs' coverage and colour,
+/// or voxel colouring from the same passes seen as depth images.
+#[allow(clippy::too_many_arguments)]
+pub fn bake_volume_from(
+    ctx: &GpuContext,
+    tree: &TreeModel,
+    species: u32,
+    grid: &TexelGrid,
+    lights: &DirectionSet,
+    supersample: u32,
+    source: TexelSource,
+    progress: &mut dyn FnMut(),
+) -> Result<TexelVolume> {
     let studio = studio_world(tree.clone());
     let mut renderer = Renderer::new(ctx, &studio)?;
     renderer.prepare_reference(ctx, &studio, SKY_DIRECTIONS, false)?;
@@ -228,6 +336,7 @@ pub fn bake_volume(
     let shots = studio_shots(lights);
     let n = grid.voxel_count();
     let mut acc = Accumulator::new(shots.len(), n);
+    let mut colouring = Colouring::new(shots.len(), n);
     let target = renderer.voxel_target(ctx, grid.box_min, grid.dims, grid.voxel, ss)?;
     let shadow_map = (2 * grid.dims.max_element() * ss).clamp(256, 2048);
     let per_pixel = 1.0 / (ss * ss) as f32;
@@ -237,17 +346,36 @@ pub fn bake_volume(
         for (v, &(sun, sky)) in shots.iter().enumerate() {
             let frame = studio_frame(camera, sun, sky, shadow_map);
             renderer.voxelize(ctx, &frame, view.w * ss, view.h * ss, &target)?;
-            for (i, s) in target.read(ctx)?.iter().enumerate() {
-                if s.fragments == 0 {
-                    continue;
+            let samples = target.read(ctx)?;
+            match source {
+                TexelSource::Slabs => {
+                    for (i, s) in samples.iter().enumerate() {
+                        if s.fragments == 0 {
+                            continue;
+                        }
+                        let coverage = s.covered as f32 * per_pixel;
+                        acc.add(v, i, coverage, s.color / s.fragments as f32 * coverage);
+                    }
                 }
-                let coverage = s.covered as f32 * per_pixel;
-                acc.add(v, i, coverage, s.color / s.fragments as f32 * coverage);
+                TexelSource::VoxelColouring => {
+                    colouring.add_view(v, grid, ax.axis, side, &samples, per_pixel)
+                }
             }
             progress();
         }
     }
-    Ok(volume_of(species, lights, grid, acc))
+    let voxels = match source {
+        TexelSource::Slabs => acc.into_rgba(),
+        TexelSource::VoxelColouring => colouring.into_rgba(),
+    };
+    Ok(TexelVolume {
+        species,
+        lights: lights.len() as u32,
+        dims: grid.dims.to_array(),
+        box_min: grid.box_min.to_array(),
+        voxel: grid.voxel,
+        voxels,
+    })
 }
 
 /// [`bake_volume`] the slow way the seeds describe it: one render per voxel-thick slab
@@ -341,6 +469,7 @@ pub fn bake_texels(
     resolution: u32,
     lights: u32,
     supersample: u32,
+    how: &TexelParams,
     progress: &mut dyn FnMut(u64, &str),
 ) -> Result<Vec<TexelVolume>> {
     if resolution == 0 {
@@ -355,13 +484,14 @@ pub fn bake_texels(
             continue;
         };
         let what = format!("{} texel volume", tree.name);
-        out.push(bake_volume(
+        out.push(bake_volume_from(
             ctx,
             tree,
             s as u32,
             &grid,
             &lights,
             supersample,
+            how.source,
             &mut || {
                 done += 1;
                 progress(done, &what);

@@ -68,6 +68,56 @@ impl BakeParams {
     }
 }
 
+/// Where the texel bake's volumes come from.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum TexelSource {
+    /// Every surface's coverage and colour in the voxel it lies in, seen along the three
+    /// axes from both sides (the seeds' slab rendering, in one pass per view).
+    #[default]
+    Slabs,
+    /// Babahenini et al.'s voxel colouring: each pixel of `views` depth images writes its
+    /// colour into the voxel of its depth, opaque (what their paper implements).
+    VoxelColouring,
+}
+
+/// `[texel]`: how the texel volumes are made (their resolution is `[bake]
+/// texel_resolution`).
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct TexelParams {
+    /// `slabs` (default) or `voxel-colouring`.
+    pub source: TexelSource,
+    /// Depth images of voxel colouring (k): 6, one down each axis from either side, as in
+    /// Babahenini et al.'s 6-image result.
+    pub views: u32,
+}
+
+impl Default for TexelParams {
+    fn default() -> Self {
+        Self {
+            source: TexelSource::Slabs,
+            views: 6,
+        }
+    }
+}
+
+/// Depth-image counts voxel colouring accepts.
+pub const VOXEL_COLOURING_VIEWS: [u32; 1] = [6];
+
+impl TexelParams {
+    pub fn check(&self) -> Result<(), FieldError> {
+        if !VOXEL_COLOURING_VIEWS.contains(&self.views) {
+            return Err(FieldError::new(
+                "views",
+                "must be 6 (one depth image down each axis from either side; other counts need depth images off the axes, not built)",
+            )
+            .with_found(self.views));
+        }
+        Ok(())
+    }
+}
+
 fn default_feature_size() -> f32 {
     400.0
 }

@@ -136,6 +136,8 @@ pub struct VoxelSum {
     pub color: Vec3,
     /// Of the voxel's ss x ss pixels, those covered by at least one fragment.
     pub covered: u32,
+    /// Which of them (bit y * ss + x).
+    pub mask: u64,
 }
 
 impl VoxelTarget {
@@ -243,6 +245,7 @@ impl VoxelTarget {
                 fragments: w[0],
                 color: Vec3::new(w[1] as f32, w[2] as f32, w[3] as f32) / COLOR_SCALE,
                 covered: w[4].count_ones() + w[5].count_ones(),
+                mask: u64::from(w[4]) | (u64::from(w[5]) << 32),
             })
             .collect())
     }
