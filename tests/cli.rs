@@ -377,6 +377,29 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
         bytes.len() / 2,
         "left as it was"
     );
+    // The texel method draws from the file too.
+    let o = render(&lone, &file, "texel");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // One byte changed inside the texel volumes' section (kind 3): refused, naming it.
+    let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
+    let sections = u32_at(12) as usize;
+    let mut at = 60 + 16 * sections;
+    let mut texel_section = None;
+    for i in 0..sections {
+        let entry = 56 + 16 * i;
+        let len = u64::from_le_bytes(bytes[entry + 8..entry + 16].try_into().unwrap()) as usize;
+        if u32_at(entry) == 3 {
+            texel_section = Some((at, len));
+        }
+        at += len;
+    }
+    let (start, len) = texel_section.expect("the bake has a texel section");
+    let mut flipped = bytes.clone();
+    flipped[start + len / 2] ^= 0x40;
+    let bad = tmp("bad-texels.canopy");
+    std::fs::write(&bad, &flipped).unwrap();
+    refused(render(&lone, &bad, "texel"), "texel");
+    refused(render(&lone, &bad, "btf"), "checksum");
     // Missing.
     refused(render(&lone, &tmp("none.canopy"), "btf"), "could not open");
     // A method without baked images.
