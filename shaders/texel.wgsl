@@ -71,9 +71,9 @@ fn slice_count_colour(slices: f32) -> vec3<f32> {
     return vec3<f32>(smoothstep(0.5, 1.0, x), 1.0 - abs(2.0 * x - 1.0), 1.0 - smoothstep(0.0, 0.5, x));
 }
 
-@vertex
-fn vs_texel(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance: u32) -> TexelOut {
-    // 12 triangles of the unit cube, counter-clockwise seen from outside.
+// Corner `i` (0..36) of the 12 triangles of the unit cube, counter-clockwise seen from
+// outside.
+fn cube_corner(i: u32) -> vec3<f32> {
     var corners = array<vec3<f32>, 36>(
         vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(1.0, 1.0, 0.0), vec3<f32>(1.0, 1.0, 1.0),
         vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(1.0, 1.0, 1.0), vec3<f32>(1.0, 0.0, 1.0),
@@ -88,8 +88,13 @@ fn vs_texel(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance: u
         vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0),
         vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 1.0, 0.0), vec3<f32>(1.0, 1.0, 0.0),
     );
+    return corners[i % 36u];
+}
+
+@vertex
+fn vs_texel(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance: u32) -> TexelOut {
     let t = texels[instance];
-    let p = t.box_min + corners[vi % 36u] * t.box_size;
+    let p = t.box_min + cube_corner(vi) * t.box_size;
     let world = (t.model * vec4<f32>(p, 1.0)).xyz;
     var out: TexelOut;
     out.clip = frame.view_proj * vec4<f32>(world, 1.0);
@@ -314,4 +319,116 @@ fn fs_stack(in: StackOut) -> @location(0) vec4<f32> {
     }
     let dist = length(in.world - frame.camera_pos);
     return vec4<f32>(fog_and_exposure(shown, alpha, dist), alpha);
+}
+
+// ---------------------------------------------------------------------------------------
+// Forest-cover tiles (src/render/method/texel/tiles.rs): a tile's volume follows the
+// ground, world = (x, b(u, w) + lo + v * height, z) with b bilinear between the terrain at
+// the tile's corners. Its world box is drawn; each fragment marches the eye's ray on
+// planes parallel to the screen as `fs_texel` does, mapping each sample to tile
+// coordinates. `TileGpu` mirrors `Tile`.
+
+struct Tile {
+    // The tile's lowest (x, z) corner and side (m), and the volume's floor above the ground.
+    origin: vec2<f32>,
+    size: f32,
+    lo: f32,
+    // Terrain height at (x0, z0), (x1, z0), (x0, z1), (x1, z1).
+    corners: vec4<f32>,
+    height: f32,
+    // Side of a cube of one voxel's volume (what alpha is a thickness of).
+    voxel: f32,
+    spacing: f32,
+    max_steps: f32,
+    atlas_origin: vec3<f32>,
+    volume_dw: f32,
+    atlas_extent: vec3<f32>,
+    lights: u32,
+    light_index: vec3<u32>,
+    slices: f32,
+    light_weight: vec3<f32>,
+    pad0: f32,
+    box_min: vec3<f32>,
+    pad1: f32,
+    box_max: vec3<f32>,
+    pad2: f32,
+}
+
+@group(1) @binding(6) var<storage, read> tiles: array<Tile>;
+@group(1) @binding(7) var tile_volumes: texture_3d<f32>;
+
+@vertex
+fn vs_tile(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance: u32) -> TexelOut {
+    let t = tiles[instance];
+    let world = t.box_min + cube_corner(vi) * (t.box_max - t.box_min);
+    var out: TexelOut;
+    out.clip = frame.view_proj * vec4<f32>(world, 1.0);
+    out.world = world;
+    out.instance = instance;
+    return out;
+}
+
+fn sample_tile(t: Tile, uvw: vec3<f32>, volume: u32) -> vec4<f32> {
+    let at = t.atlas_origin + uvw * t.atlas_extent + vec3<f32>(0.0, 0.0, f32(volume) * t.volume_dw);
+    return textureSampleLevel(tile_volumes, volume_sampler, at, 0.0);
+}
+
+@fragment
+fn fs_tile(in: TexelOut) -> @location(0) vec4<f32> {
+    let t = tiles[in.instance];
+    let eye = frame.camera_pos;
+    let dir = normalize(in.world - eye);
+    let inv = 1.0 / select(dir, vec3<f32>(1e-8), abs(dir) < vec3<f32>(1e-8));
+    let a = (t.box_min - eye) * inv;
+    let b = (t.box_max - eye) * inv;
+    let lo = min(a, b);
+    let hi = max(a, b);
+    let t_in = max(max(max(lo.x, lo.y), lo.z), 0.0);
+    let t_out = min(min(hi.x, hi.y), hi.z);
+    if t_out <= t_in {
+        discard;
+    }
+    let depth_per_t = max(dot(dir, frame.camera_forward), 0.05);
+    let dt = t.spacing / depth_per_t;
+    let first = (floor(t_in * depth_per_t / t.spacing) + 1.0) * dt;
+    let thickness = dt / t.voxel;
+    let steps = min(ceil((t_out - first) / dt), t.max_steps);
+    let cells = vec3<f32>(textureDimensions(tile_volumes)) * t.atlas_extent;
+    let half = 0.5 / cells;
+    var color = vec3<f32>(0.0);
+    var alpha = 0.0;
+    for (var k = 0.0; k < steps; k += 1.0) {
+        let p = eye + dir * (first + k * dt);
+        let u = (p.x - t.origin.x) / t.size;
+        let w = (p.z - t.origin.y) / t.size;
+        let ground = mix(mix(t.corners.x, t.corners.y, u), mix(t.corners.z, t.corners.w, u), w);
+        let v = (p.y - ground - t.lo) / t.height;
+        let uvw = vec3<f32>(u, v, w);
+        if any(uvw < vec3<f32>(0.0)) || any(uvw > vec3<f32>(1.0)) {
+            continue;
+        }
+        let at = clamp(uvw, half, vec3<f32>(1.0) - half);
+        let sky = sample_tile(t, at, t.lights);
+        if sky.a < 0.002 {
+            continue;
+        }
+        var direct = vec3<f32>(0.0);
+        for (var j = 0; j < 3; j++) {
+            let wj = t.light_weight[j];
+            if wj > 0.0 {
+                direct += wj * sample_tile(t, at, t.light_index[j]).rgb;
+            }
+        }
+        let c = direct * frame.sun_color + sky.rgb * frame.sky_ambient;
+        let a_step = 1.0 - pow(1.0 - min(sky.a, 0.999), thickness);
+        color += (1.0 - alpha) * c * (a_step / sky.a);
+        alpha += (1.0 - alpha) * a_step;
+        if alpha > 0.995 {
+            break;
+        }
+    }
+    if alpha <= 0.0 {
+        discard;
+    }
+    return vec4<f32>(fog_and_exposure(color, alpha, t_in), alpha);
 }

@@ -105,7 +105,8 @@ struct BenchArgs {
     #[arg(long, value_delimiter = ',', value_parser = parse_method, default_value = "geometry,btf,billboard,texel")]
     methods: Vec<Method>,
     /// Sweep a knob: KEY=V1,V2,... (btf: lod_scale, weight_threshold, lod_fade, planes,
-    /// vcm; texel: slice_d0, slice_d1, max_slices, texel_mode); repeat for a grid.
+    /// vcm; texel: slice_d0, slice_d1, max_slices, texel_mode, texel_tiles, tile_distance);
+    /// repeat for a grid.
     #[arg(long, value_parser = parse_sweep)]
     sweep: Vec<canopy::bench::run::Sweep>,
     /// Image size, WIDTHxHEIGHT.
@@ -263,9 +264,15 @@ struct RenderArgs {
     #[arg(long, default_value_t = SliceBounds::default().max_slices,
           value_parser = clap::value_parser!(u32).range(1..=1024))]
     max_slices: u32,
-    /// texel: colour each texel by its slice count (blue few, red the cap).
+    /// texel: colour each texel by its slice count (blue 1, green about 11, red 128 or more).
     #[arg(long)]
     show_slices: bool,
+    /// texel: draw the trees of far tiles as forest-cover tiles (on or off).
+    #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+    texel_tiles: bool,
+    /// texel: distance (m) beyond which a whole tile is drawn as one forest-cover volume.
+    #[arg(long, default_value_t = TexelSettings::default().tile_distance, value_parser = parse_positive)]
+    tile_distance: f32,
     /// Prefer the CPU (software) adapter.
     #[arg(long)]
     cpu: bool,
@@ -477,6 +484,8 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         },
         vcm: args.vcm,
         show_slices: args.show_slices,
+        tiles: args.texel_tiles,
+        tile_distance: args.tile_distance,
     };
     let (w, h) = args.size;
     canopy::render::target::check_size(

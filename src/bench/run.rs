@@ -33,10 +33,14 @@ pub enum Knob {
     MaxSlices,
     /// texel: slices3d or stacks.
     TexelMode,
+    /// texel: forest-cover tiles on or off.
+    TexelTiles,
+    /// texel: the distance beyond which tiles draw (m).
+    TileDistance,
 }
 
 impl Knob {
-    pub const ALL: [Knob; 9] = [
+    pub const ALL: [Knob; 11] = [
         Knob::LodScale,
         Knob::WeightThreshold,
         Knob::LodFade,
@@ -46,12 +50,19 @@ impl Knob {
         Knob::SliceD1,
         Knob::MaxSlices,
         Knob::TexelMode,
+        Knob::TexelTiles,
+        Knob::TileDistance,
     ];
 
     /// The method this knob belongs to.
     pub fn method(self) -> Method {
         match self {
-            Knob::SliceD0 | Knob::SliceD1 | Knob::MaxSlices | Knob::TexelMode => Method::Texel,
+            Knob::SliceD0
+            | Knob::SliceD1
+            | Knob::MaxSlices
+            | Knob::TexelMode
+            | Knob::TexelTiles
+            | Knob::TileDistance => Method::Texel,
             _ => Method::Btf,
         }
     }
@@ -67,6 +78,8 @@ impl Knob {
             Knob::SliceD1 => "slice_d1",
             Knob::MaxSlices => "max_slices",
             Knob::TexelMode => "texel_mode",
+            Knob::TexelTiles => "texel_tiles",
+            Knob::TileDistance => "tile_distance",
         }
     }
 
@@ -90,13 +103,9 @@ impl Knob {
             Knob::Planes => {
                 s.planes = PlaneMode::parse(value).ok_or_else(|| bad("give single or crossed"))?
             }
-            Knob::Vcm => {
-                s.vcm = match value {
-                    "on" => true,
-                    "off" => false,
-                    _ => return Err(bad("give on or off")),
-                }
-            }
+            Knob::Vcm => s.vcm = on_off(value).ok_or_else(|| bad("give on or off"))?,
+            Knob::TexelTiles => t.tiles = on_off(value).ok_or_else(|| bad("give on or off"))?,
+            Knob::TileDistance => t.tile_distance = number(1.0, 100_000.0)?,
             Knob::SliceD0 => t.bounds.d0 = number(0.01, 100.0)?,
             Knob::SliceD1 => t.bounds.d1 = number(0.05, 100.0)?,
             Knob::MaxSlices => t.bounds.max_slices = number(1.0, 1024.0)?.round() as u32,
@@ -105,6 +114,14 @@ impl Knob {
             }
         }
         Ok(())
+    }
+}
+
+fn on_off(value: &str) -> Option<bool> {
+    match value {
+        "on" => Some(true),
+        "off" => Some(false),
+        _ => None,
     }
 }
 

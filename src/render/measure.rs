@@ -232,6 +232,8 @@ pub struct TexelReport {
     pub slice_d1: f32,
     pub max_slices: u32,
     pub texel_vcm: bool,
+    pub texel_tiles: bool,
+    pub tile_distance: f32,
 }
 
 /// The `btf` part of a [`FrameReport`].
@@ -298,6 +300,8 @@ impl FrameReport {
                 slice_d1: frame.texel.bounds.d1,
                 max_slices: frame.texel.bounds.max_slices,
                 texel_vcm: frame.texel.vcm,
+                texel_tiles: frame.texel.tiles,
+                tile_distance: frame.texel.tile_distance,
             }),
             reference: reference.is_some(),
             sky: reference.and_then(|_| renderer.sky_visibility()).map(

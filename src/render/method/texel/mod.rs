@@ -8,9 +8,11 @@
 //! boxes (a second for the boxes the eye is inside, drawn from their far faces).
 //!
 //! The seeds' own way, three axis stacks of 2D slices with pre-composited levels, is
-//! [`stacks`] (`--texel-mode stacks`). Not yet here (issue 11): forest-cover tiles.
+//! [`stacks`] (`--texel-mode stacks`). Beyond `tile_distance`, the trees of a whole
+//! forest-cover tile are drawn as one volume that follows the ground ([`tiles`]).
 
 pub mod stacks;
+pub mod tiles;
 
 use std::collections::HashMap;
 
@@ -66,6 +68,11 @@ pub struct TexelSettings {
     pub vcm: bool,
     /// Show each texel's slice count as a colour.
     pub show_slices: bool,
+    /// Draw the trees of tiles wholly beyond `tile_distance` as forest-cover tiles.
+    pub tiles: bool,
+    /// Distance (m) from the eye to a tile's nearest point beyond which it is drawn as
+    /// one volume.
+    pub tile_distance: f32,
 }
 
 impl Default for TexelSettings {
@@ -75,6 +82,8 @@ impl Default for TexelSettings {
             bounds: SliceBounds::default(),
             vcm: true,
             show_slices: false,
+            tiles: true,
+            tile_distance: 400.0,
         }
     }
 }
@@ -85,8 +94,10 @@ pub struct TexelStats {
     pub texel_mode: TexelMode,
     /// Trees drawn as texels.
     pub texels: u32,
-    /// Forest-cover tiles drawn (none yet).
+    /// Forest-cover tiles drawn.
     pub tiles: u32,
+    /// Trees those tiles stand for (not counted in `texels`).
+    pub tiled_trees: u32,
     pub slices_mean: f32,
     pub slices_max: u32,
     /// Bytes of the volumes on the GPU, mipmaps included (with the stack atlas, once the
@@ -344,6 +355,8 @@ pub struct TexelFrame {
     /// In the stacks mode, each record's stack (same order) and the quads to draw.
     pub stacks: Vec<stacks::StackGpu>,
     pub quads: Vec<[u32; 2]>,
+    /// Forest-cover tiles to draw first, back to front.
+    pub tiles: Vec<tiles::TileGpu>,
 }
 
 /// The texels of the trees in `visible` (per species, indices into `trees`): slice counts,
@@ -484,6 +497,7 @@ pub fn prepare(
         stats,
         stacks: stack_records,
         quads,
+        tiles: Vec::new(),
     }
 }
 
@@ -512,6 +526,10 @@ pub struct TexelAssets {
     stacks: Option<stacks::StackAssets>,
     /// Why the stack atlas could not be built (the slices3d mode still draws).
     stack_problem: Option<String>,
+    /// The terrain, kept to build the forest-cover tiles the first time they draw.
+    terrain: crate::model::Terrain,
+    tiles: Option<tiles::TileAssets>,
+    tile_problem: Option<String>,
 }
 
 /// The render pipelines of the `texel` method for one target format: boxes seen from
@@ -520,6 +538,7 @@ pub struct TexelAssets {
 pub struct TexelPipelines {
     pub boxes: [wgpu::RenderPipeline; 2],
     pub stack: Option<wgpu::RenderPipeline>,
+    pub tile: Option<wgpu::RenderPipeline>,
 }
 
 /// Most texels drawn in one frame.
@@ -631,12 +650,90 @@ impl TexelAssets {
             species_count: world.species.len(),
             stacks: None,
             stack_problem: None,
+            terrain: world.terrain.clone(),
+            tiles: None,
+            tile_problem: None,
         })
     }
 
     /// Bytes of the volumes on the GPU: the 3D texture, and the stack atlas once built.
     pub fn total_bytes(&self) -> u64 {
-        self.bytes + self.stacks.as_ref().map_or(0, |s| s.bytes)
+        self.bytes
+            + self.stacks.as_ref().map_or(0, |s| s.bytes)
+            + self.tiles.as_ref().map_or(0, |t| t.bytes)
+    }
+
+    /// Builds the forest-cover tiles if they are not yet (or says why they cannot be).
+    fn ensure_tiles(&mut self, ctx: &GpuContext, world: &WorldGpu) -> Result<()> {
+        if let Some(p) = &self.tile_problem {
+            return Err(Error::BadInput(format!(
+                "the forest-cover tiles cannot be built: {p}"
+            )));
+        }
+        if self.tiles.is_none() {
+            match tiles::TileAssets::new(ctx, &self.terrain, world, &self.volumes) {
+                Ok(t) => self.tiles = Some(t),
+                Err(e) => {
+                    self.tile_problem = Some(e.to_string());
+                    return Err(Error::BadInput(format!(
+                        "the forest-cover tiles cannot be built: {e}"
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The tiles wholly beyond `settings.tile_distance` in view, back to front, and the
+    /// trees they stand for (per tree, whether a drawn tile holds it).
+    fn frame_tiles(
+        &self,
+        world: &WorldGpu,
+        view: &PrepareView,
+        settings: &TexelSettings,
+    ) -> (Vec<tiles::TileGpu>, Vec<bool>, u32) {
+        let Some(t) = self.tiles.as_ref() else {
+            return (Vec::new(), Vec::new(), 0);
+        };
+        let bounds = settings.bounds.sanitized();
+        let cam = view.camera.position;
+        let forward = view.camera.forward();
+        let blend = self.scene.lights.blend(view.to_sun.normalize_or(Vec3::Y));
+        let mut drawn = vec![false; t.grid.tiles.len()];
+        let mut sorted = Vec::new();
+        for (i, tile) in t.grid.tiles.iter().enumerate() {
+            let b = tile.bounds();
+            let nearest = cam.clamp(b.min, b.max);
+            if (nearest - cam).length() < settings.tile_distance
+                || !view.frustum.intersects(&b)
+            {
+                continue;
+            }
+            drawn[i] = true;
+            let extent = b.max - b.min;
+            let depth = (extent * forward.abs()).element_sum();
+            let z = (b.center() - cam).dot(forward).max(view.camera.near.max(0.1));
+            // The criteria, but no more than two slices per tile voxel along the view:
+            // finer slices would sample the same voxels again.
+            let per_voxel = (2.0 * depth * tiles::TILE_DIMS.x as f32 / tile.size).ceil();
+            let n = slices::screen_slices(view.focal_px, depth, z, &bounds)
+                .min(per_voxel.max(1.0) as u32);
+            sorted.push((z, t.record(i, depth / n as f32, n, &blend)));
+        }
+        sorted.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let mut skip = vec![false; world.tree_data.len()];
+        let mut tiled = 0;
+        for (tree, tile) in t.grid.tile_of.iter().enumerate() {
+            if let Some(k) = tile
+                && drawn.get(*k as usize).copied().unwrap_or(false)
+            {
+                if let Some(s) = skip.get_mut(tree) {
+                    *s = true;
+                    tiled += 1;
+                }
+            }
+        }
+        (sorted.into_iter().map(|s| s.1).collect(), skip, tiled)
     }
 
     /// Builds the stack atlas if it is not yet (or says why it cannot be).
@@ -677,6 +774,29 @@ impl TexelAssets {
         if settings.mode == TexelMode::Stacks {
             self.ensure_stacks(ctx)?;
         }
+        if settings.tiles {
+            self.ensure_tiles(ctx, world)?;
+        }
+        let (tile_records, skip, tiled) = if settings.tiles {
+            self.frame_tiles(world, view, settings)
+        } else {
+            (Vec::new(), Vec::new(), 0)
+        };
+        let kept: Vec<Vec<u32>>;
+        let visible = if skip.iter().any(|&s| s) {
+            kept = visible
+                .iter()
+                .map(|list| {
+                    list.iter()
+                        .copied()
+                        .filter(|&t| !skip.get(t as usize).copied().unwrap_or(false))
+                        .collect()
+                })
+                .collect();
+            &kept[..]
+        } else {
+            visible
+        };
         let atlas = match settings.mode {
             TexelMode::Stacks => self.stacks.as_ref().map(|s| &s.atlas),
             TexelMode::Slices3d => None,
@@ -692,6 +812,12 @@ impl TexelAssets {
             MAX_TEXELS,
         );
         f.stats.texel_bytes = self.total_bytes();
+        f.stats.tiles = tile_records.len() as u32;
+        f.stats.tiled_trees = tiled;
+        if let Some(t) = self.tiles.as_mut() {
+            t.upload(ctx, &tile_records, &self.sampler);
+        }
+        f.tiles = tile_records;
         if f.records.len() > self.capacity {
             self.capacity = f.records.len().next_power_of_two().min(MAX_TEXELS);
             self.records = record_buffer(ctx, self.capacity);
@@ -804,9 +930,14 @@ impl TexelAssets {
             .stacks
             .as_mut()
             .map(|s| s.pipeline(device, frame_layout, format).clone());
+        let tile = self
+            .tiles
+            .as_mut()
+            .map(|t| t.pipeline(device, frame_layout, format).clone());
         TexelPipelines {
             boxes: self.box_pipelines(device, frame_layout, format).clone(),
             stack,
+            tile,
         }
     }
 
@@ -849,6 +980,14 @@ impl TexelAssets {
         stats: &mut FrameStats,
     ) {
         let n = frame.records.len() as u32;
+        if let (Some(t), Some(p), false) = (&self.tiles, &pipelines.tile, frame.tiles.is_empty())
+        {
+            // The far tiles first: everything else is nearer.
+            let count = frame.tiles.len() as u32;
+            t.draw(pass, p, count);
+            stats.draw_calls += 1;
+            stats.triangles += u64::from(count) * 12;
+        }
         if frame.stats.texel_mode == TexelMode::Stacks {
             if let (Some(s), Some(p)) = (&self.stacks, &pipelines.stack) {
                 let quads = frame.quads.len() as u32;
