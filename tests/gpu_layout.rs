@@ -215,3 +215,35 @@ fn stack_record_matches_texel_wgsl() {
         rust,
     );
 }
+
+#[test]
+fn tile_record_matches_texel_wgsl() {
+    use canopy::render::method::texel::tiles::TileGpu;
+    let rust = rust_layout!(TileGpu {
+        origin,
+        size,
+        lo,
+        corners,
+        height,
+        voxel,
+        spacing,
+        max_steps,
+        atlas_origin,
+        volume_dw,
+        atlas_extent,
+        lights,
+        light_index,
+        slices,
+        light_weight,
+        pad0,
+        box_min,
+        pad1,
+        box_max,
+        pad2,
+    });
+    check(
+        "Tile",
+        wgsl_layout(&canopy::render::shaders::texel(), "Tile"),
+        rust,
+    );
+}

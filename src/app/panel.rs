@@ -279,12 +279,23 @@ fn texel_controls(ui: &mut egui::Ui, frame: &mut FrameDesc, stats: &PanelStats) 
     );
     ui.checkbox(&mut t.vcm, "VCM shading (trees shade each other)");
     ui.checkbox(&mut t.show_slices, "show slice count");
+    ui.checkbox(&mut t.tiles, "forest-cover tiles far away")
+        .on_hover_text("beyond the distance, the trees of a whole 64 m tile drawn as one volume that follows the ground");
+    ui.add_enabled(
+        t.tiles,
+        egui::Slider::new(&mut t.tile_distance, 50.0..=2000.0)
+            .logarithmic(true)
+            .text("tile distance m"),
+    );
     if let Some(s) = &stats.texel {
         egui::Grid::new("texel stats")
             .num_columns(2)
             .show(ui, |ui| {
                 ui.label("texels drawn");
                 ui.label(s.texels.to_string());
+                ui.end_row();
+                ui.label("tiles drawn (trees)");
+                ui.label(format!("{} ({})", s.tiles, s.tiled_trees));
                 ui.end_row();
                 ui.label("slices mean / max");
                 ui.label(format!("{:.1} / {}", s.slices_mean, s.slices_max));

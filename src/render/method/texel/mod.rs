@@ -704,15 +704,15 @@ impl TexelAssets {
         for (i, tile) in t.grid.tiles.iter().enumerate() {
             let b = tile.bounds();
             let nearest = cam.clamp(b.min, b.max);
-            if (nearest - cam).length() < settings.tile_distance
-                || !view.frustum.intersects(&b)
-            {
+            if (nearest - cam).length() < settings.tile_distance || !view.frustum.intersects(&b) {
                 continue;
             }
             drawn[i] = true;
             let extent = b.max - b.min;
             let depth = (extent * forward.abs()).element_sum();
-            let z = (b.center() - cam).dot(forward).max(view.camera.near.max(0.1));
+            let z = (b.center() - cam)
+                .dot(forward)
+                .max(view.camera.near.max(0.1));
             // The criteria, but no more than two slices per tile voxel along the view:
             // finer slices would sample the same voxels again.
             let per_voxel = (2.0 * depth * tiles::TILE_DIMS.x as f32 / tile.size).ceil();
@@ -726,11 +726,10 @@ impl TexelAssets {
         for (tree, tile) in t.grid.tile_of.iter().enumerate() {
             if let Some(k) = tile
                 && drawn.get(*k as usize).copied().unwrap_or(false)
+                && let Some(s) = skip.get_mut(tree)
             {
-                if let Some(s) = skip.get_mut(tree) {
-                    *s = true;
-                    tiled += 1;
-                }
+                *s = true;
+                tiled += 1;
             }
         }
         (sorted.into_iter().map(|s| s.1).collect(), skip, tiled)
@@ -980,8 +979,7 @@ impl TexelAssets {
         stats: &mut FrameStats,
     ) {
         let n = frame.records.len() as u32;
-        if let (Some(t), Some(p), false) = (&self.tiles, &pipelines.tile, frame.tiles.is_empty())
-        {
+        if let (Some(t), Some(p), false) = (&self.tiles, &pipelines.tile, frame.tiles.is_empty()) {
             // The far tiles first: everything else is nearer.
             let count = frame.tiles.len() as u32;
             t.draw(pass, p, count);
