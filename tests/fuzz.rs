@@ -1,0 +1,405 @@
+//! Mutation fuzzing of the two parsers that read what users hand canopy: the baked-file
+//! decoder (`format::from_bytes`) and the scene parser (`Scene::parse`), seeded with real
+//! inputs (baked files built here through the public types, the embedded default scene,
+//! the species presets and the test scenes).
+//!
+//! Each input must end in `Ok` or a clean `Err`: no panic, no single allocation larger than
+//! the input allows (a length read from the file never sizes a buffer unchecked), no input
+//! taking a second. Half of the baked inputs have their checksums recomputed after the
+//! mutation, so the records behind the checksums are reached too.
+//!
+//! `cargo test --release --test fuzz -- --ignored` runs 1,000,000 inputs per target
+//! (`CANOPY_FUZZ_INPUTS` to change, `CANOPY_FUZZ_SEED` for another sequence) and prints
+//! inputs, time and outcomes; the plain `cargo test` runs a short smoke of each.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::time::{Duration, Instant};
+
+use canopy::format::{self, BakeSettings, Baked, BtfImageSet, TexelVolume, VcmSet};
+use canopy::model::Level;
+use canopy::scene::Scene;
+
+/// The system allocator, remembering the largest single allocation of the current thread
+/// while it tracks.
+struct Watch;
+
+thread_local! {
+    static TRACKING: Cell<bool> = const { Cell::new(false) };
+    static LARGEST: Cell<usize> = const { Cell::new(0) };
+}
+
+unsafe impl GlobalAlloc for Watch {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note(layout.size());
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note(layout.size());
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note(new_size);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+fn note(size: usize) {
+    let _ = TRACKING.try_with(|t| {
+        if t.get() {
+            let _ = LARGEST.try_with(|l| l.set(l.get().max(size)));
+        }
+    });
+}
+
+#[global_allocator]
+static ALLOCATOR: Watch = Watch;
+
+/// Runs `f`, returning its result, the largest single allocation it made and its time.
+fn watched<T>(f: impl FnOnce() -> T) -> (T, usize, Duration) {
+    LARGEST.with(|l| l.set(0));
+    TRACKING.with(|t| t.set(true));
+    let t0 = Instant::now();
+    let out = f();
+    let took = t0.elapsed();
+    TRACKING.with(|t| t.set(false));
+    (out, LARGEST.with(|l| l.get()), took)
+}
+
+/// xorshift64*: a small, seeded, reproducible generator.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+/// Values that sit on the edges of what fields hold.
+const EDGE_U32: [u32; 12] = [
+    0,
+    1,
+    2,
+    6,
+    7,
+    8,
+    255,
+    256,
+    4096,
+    0x7fff_ffff,
+    0x8000_0000,
+    u32::MAX,
+];
+
+/// One to four mutations of `seed`: bit flips, edge values written over 4 bytes, random
+/// bytes, truncation, a copied or deleted run, or a splice of `other`.
+fn mutate(seed: &[u8], other: &[u8], rng: &mut Rng) -> Vec<u8> {
+    let mut b = seed.to_vec();
+    for _ in 0..1 + rng.below(4) {
+        if b.is_empty() {
+            b.push(rng.next() as u8);
+            continue;
+        }
+        match rng.below(8) {
+            0 => {
+                let i = rng.below(b.len());
+                b[i] ^= 1 << rng.below(8);
+            }
+            1 | 2 => {
+                // Edge values land on the 4-byte fields of the header and records.
+                let i = rng.below(b.len()) & !3;
+                let v = EDGE_U32[rng.below(EDGE_U32.len())].to_le_bytes();
+                for (k, byte) in v.iter().enumerate() {
+                    if let Some(x) = b.get_mut(i + k) {
+                        *x = *byte;
+                    }
+                }
+            }
+            3 => {
+                let i = rng.below(b.len());
+                b[i] = rng.next() as u8;
+            }
+            4 => {
+                let n = rng.below(b.len());
+                b.truncate(n);
+            }
+            5 => {
+                let i = rng.below(b.len());
+                let n = rng.below(64).min(b.len() - i);
+                let run: Vec<u8> = b[i..i + n].to_vec();
+                let at = rng.below(b.len());
+                b.splice(at..at, run);
+            }
+            6 => {
+                let i = rng.below(b.len());
+                let n = rng.below(64).min(b.len() - i);
+                b.drain(i..i + n);
+            }
+            _ => {
+                if !other.is_empty() {
+                    let from = rng.below(other.len());
+                    let n = rng.below(256).min(other.len() - from);
+                    let at = rng.below(b.len());
+                    let end = (at + n).min(b.len());
+                    b.splice(at..end, other[from..from + n].iter().copied());
+                }
+            }
+        }
+    }
+    b
+}
+
+fn u32_at(b: &[u8], at: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(b.get(at..at + 4)?.try_into().ok()?))
+}
+
+/// Recomputes the checksums of a (mutated) baked file where its section table can be
+/// followed, so that the decoder reads past them.
+fn fix_checksums(b: &mut [u8]) {
+    let Some(n) = u32_at(b, 12).map(|n| n as usize).filter(|&n| n <= 64) else {
+        return;
+    };
+    let table_end = 56 + 16 * n;
+    let mut at = table_end + 4;
+    for i in 0..n {
+        let entry = 56 + 16 * i;
+        let Some(len) = b
+            .get(entry + 8..entry + 16)
+            .map(|s| u64::from_le_bytes(s.try_into().unwrap_or([0; 8])) as usize)
+        else {
+            return;
+        };
+        let Some(end) = at.checked_add(len).filter(|&e| e <= b.len()) else {
+            break;
+        };
+        let crc = crc32fast::hash(&b[at..end]).to_le_bytes();
+        b[entry + 4..entry + 8].copy_from_slice(&crc);
+        at = end;
+    }
+    if table_end + 4 <= b.len() {
+        let crc = crc32fast::hash(&b[..table_end]).to_le_bytes();
+        b[table_end..table_end + 4].copy_from_slice(&crc);
+    }
+}
+
+fn noise(seed: u32, len: usize) -> Vec<u8> {
+    let mut r = Rng(u64::from(seed) * 0x9e37_79b9 + 1);
+    (0..len).map(|_| r.next() as u8).collect()
+}
+
+/// Small valid baked files: VCM sets and texel volumes only, and one with a BTF set.
+fn baked_seeds() -> Vec<Vec<u8>> {
+    let settings = BakeSettings {
+        views: 6,
+        lights: 6,
+        resolution: 32,
+        supersample: 2,
+        vcm_resolution: 8,
+        texel_resolution: 16,
+    };
+    let vcm = |owner: u32, level: Level| VcmSet {
+        species: 0,
+        owner,
+        level,
+        resolution: 8,
+        opacity: noise(owner + 3, 48 * 64),
+        mean_opacity: [0.5; 8],
+    };
+    let texel = |species: u32, dims: [u32; 3]| TexelVolume {
+        species,
+        lights: 6,
+        dims,
+        box_min: [-1.0, 0.0, -1.0],
+        voxel: 0.5,
+        voxels: noise(species + 9, 7 * dims.iter().product::<u32>() as usize * 4),
+    };
+    let small = Baked {
+        scene_hash: 0x5eed,
+        settings,
+        btf: Vec::new(),
+        vcm: vec![vcm(0, Level::Twig), vcm(3, Level::Tree)],
+        texels: vec![texel(0, [2, 3, 2]), texel(1, [3, 2, 1])],
+    };
+    let image = 32 * 32 * 4;
+    let with_btf = Baked {
+        btf: vec![BtfImageSet {
+            species: 0,
+            level: Level::Branch,
+            views: 6,
+            lights: 6,
+            resolution: 32,
+            center: [0.0, 1.0, 0.0],
+            radius: 2.0,
+            texel_size: 0.05,
+            direct: noise(1, image * 36),
+            ambient: noise(2, image * 6),
+        }],
+        ..small.clone()
+    };
+    let seeds: Vec<Vec<u8>> = [small, with_btf].iter().map(format::to_bytes).collect();
+    for s in &seeds {
+        format::from_bytes(s).expect("the seeds are valid baked files");
+    }
+    seeds
+}
+
+/// The scene texts canopy ships and tests with.
+fn scene_seeds() -> Vec<Vec<u8>> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut out = Vec::new();
+    for dir in ["assets", "assets/species", "tests/data"] {
+        let Ok(entries) = std::fs::read_dir(root.join(dir)) else {
+            continue;
+        };
+        let mut paths: Vec<_> = entries.flatten().map(|e| e.path()).collect();
+        paths.sort();
+        for p in paths {
+            if p.extension().is_some_and(|e| e == "toml")
+                && let Ok(b) = std::fs::read(&p)
+            {
+                out.push(b);
+            }
+        }
+    }
+    assert!(out.len() >= 3, "scene seeds found: {}", out.len());
+    out
+}
+
+/// What a fuzz run saw.
+#[derive(Debug, Default)]
+struct Outcome {
+    inputs: u64,
+    accepted: u64,
+    refused: u64,
+    largest_alloc: usize,
+    slowest: Duration,
+    seconds: f64,
+}
+
+fn inputs(default: u64) -> u64 {
+    std::env::var("CANOPY_FUZZ_INPUTS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+fn rng() -> Rng {
+    let seed = std::env::var("CANOPY_FUZZ_SEED")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0x00c0_ffee_u64);
+    Rng(seed | 1)
+}
+
+/// Feeds `count` mutated baked files to the decoder.
+fn fuzz_baked(count: u64) -> Outcome {
+    let seeds = baked_seeds();
+    let mut rng = rng();
+    let mut o = Outcome::default();
+    let t0 = Instant::now();
+    for i in 0..count {
+        // Mostly the small seed; one input in 16 from the one with images (150 KB).
+        let k = usize::from(i % 16 == 15);
+        let mut input = mutate(&seeds[k], &seeds[1 - k], &mut rng);
+        if rng.below(2) == 0 {
+            fix_checksums(&mut input);
+        }
+        let (result, largest, took) = watched(|| format::from_bytes(&input));
+        // A file's records never need more than the file's own size in one buffer (and
+        // a little to start with).
+        assert!(
+            largest <= input.len() * 2 + (1 << 16),
+            "input {i}: an allocation of {largest} bytes for a {}-byte file",
+            input.len()
+        );
+        assert!(took < Duration::from_secs(1), "input {i} took {took:?}");
+        match result {
+            Ok(_) => o.accepted += 1,
+            Err(e) => {
+                assert!(!e.to_string().is_empty());
+                o.refused += 1;
+            }
+        }
+        o.largest_alloc = o.largest_alloc.max(largest);
+        o.slowest = o.slowest.max(took);
+        o.inputs += 1;
+    }
+    o.seconds = t0.elapsed().as_secs_f64();
+    o
+}
+
+/// Feeds `count` mutated scene texts to the parser.
+fn fuzz_scenes(count: u64) -> Outcome {
+    let seeds = scene_seeds();
+    let mut rng = rng();
+    let mut o = Outcome::default();
+    let t0 = Instant::now();
+    for i in 0..count {
+        let a = rng.below(seeds.len());
+        let b = rng.below(seeds.len());
+        let input = mutate(&seeds[a], &seeds[b], &mut rng);
+        let text = String::from_utf8_lossy(&input).into_owned();
+        let (result, largest, took) = watched(|| Scene::parse(&text, "fuzz.toml"));
+        assert!(
+            largest <= text.len() * 64 + (1 << 20),
+            "input {i}: an allocation of {largest} bytes for a {}-byte scene",
+            text.len()
+        );
+        assert!(took < Duration::from_secs(1), "input {i} took {took:?}");
+        match result {
+            Ok(_) => o.accepted += 1,
+            Err(e) => {
+                assert!(!e.to_string().is_empty());
+                o.refused += 1;
+            }
+        }
+        o.largest_alloc = o.largest_alloc.max(largest);
+        o.slowest = o.slowest.max(took);
+        o.inputs += 1;
+    }
+    o.seconds = t0.elapsed().as_secs_f64();
+    o
+}
+
+#[test]
+fn fuzz_smoke_baked_decoder() {
+    let o = fuzz_baked(3_000);
+    eprintln!("baked decoder smoke: {o:?}");
+    assert!(o.refused > 0 && o.accepted + o.refused == o.inputs);
+}
+
+#[test]
+fn fuzz_smoke_scene_parser() {
+    let o = fuzz_scenes(3_000);
+    eprintln!("scene parser smoke: {o:?}");
+    assert!(o.refused > 0 && o.accepted > 0);
+}
+
+#[test]
+#[ignore = "a million inputs: cargo test --release --test fuzz -- --ignored"]
+fn fuzz_baked_decoder() {
+    let o = fuzz_baked(inputs(1_000_000));
+    eprintln!(
+        "baked decoder: {} inputs in {:.1} s ({} accepted, {} refused), largest allocation {} bytes, slowest input {:?}",
+        o.inputs, o.seconds, o.accepted, o.refused, o.largest_alloc, o.slowest
+    );
+}
+
+#[test]
+#[ignore = "a million inputs: cargo test --release --test fuzz -- --ignored"]
+fn fuzz_scene_parser() {
+    let o = fuzz_scenes(inputs(1_000_000));
+    eprintln!(
+        "scene parser: {} inputs in {:.1} s ({} accepted, {} refused), largest allocation {} bytes, slowest input {:?}",
+        o.inputs, o.seconds, o.accepted, o.refused, o.largest_alloc, o.slowest
+    );
+}
