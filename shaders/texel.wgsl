@@ -432,3 +432,58 @@ fn fs_tile(in: TexelOut) -> @location(0) vec4<f32> {
     }
     return vec4<f32>(fog_and_exposure(color, alpha, t_in), alpha);
 }
+
+// ---------------------------------------------------------------------------------------
+// Slices parallel to the screen as polygons (`--texel-mode polygons`;
+// src/render/method/texel/polygons.rs): the planes `fs_texel` samples, cut out of each box
+// on the CPU and drawn back to front; each fragment is one of the ray march's samples.
+
+struct PolyVertex {
+    position: vec3<f32>,
+    texel: u32,
+}
+
+@group(1) @binding(8) var<storage, read> poly_vertices: array<PolyVertex>;
+
+@vertex
+fn vs_poly(@builtin(vertex_index) vi: u32) -> TexelOut {
+    let v = poly_vertices[vi];
+    var out: TexelOut;
+    out.clip = frame.view_proj * vec4<f32>(v.position, 1.0);
+    out.world = v.position;
+    out.instance = v.texel;
+    return out;
+}
+
+@fragment
+fn fs_poly(in: TexelOut) -> @location(0) vec4<f32> {
+    let t = texels[in.instance];
+    let p = (t.world_to_object * vec4<f32>(in.world, 1.0)).xyz;
+    let half = 0.5 / (t.box_size / t.voxel);
+    let uvw = clamp((p - t.box_min) / t.box_size, half, vec3<f32>(1.0) - half);
+    let sky = sample_volume(t, uvw, t.lights);
+    if sky.a < 0.002 {
+        discard;
+    }
+    var direct = vec3<f32>(0.0);
+    for (var j = 0; j < 3; j++) {
+        let w = t.light_weight[j];
+        if w > 0.0 {
+            direct += w * sample_volume(t, uvw, t.light_index[j]).rgb;
+        }
+    }
+    let u = (p - t.vcm_min) * t.vcm_inv_size;
+    let f_sun = trilinear(t.vcm_direct[0], t.vcm_direct[1], u);
+    let f_sky = trilinear(t.vcm_sky[0], t.vcm_sky[1], u);
+    // The ray's length between two slices, in voxels: what this sample's alpha covers.
+    let dir_world = normalize(in.world - frame.camera_pos);
+    let dt = t.spacing / (t.scale * max(dot(dir_world, frame.camera_forward), 0.05));
+    let a_step = 1.0 - pow(1.0 - min(sky.a, 0.999), dt / t.voxel);
+    let c = direct * frame.sun_color * f_sun + sky.rgb * frame.sky_ambient * f_sky;
+    var shown = c * (a_step / sky.a) * t.tint;
+    if t.mode == MODE_SLICES {
+        shown = slice_count_colour(t.slices) * a_step;
+    }
+    let dist = length(in.world - frame.camera_pos);
+    return vec4<f32>(fog_and_exposure(shown, a_step, dist), a_step);
+}

@@ -251,7 +251,7 @@ struct RenderArgs {
     lod_fade: Option<f32>,
     /// texel: how volumes are sliced (slices3d: parallel to the screen through a 3D
     /// texture; stacks: the seeds' three axis stacks of 2D slices with pre-composited
-    /// power-of-two levels).
+    /// power-of-two levels; polygons: slices3d's slices drawn as polygons).
     #[arg(long, default_value = "slices3d", value_parser = parse_texel_mode)]
     texel_mode: TexelMode,
     /// texel: largest visible depth between slices, metres (criterion C1).
@@ -283,7 +283,7 @@ struct RenderArgs {
 
 fn parse_texel_mode(s: &str) -> Result<TexelMode, String> {
     TexelMode::parse(s)
-        .ok_or_else(|| format!("unknown texel mode {s:?}; expected slices3d or stacks"))
+        .ok_or_else(|| format!("unknown texel mode {s:?}; expected slices3d, stacks or polygons"))
 }
 
 fn parse_method(s: &str) -> Result<Method, String> {

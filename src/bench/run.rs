@@ -110,7 +110,8 @@ impl Knob {
             Knob::SliceD1 => t.bounds.d1 = number(0.05, 100.0)?,
             Knob::MaxSlices => t.bounds.max_slices = number(1.0, 1024.0)?.round() as u32,
             Knob::TexelMode => {
-                t.mode = TexelMode::parse(value).ok_or_else(|| bad("give slices3d or stacks"))?
+                t.mode = TexelMode::parse(value)
+                    .ok_or_else(|| bad("give slices3d, stacks or polygons"))?
             }
         }
         Ok(())

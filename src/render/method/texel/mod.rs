@@ -11,6 +11,7 @@
 //! [`stacks`] (`--texel-mode stacks`). Beyond `tile_distance`, the trees of a whole
 //! forest-cover tile are drawn as one volume that follows the ground ([`tiles`]).
 
+pub mod polygons;
 pub mod stacks;
 pub mod tiles;
 
@@ -40,6 +41,9 @@ pub enum TexelMode {
     /// The seeds' three axis stacks of 2D slices, the one most facing the eye drawn, with
     /// power-of-two pre-composited levels (Meyer-Neyret 1998).
     Stacks,
+    /// The slices of `Slices3d` cut out of each box as polygons and blended one by one
+    /// (Decaudin-Neyret's own drawing), to compare with the ray march.
+    Polygons,
 }
 
 impl TexelMode {
@@ -47,6 +51,7 @@ impl TexelMode {
         match self {
             TexelMode::Slices3d => "slices3d",
             TexelMode::Stacks => "stacks",
+            TexelMode::Polygons => "polygons",
         }
     }
 
@@ -54,6 +59,7 @@ impl TexelMode {
         match s {
             "slices3d" => Some(TexelMode::Slices3d),
             "stacks" => Some(TexelMode::Stacks),
+            "polygons" => Some(TexelMode::Polygons),
             _ => None,
         }
     }
@@ -357,6 +363,8 @@ pub struct TexelFrame {
     pub quads: Vec<[u32; 2]>,
     /// Forest-cover tiles to draw first, back to front.
     pub tiles: Vec<tiles::TileGpu>,
+    /// In the polygons mode, the slices' triangles, back to front.
+    pub polygons: Vec<polygons::PolyVertex>,
 }
 
 /// The texels of the trees in `visible` (per species, indices into `trees`): slice counts,
@@ -498,6 +506,7 @@ pub fn prepare(
         stacks: stack_records,
         quads,
         tiles: Vec::new(),
+        polygons: Vec::new(),
     }
 }
 
@@ -530,6 +539,7 @@ pub struct TexelAssets {
     terrain: crate::model::Terrain,
     tiles: Option<tiles::TileAssets>,
     tile_problem: Option<String>,
+    polygons: Option<polygons::PolyAssets>,
 }
 
 /// The render pipelines of the `texel` method for one target format: boxes seen from
@@ -539,6 +549,7 @@ pub struct TexelPipelines {
     pub boxes: [wgpu::RenderPipeline; 2],
     pub stack: Option<wgpu::RenderPipeline>,
     pub tile: Option<wgpu::RenderPipeline>,
+    pub polygon: Option<wgpu::RenderPipeline>,
 }
 
 /// Most texels drawn in one frame.
@@ -653,6 +664,7 @@ impl TexelAssets {
             terrain: world.terrain.clone(),
             tiles: None,
             tile_problem: None,
+            polygons: None,
         })
     }
 
@@ -798,7 +810,7 @@ impl TexelAssets {
         };
         let atlas = match settings.mode {
             TexelMode::Stacks => self.stacks.as_ref().map(|s| &s.atlas),
-            TexelMode::Slices3d => None,
+            TexelMode::Slices3d | TexelMode::Polygons => None,
         };
         let mut f = prepare(
             &self.scene,
@@ -817,6 +829,29 @@ impl TexelAssets {
             t.upload(ctx, &tile_records, &self.sampler);
         }
         f.tiles = tile_records;
+        if settings.mode == TexelMode::Polygons {
+            let mut vertices = Vec::new();
+            let cam = view.camera.position;
+            let forward = view.camera.forward();
+            for (i, r) in f.records.iter().enumerate() {
+                let m = Mat4::from_cols_array_2d(&r.model);
+                let polys = polygons::slice_polygons(
+                    &m,
+                    Vec3::from(r.box_min),
+                    Vec3::from(r.box_size),
+                    cam,
+                    forward,
+                    r.spacing,
+                    r.max_steps as usize,
+                );
+                polygons::triangles(&polys, i as u32, &mut vertices);
+            }
+            let p = self
+                .polygons
+                .get_or_insert_with(|| polygons::PolyAssets::new(ctx));
+            p.upload(ctx, &vertices, &self.records, &self.view, &self.sampler);
+            f.polygons = vertices;
+        }
         if f.records.len() > self.capacity {
             self.capacity = f.records.len().next_power_of_two().min(MAX_TEXELS);
             self.records = record_buffer(ctx, self.capacity);
@@ -933,10 +968,15 @@ impl TexelAssets {
             .tiles
             .as_mut()
             .map(|t| t.pipeline(device, frame_layout, format).clone());
+        let polygon = self
+            .polygons
+            .as_mut()
+            .map(|p| p.pipeline(device, frame_layout, format).clone());
         TexelPipelines {
             boxes: self.box_pipelines(device, frame_layout, format).clone(),
             stack,
             tile,
+            polygon,
         }
     }
 
@@ -985,6 +1025,16 @@ impl TexelAssets {
             t.draw(pass, p, count);
             stats.draw_calls += 1;
             stats.triangles += u64::from(count) * 12;
+        }
+        if frame.stats.texel_mode == TexelMode::Polygons {
+            if let (Some(p), Some(pipe)) = (&self.polygons, &pipelines.polygon) {
+                let vertices = frame.polygons.len() as u32;
+                p.draw(pass, pipe, vertices);
+                stats.draw_calls += u32::from(vertices > 0);
+                stats.trees_drawn = n;
+                stats.triangles += u64::from(vertices / 3);
+            }
+            return;
         }
         if frame.stats.texel_mode == TexelMode::Stacks {
             if let (Some(s), Some(p)) = (&self.stacks, &pipelines.stack) {
