@@ -134,7 +134,20 @@ impl StackAtlas {
     /// The layout for `volumes` (`species` of the scene), or an error naming what does not
     /// fit a `max_dim`-texel texture.
     pub fn new(volumes: &[TexelVolume], species: usize, max_dim: u32) -> Result<Self> {
-        let width = ATLAS_WIDTH.min(max_dim) / TILE_ALIGN * TILE_ALIGN;
+        // The narrowest power-of-two width (from ATLAS_WIDTH) whose height fits.
+        let mut width = ATLAS_WIDTH.min(max_dim) / TILE_ALIGN * TILE_ALIGN;
+        loop {
+            match Self::with_width(volumes, species, max_dim, width) {
+                Err(e) if width * 2 <= max_dim => {
+                    log::debug!("{e}; trying a wider atlas");
+                    width *= 2;
+                }
+                other => return other,
+            }
+        }
+    }
+
+    fn with_width(volumes: &[TexelVolume], species: usize, max_dim: u32, width: u32) -> Result<Self> {
         let mut groups = vec![None; species];
         let mut height = 0u32;
         for t in volumes {
