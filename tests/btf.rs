@@ -298,6 +298,7 @@ fn the_cache_is_reused_and_a_corrupt_file_is_baked_again() {
     match source {
         Source::Baked {
             replaced: Some(why),
+            not_cached: None,
         } => assert!(why.contains("checksum"), "{why}"),
         other => panic!("expected a re-bake, got {other:?}"),
     }

@@ -419,3 +419,72 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     let cached = std::fs::read_dir(&cache).map_or(0, |d| d.count());
     assert_eq!(cached, 0, "nothing baked into the cache");
 }
+
+/// Two processes baking the same scene into one cache at once leave one valid file (each
+/// writes its own temporary file and renames it over the cache file); a cache folder that
+/// cannot be created costs only the caching: the frame is drawn from memory and the reason
+/// is printed.
+#[test]
+fn concurrent_bakes_leave_one_valid_file_and_an_unwritable_cache_is_only_a_warning() {
+    let cache = tmp("concurrent-cache");
+    let lone = common::data("lone_tree.toml");
+    let bake = || {
+        canopy()
+            .env("CANOPY_CACHE_DIR", &cache)
+            .arg("bake")
+            .arg(&lone)
+            .arg("--cpu")
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (a, b) = (bake(), bake());
+    for child in [a, b] {
+        let o = child.wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let files: Vec<std::path::PathBuf> = std::fs::read_dir(&cache)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(files.len(), 1, "one file, no temporary left: {files:?}");
+    assert!(files[0].extension().is_some_and(|e| e == "canopy"));
+    canopy::format::from_bytes(&std::fs::read(&files[0]).unwrap()).expect("a valid bake");
+    // A render takes it from the cache as it is.
+    let before = std::fs::metadata(&files[0]).unwrap().modified().unwrap();
+    let o = canopy()
+        .env("CANOPY_CACHE_DIR", &cache)
+        .arg("render")
+        .arg(&lone)
+        .args([
+            "--method", "btf", "--size", "32x24", "--frames", "1", "--cpu",
+        ])
+        .arg("--out")
+        .arg(tmp("concurrent.png"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let after = std::fs::metadata(&files[0]).unwrap().modified().unwrap();
+    assert_eq!(before, after, "not baked again");
+
+    // The cache folder cannot be made (its parent is a file): drawn anyway, and said why.
+    let blocker = tmp("not-a-folder");
+    std::fs::write(&blocker, b"a file").unwrap();
+    let o = canopy()
+        .env("CANOPY_CACHE_DIR", blocker.join("cache"))
+        .env("RUST_LOG", "warn")
+        .arg("render")
+        .arg(&lone)
+        .args([
+            "--method", "btf", "--size", "32x24", "--frames", "1", "--cpu",
+        ])
+        .arg("--out")
+        .arg(tmp("uncached.png"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("could not cache the bake"), "{err}");
+    assert!(tmp("uncached.png").exists());
+}

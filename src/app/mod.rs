@@ -328,11 +328,21 @@ impl App {
                 Ok(crate::bake::Source::Cache) => {
                     ("BTF images loaded from the cache".into(), false)
                 }
-                Ok(crate::bake::Source::Baked { replaced: None }) => {
+                Ok(crate::bake::Source::Baked {
+                    not_cached: Some(why),
+                    ..
+                }) => (
+                    format!(
+                        "baked, but the bake could not be cached ({why}); it is used from memory and will be baked again next time"
+                    ),
+                    true,
+                ),
+                Ok(crate::bake::Source::Baked { replaced: None, .. }) => {
                     ("BTF images baked and cached".into(), false)
                 }
                 Ok(crate::bake::Source::Baked {
                     replaced: Some(why),
+                    ..
                 }) => (
                     format!("the cached bake could not be used ({why}); baked again"),
                     false,

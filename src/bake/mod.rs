@@ -287,8 +287,13 @@ pub enum Source {
     /// Read from the cache file.
     Cache,
     /// Baked now (and written to the cache); the reason the cache was not used, if it
-    /// existed.
-    Baked { replaced: Option<String> },
+    /// existed, and why the new bake could not be written to it, if it could not (a
+    /// read-only or full cache folder: the bake is used from memory, and baked again next
+    /// time).
+    Baked {
+        replaced: Option<String>,
+        not_cached: Option<String>,
+    },
 }
 
 /// The scene's bake from the cache, or baked now and cached (atomically: an interrupted
@@ -351,10 +356,17 @@ pub fn load_or_bake_at(
         progress,
     )?;
     // A cache that cannot be written costs a re-bake next time, not this run.
-    if let Err(e) = store(&path, &baked) {
+    let not_cached = store(&path, &baked).err().map(|e| {
         log::warn!("could not cache the bake at {}: {e}", path.display());
-    }
-    Ok((baked, Source::Baked { replaced }))
+        e.to_string()
+    });
+    Ok((
+        baked,
+        Source::Baked {
+            replaced,
+            not_cached,
+        },
+    ))
 }
 
 /// Bakes `scene` now, whatever the cache holds, and writes it to `path` as

@@ -147,7 +147,12 @@ impl StackAtlas {
         }
     }
 
-    fn with_width(volumes: &[TexelVolume], species: usize, max_dim: u32, width: u32) -> Result<Self> {
+    fn with_width(
+        volumes: &[TexelVolume],
+        species: usize,
+        max_dim: u32,
+        width: u32,
+    ) -> Result<Self> {
         let mut groups = vec![None; species];
         let mut height = 0u32;
         for t in volumes {
