@@ -181,7 +181,7 @@ fn the_frame_time_plot_shows_cpu_and_gpu_lines_and_the_bench_button_opens_the_wi
     let mut harness = tall().build_ui_state(
         move |ui, s: &mut State| {
             let a = controls(ui, &mut s.frame, &with_gpu, None);
-            if a.open_bench {
+            if a.open_bench || a.open_file {
                 s.actions = a;
             }
         },
@@ -195,6 +195,10 @@ fn the_frame_time_plot_shows_cpu_and_gpu_lines_and_the_bench_button_opens_the_wi
     harness.get_by_label("Bench results…").click();
     harness.run();
     assert!(harness.state().actions.open_bench);
+    assert!(!harness.state().actions.open_file);
+    harness.get_by_label("Open…").click();
+    harness.run();
+    assert!(harness.state().actions.open_file);
 
     let mut cpu_only = PanelStats::default();
     cpu_only.history.push(16.0, None);

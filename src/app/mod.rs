@@ -107,6 +107,38 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
     }
 }
 
+/// What File → Open or a file dropped on the window brings.
+pub enum Opened {
+    /// A scene file, parsed and its world built.
+    Scene(Box<Scene>, Box<World>),
+    /// A baked file of the scene on show.
+    Baked(Box<crate::format::Baked>),
+}
+
+/// Opens `path` for the viewer showing `current`: a `.toml` scene, or a `.canopy` bake of
+/// `current` (one of another scene, a corrupt or truncated one is refused with its reason;
+/// it is never re-baked, since the user chose that file).
+pub fn open_file(path: &Path, current: &Scene) -> Result<Opened> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    match ext.as_str() {
+        "toml" => {
+            let scene = Scene::load(path)?;
+            let world = scene.build_world()?;
+            Ok(Opened::Scene(Box::new(scene), Box::new(world)))
+        }
+        "canopy" => Ok(Opened::Baked(Box::new(crate::bake::open_baked(
+            path, current,
+        )?))),
+        _ => Err(Error::BadInput(format!(
+            "cannot open {}: the viewer opens scene files (.toml) and baked files (.canopy)",
+            path.display()
+        ))),
+    }
+}
+
 /// The frame actually drawn (and saved by a screenshot): until its bake is ready, the btf
 /// method shows terrain and sky only (and the bake's progress), which stays responsive even
 /// on a software renderer.
@@ -266,6 +298,41 @@ impl App {
             Ok(()) => (format!("saved {}", path.display()), false),
             Err(e) => (e.to_string(), true),
         });
+    }
+
+    /// Opens a scene or a bake chosen with File → Open or dropped on the window; what
+    /// cannot be opened is reported in the panel and the scene on show stays.
+    fn open(&mut self, path: &Path) {
+        let Some(r) = &mut self.running else { return };
+        match open_file(path, &self.scene) {
+            Ok(Opened::Scene(scene, world)) => match Renderer::new(&r.ctx, &world) {
+                Ok(renderer) => {
+                    let method = self.frame.method;
+                    r.renderer = renderer;
+                    self.scene = *scene;
+                    self.world = *world;
+                    self.frame = FrameDesc::from_scene(&self.scene);
+                    self.frame.method = method;
+                    // A bake still running for the old scene is left to finish unseen.
+                    self.bake_job = None;
+                    self.bake_failed = false;
+                    self.preloaded = None;
+                    self.title = format!("canopy: {}", path.display());
+                    r.window.set_title(&self.title);
+                    self.stats.trees_total = self.world.forest.instances.len();
+                    self.message = Some((format!("opened {}", path.display()), false));
+                }
+                Err(e) => {
+                    self.message = Some((format!("cannot open {}: {e}", path.display()), true))
+                }
+            },
+            Ok(Opened::Baked(baked)) => {
+                // Attached on the next frame, as a bake named with --baked is.
+                self.bake_job = None;
+                self.preloaded = Some((*baked, path.to_path_buf()));
+            }
+            Err(e) => self.message = Some((e.to_string(), true)),
+        }
     }
 
     /// The btf method needs a bake: start one in the background, or attach a finished one.
@@ -544,6 +611,15 @@ impl App {
                 self.screenshot(&path);
             }
         }
+        if actions.open_file {
+            let picked = rfd::FileDialog::new()
+                .set_title("Open a scene or a bake")
+                .add_filter("scene or bake", &["toml", "canopy"])
+                .pick_file();
+            if let Some(path) = picked {
+                self.open(&path);
+            }
+        }
         if let Some(path) = self.options.screenshot.clone()
             && self.frames >= u64::from(self.options.after_frames.max(1))
         {
@@ -631,6 +707,7 @@ impl ApplicationHandler for App {
                 };
                 self.fly.wheel(notches);
             }
+            WindowEvent::DroppedFile(path) => self.open(&path),
             WindowEvent::RedrawRequested => self.redraw(event_loop),
             _ => {}
         }
@@ -640,5 +717,84 @@ impl ApplicationHandler for App {
         if let Some(r) = &self.running {
             r.window.request_redraw();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn data(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data")
+            .join(name)
+    }
+
+    fn tmp(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("canopy-open-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join(name)
+    }
+
+    #[test]
+    fn open_takes_scenes_and_bakes_of_the_scene_and_refuses_the_rest_with_the_reason() {
+        let current = Scene::default_scene();
+        match open_file(&data("lone_tree.toml"), &current) {
+            Ok(Opened::Scene(scene, world)) => {
+                assert_eq!(scene.forest.count, 1);
+                assert_eq!(world.forest.instances.len(), 1);
+            }
+            Ok(Opened::Baked(_)) => panic!("a scene opened as a bake"),
+            Err(e) => panic!("{e}"),
+        }
+        let err = |p: &Path| match open_file(p, &current) {
+            Ok(_) => panic!("{} opened", p.display()),
+            Err(e) => e.to_string(),
+        };
+        let e = err(&tmp("missing.toml"));
+        assert!(e.contains("missing.toml"), "{e}");
+        let e = err(Path::new("notes.txt"));
+        assert!(e.contains(".toml") && e.contains(".canopy"), "{e}");
+        // A scene with a typo: the file, line and key.
+        let typo = tmp("typo.toml");
+        let text = std::fs::read_to_string(data("lone_tree.toml"))
+            .unwrap()
+            .replace("count = 1", "cout = 1");
+        std::fs::write(&typo, text).unwrap();
+        let e = err(&typo);
+        assert!(e.contains("typo.toml") && e.contains("cout"), "{e}");
+        // A bake of another scene, and a truncated bake: refused, never re-baked.
+        let baked = crate::format::Baked {
+            scene_hash: 42,
+            settings: crate::format::BakeSettings {
+                views: 6,
+                lights: 6,
+                resolution: 32,
+                supersample: 2,
+                vcm_resolution: 8,
+                texel_resolution: 0,
+            },
+            btf: Vec::new(),
+            vcm: Vec::new(),
+            texels: Vec::new(),
+        };
+        let other = tmp("other.canopy");
+        crate::format::write_atomic(&other, &baked).unwrap();
+        let e = err(&other);
+        assert!(e.contains("another scene"), "{e}");
+        let cut = tmp("cut.canopy");
+        let bytes = std::fs::read(&other).unwrap();
+        std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+        let e = err(&cut);
+        assert!(e.contains("cut.canopy"), "{e}");
+        assert_eq!(std::fs::read(&cut).unwrap().len(), bytes.len() / 2);
+        // The bake of the scene on show opens.
+        let mine = crate::format::Baked {
+            scene_hash: crate::bake::cache::scene_hash(&current),
+            ..baked
+        };
+        let own = tmp("own.canopy");
+        crate::format::write_atomic(&own, &mine).unwrap();
+        assert!(matches!(open_file(&own, &current), Ok(Opened::Baked(_))));
     }
 }

@@ -47,6 +47,8 @@ pub struct PanelActions {
     pub sun_held: bool,
     /// Open the bench results window.
     pub open_bench: bool,
+    /// Pick a scene or a bake to open.
+    pub open_file: bool,
 }
 
 /// Draws the panel's contents into `ui`, editing `frame` in place.
@@ -220,9 +222,20 @@ pub fn controls(
             actions.screenshot_as = true;
         }
     });
-    if ui.button("Bench results…").clicked() {
-        actions.open_bench = true;
-    }
+    ui.horizontal(|ui| {
+        if ui
+            .button("Open…")
+            .on_hover_text(
+                "a scene (.toml) or a bake of this scene (.canopy); or drop one on the window",
+            )
+            .clicked()
+        {
+            actions.open_file = true;
+        }
+        if ui.button("Bench results…").clicked() {
+            actions.open_bench = true;
+        }
+    });
     if let Some((text, is_error)) = message {
         if *is_error {
             ui.colored_label(egui::Color32::from_rgb(230, 80, 70), text);
