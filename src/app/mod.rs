@@ -6,6 +6,7 @@ pub mod bench_view;
 pub mod fly;
 pub mod history;
 pub mod panel;
+pub mod reload;
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -97,6 +98,8 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         fatal: None,
         sun_slider_held: false,
         bench: BenchWindow::default(),
+        watch: scene_path.map(reload::Watch::new),
+        rebake: None,
     };
     event_loop
         .run_app(&mut app)
@@ -169,6 +172,37 @@ struct BakeJob {
     handle: std::thread::JoinHandle<Result<(crate::format::Baked, crate::bake::Source)>>,
 }
 
+impl BakeJob {
+    /// Loads `scene`'s bake from the cache, or bakes it, on its own thread.
+    fn start(scene: &Scene, world: &World) -> Self {
+        let progress = Arc::new(Mutex::new(crate::bake::Progress {
+            done: 0,
+            total: 1,
+            what: "starting".into(),
+        }));
+        let sink = progress.clone();
+        let scene = scene.clone();
+        let world = world.clone();
+        let handle = std::thread::spawn(move || {
+            let ctx = GpuContext::headless(AdapterPreference::Default)?;
+            crate::bake::load_or_bake(&ctx, &scene, &world, &mut |p| {
+                if let Ok(mut slot) = sink.lock() {
+                    *slot = p.clone();
+                }
+            })
+        });
+        Self { progress, handle }
+    }
+}
+
+/// An edit of the scene file that changes the bake: its bake runs while the old scene
+/// stays on show.
+struct Rebake {
+    job: BakeJob,
+    scene: Scene,
+    world: World,
+}
+
 struct App {
     frame: FrameDesc,
     scene: Scene,
@@ -193,6 +227,9 @@ struct App {
     sun_slider_held: bool,
     /// The "Bench results" window.
     bench: BenchWindow,
+    /// The scene file, watched for edits (none for the embedded default forest).
+    watch: Option<reload::Watch>,
+    rebake: Option<Rebake>,
 }
 
 impl App {
@@ -319,6 +356,8 @@ impl App {
                     self.preloaded = None;
                     self.title = format!("canopy: {}", path.display());
                     r.window.set_title(&self.title);
+                    self.watch = Some(reload::Watch::new(path));
+                    self.rebake = None;
                     self.stats.trees_total = self.world.forest.instances.len();
                     self.message = Some((format!("opened {}", path.display()), false));
                 }
@@ -350,30 +389,18 @@ impl App {
         }
         // The bake starts with the viewer (from the cache when it can), whatever the method.
         if !r.renderer.has_btf() && self.bake_job.is_none() && !self.bake_failed {
-            let progress = Arc::new(Mutex::new(crate::bake::Progress {
-                done: 0,
-                total: 1,
-                what: "starting".into(),
-            }));
-            let sink = progress.clone();
-            let scene = self.scene.clone();
-            let world = self.world.clone();
-            let handle = std::thread::spawn(move || {
-                let ctx = GpuContext::headless(AdapterPreference::Default)?;
-                crate::bake::load_or_bake(&ctx, &scene, &world, &mut |p| {
-                    if let Ok(mut slot) = sink.lock() {
-                        *slot = p.clone();
-                    }
-                })
-            });
-            self.bake_job = Some(BakeJob { progress, handle });
+            self.bake_job = Some(BakeJob::start(&self.scene, &self.world));
         }
-        self.stats.bake_progress = self.bake_job.as_ref().and_then(|j| {
-            j.progress
-                .lock()
-                .ok()
-                .map(|p| (p.done, p.total, p.what.clone()))
-        });
+        self.stats.bake_progress = self
+            .bake_job
+            .as_ref()
+            .or(self.rebake.as_ref().map(|r| &r.job))
+            .and_then(|j| {
+                j.progress
+                    .lock()
+                    .ok()
+                    .map(|p| (p.done, p.total, p.what.clone()))
+            });
         if self
             .bake_job
             .as_ref()
@@ -426,8 +453,85 @@ impl App {
         self.stats.vcm_resolution = r.renderer.vcm_resolution();
     }
 
+    /// Looks at the scene file and applies an edit (see [`reload`]); finishes a re-bake.
+    fn tend_reload(&mut self) {
+        let Some(r) = &mut self.running else { return };
+        if let Some(w) = self.watch.as_mut()
+            && let Some(text) = w.poll()
+        {
+            let origin = w.path.display().to_string();
+            let edit = match text {
+                Ok(text) => reload::classify(&self.scene, &text, &origin),
+                Err(why) => reload::Reload::Broken(why),
+            };
+            match edit {
+                reload::Reload::Unchanged => {}
+                reload::Reload::Frame(new) => {
+                    reload::apply_frame_edit(&self.scene, &new, &mut self.frame);
+                    self.scene = *new;
+                    self.message = Some((format!("applied the edit of {origin}"), false));
+                }
+                reload::Reload::Rebake(new, world) => {
+                    self.rebake = Some(Rebake {
+                        job: BakeJob::start(&new, &world),
+                        scene: *new,
+                        world: *world,
+                    });
+                    self.message = Some((
+                        format!(
+                            "{origin} changes what is baked: baking it; the old scene stays until then"
+                        ),
+                        false,
+                    ));
+                }
+                reload::Reload::Broken(why) => {
+                    self.message = Some((format!("{why} (the last good scene stays)"), true));
+                }
+            }
+        }
+        if !self
+            .rebake
+            .as_ref()
+            .is_some_and(|b| b.job.handle.is_finished())
+        {
+            return;
+        }
+        let Some(done) = self.rebake.take() else {
+            return;
+        };
+        let result = done
+            .job
+            .handle
+            .join()
+            .unwrap_or_else(|_| Err(Error::Gpu("the bake thread stopped unexpectedly".into())))
+            .and_then(|(baked, _)| {
+                let mut renderer = Renderer::new(&r.ctx, &done.world)?;
+                renderer.attach_btf(&r.ctx, &baked, &done.world)?;
+                Ok(renderer)
+            });
+        match result {
+            Ok(renderer) => {
+                r.renderer = renderer;
+                reload::apply_frame_edit(&self.scene, &done.scene, &mut self.frame);
+                self.scene = done.scene;
+                self.world = done.world;
+                self.bake_job = None;
+                self.bake_failed = false;
+                self.stats.trees_total = self.world.forest.instances.len();
+                self.message = Some(("the edited scene is baked and on show".into(), false));
+            }
+            Err(e) => {
+                self.message = Some((
+                    format!("the edited scene could not be baked: {e} (the last good scene stays)"),
+                    true,
+                ));
+            }
+        }
+    }
+
     fn redraw(&mut self, event_loop: &ActiveEventLoop) {
         self.tend_bake();
+        self.tend_reload();
         let now = Instant::now();
         let dt = now.duration_since(self.last_frame).as_secs_f32();
         self.last_frame = now;
