@@ -143,3 +143,28 @@ fn zero_sized_frames_are_an_error_not_a_panic() {
     let frame = FrameDesc::from_scene(&scene);
     assert!(renderer.render_image(&ctx, &frame, 0, 32, 1).is_err());
 }
+
+/// A lost device (simulated with `Device::destroy`) ends in a clear error, never a panic:
+/// drawing after it says the device was lost and what to do; a new device draws again.
+#[test]
+fn a_lost_device_is_an_error_with_its_reason_and_a_new_one_draws_again() {
+    let scene = lone_tree_scene();
+    let world = scene.build_world().unwrap();
+    let frame = FrameDesc::from_scene(&scene);
+    let ctx = gpu();
+    let mut renderer = Renderer::new(&ctx, &world).unwrap();
+    renderer.render_image(&ctx, &frame, 32, 32, 1).unwrap();
+    ctx.device.destroy();
+    let _ = ctx.device.poll(wgpu::PollType::Poll);
+    assert!(ctx.is_lost(), "the lost-device callback ran");
+    let e = renderer
+        .render_image(&ctx, &frame, 32, 32, 1)
+        .expect_err("a lost device cannot draw")
+        .to_string();
+    assert!(e.contains("lost") && e.contains("restart"), "{e}");
+    // Recovery is a new device and the scene uploaded again.
+    let again = gpu();
+    let mut renderer = Renderer::new(&again, &world).unwrap();
+    let (img, _) = renderer.render_image(&again, &frame, 32, 32, 1).unwrap();
+    assert_eq!(img.dimensions(), (32, 32));
+}

@@ -44,3 +44,34 @@ fn viewer_renders_and_writes_a_non_blank_screenshot() {
         colours.len()
     );
 }
+
+/// A lost GPU device (destroyed at frame 2 through the test hook) is replaced: the viewer
+/// goes on and writes its screenshot with the new device.
+#[test]
+fn the_viewer_recovers_from_a_lost_device() {
+    if std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
+        assert!(
+            std::env::var_os("CANOPY_REQUIRE_DISPLAY").is_none(),
+            "CANOPY_REQUIRE_DISPLAY is set but there is no DISPLAY"
+        );
+        eprintln!("skipped: no display (run under Xvfb with DISPLAY set)");
+        return;
+    }
+    let out = std::env::temp_dir().join(format!("canopy-viewer-lost-{}.png", std::process::id()));
+    let _ = std::fs::remove_file(&out);
+    let o = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .env("CANOPY_TEST_LOSE_DEVICE_AT_FRAME", "2")
+        .env("RUST_LOG", "warn")
+        .arg("view")
+        .arg(common::data("small.toml"))
+        .arg("--screenshot")
+        .arg(&out)
+        .args(["--after-frames", "6", "--method", "geometry"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "viewer failed: {err}");
+    assert!(err.contains("device was lost"), "{err}");
+    let img = image::open(&out).expect("screenshot is a PNG").to_rgb8();
+    assert!(img.width() > 100 && img.height() > 100);
+}

@@ -100,6 +100,9 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         bench: BenchWindow::default(),
         watch: scene_path.map(reload::Watch::new),
         rebake: None,
+        lose_device_at: std::env::var("CANOPY_TEST_LOSE_DEVICE_AT_FRAME")
+            .ok()
+            .and_then(|v| v.parse().ok()),
     };
     event_loop
         .run_app(&mut app)
@@ -230,18 +233,32 @@ struct App {
     /// The scene file, watched for edits (none for the embedded default forest).
     watch: Option<reload::Watch>,
     rebake: Option<Rebake>,
+    /// For tests: destroy the device at this frame (`CANOPY_TEST_LOSE_DEVICE_AT_FRAME`), to
+    /// check that the viewer recovers.
+    lose_device_at: Option<u64>,
 }
 
 impl App {
-    fn start(&mut self, event_loop: &ActiveEventLoop) -> Result<Running> {
-        let attrs = Window::default_attributes()
-            .with_title(self.title.clone())
-            .with_inner_size(winit::dpi::LogicalSize::new(1280.0, 720.0));
-        let window = Arc::new(
-            event_loop
-                .create_window(attrs)
-                .map_err(|e| Error::Window(e.to_string()))?,
-        );
+    /// The GPU side of the viewer: its window (`window`, or a new one), surface, device and
+    /// renderer.
+    fn start(
+        &mut self,
+        event_loop: &ActiveEventLoop,
+        window: Option<Arc<Window>>,
+    ) -> Result<Running> {
+        let window = match window {
+            Some(w) => w,
+            None => {
+                let attrs = Window::default_attributes()
+                    .with_title(self.title.clone())
+                    .with_inner_size(winit::dpi::LogicalSize::new(1280.0, 720.0));
+                Arc::new(
+                    event_loop
+                        .create_window(attrs)
+                        .map_err(|e| Error::Window(e.to_string()))?,
+                )
+            }
+        };
         let instance = wgpu::Instance::new(crate::render::context::instance_descriptor(Some(
             Box::new(event_loop.owned_display_handle()),
         )));
@@ -549,9 +566,36 @@ impl App {
         // Held by a Ctrl-drag in the view, or by a sun slider in the last frame's panel.
         self.frame.sun_held = self.fly.is_dragging_sun() || self.sun_slider_held;
         let frame = shown_frame(&self.frame, r.renderer.has_btf());
+        if self.lose_device_at == Some(self.frames) {
+            self.lose_device_at = None;
+            r.ctx.device.destroy();
+            let _ = r.ctx.device.poll(wgpu::PollType::Poll);
+        }
         if r.ctx.is_lost() {
-            let e = Error::Gpu("the GPU device was lost; restart canopy".into());
-            self.fail(event_loop, e);
+            // A new device, surface and renderer; the bake comes back from the cache (or is
+            // baked again) as at start.
+            log::warn!("the GPU device was lost: creating a new one");
+            let window = r.window.clone();
+            self.running = None;
+            self.bake_job = None;
+            self.rebake = None;
+            match self.start(event_loop, Some(window)) {
+                Ok(r) => {
+                    r.window.request_redraw();
+                    self.running = Some(r);
+                    self.message = Some((
+                        "the GPU device was lost and has been created again; reloading the bake"
+                            .into(),
+                        true,
+                    ));
+                }
+                Err(e) => self.fail(
+                    event_loop,
+                    Error::Gpu(format!(
+                        "the GPU device was lost and a new one could not be created ({e}); restart canopy"
+                    )),
+                ),
+            }
             return;
         }
         let surface_texture = match r.surface.get_current_texture() {
@@ -745,7 +789,7 @@ impl ApplicationHandler for App {
         if self.running.is_some() {
             return;
         }
-        match self.start(event_loop) {
+        match self.start(event_loop, None) {
             Ok(r) => {
                 r.window.request_redraw();
                 self.running = Some(r);
