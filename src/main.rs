@@ -50,6 +50,10 @@ enum Command {
         /// been baked from the scene, and is never re-baked.
         #[arg(long)]
         baked: Option<PathBuf>,
+        /// Run a soak script (camera moves, sun sweeps, method and knob changes, resizes,
+        /// screenshots; memory sampled), then quit; fails if memory grew over 5 %.
+        #[arg(long)]
+        script: Option<PathBuf>,
     },
     /// Render one frame to a PNG, no window needed.
     Render(RenderArgs),
@@ -395,6 +399,7 @@ fn main() -> ExitCode {
             after_frames,
             method,
             baked,
+            script,
         }) => canopy::app::run_with(
             scene.as_deref(),
             canopy::app::ViewOptions {
@@ -402,6 +407,7 @@ fn main() -> ExitCode {
                 after_frames,
                 method,
                 baked,
+                script,
             },
         )
         .map_err(anyhow::Error::from),

@@ -75,3 +75,49 @@ fn the_viewer_recovers_from_a_lost_device() {
     let img = image::open(&out).expect("screenshot is a PNG").to_rgb8();
     assert!(img.width() > 100 && img.height() > 100);
 }
+
+/// The soak's two-minute run: the viewer flies, sweeps the sun, switches methods and texel
+/// modes, changes knobs, resizes and takes screenshots for 120 s after its bake is on
+/// show; resident and GPU memory sampled every 60 s must not grow by more than 5 % over the
+/// second minute (the first warms up what is built on first use), or the run fails.
+#[test]
+fn a_two_minute_soak_does_not_grow() {
+    if std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
+        assert!(
+            std::env::var_os("CANOPY_REQUIRE_DISPLAY").is_none(),
+            "CANOPY_REQUIRE_DISPLAY is set but there is no DISPLAY"
+        );
+        eprintln!("skipped: no display (run under Xvfb with DISPLAY set)");
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("canopy-soak-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let report = dir.join("soak.csv");
+    let script = dir.join("soak.toml");
+    std::fs::write(
+        &script,
+        format!(
+            "seconds = 120\nsample_seconds = 60\nevery_frames = 2\nreport = {:?}\nactions = [\"fly\", \"sun\", \"method texel\", \"texel_mode stacks\", \"resize 700x500\", \"method geometry\", \"screenshot\", \"method btf\", \"lod_scale 2\", \"resize 900x600\", \"texel_mode slices3d\", \"lod_scale 1\", \"method billboard\"]\n",
+            report.display().to_string()
+        ),
+    )
+    .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .arg("view")
+        .arg(common::data("small.toml"))
+        .arg("--script")
+        .arg(&script)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    let err = String::from_utf8_lossy(&o.stderr);
+    eprintln!("{out}");
+    assert!(o.status.success(), "soak failed: {err}\n{out}");
+    let csv = std::fs::read_to_string(&report).unwrap();
+    assert_eq!(
+        csv.lines().count(),
+        1 + 3,
+        "samples at 0, 60 and 120 s: {csv}"
+    );
+    assert!(out.contains("soak:"), "{out}");
+}

@@ -7,6 +7,7 @@ pub mod fly;
 pub mod history;
 pub mod panel;
 pub mod reload;
+pub mod soak;
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -37,6 +38,8 @@ pub struct ViewOptions {
     pub method: Method,
     /// A baked file to use instead of the cache (checked before the window opens).
     pub baked: Option<PathBuf>,
+    /// A soak script to run, then quit (see [`soak`]).
+    pub script: Option<PathBuf>,
 }
 
 impl Default for ViewOptions {
@@ -46,6 +49,7 @@ impl Default for ViewOptions {
             after_frames: 3,
             method: Method::Btf,
             baked: None,
+            script: None,
         }
     }
 }
@@ -64,6 +68,10 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
     // A named baked file is checked before the window opens: a wrong one is refused.
     let preloaded = match &options.baked {
         Some(path) => Some((crate::bake::open_baked(path, &scene)?, path.clone())),
+        None => None,
+    };
+    let script = match &options.script {
+        Some(p) => Some(soak::Script::load(p)?),
         None => None,
     };
     let title = match scene_path {
@@ -100,6 +108,13 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         bench: BenchWindow::default(),
         watch: scene_path.map(reload::Watch::new),
         rebake: None,
+        soak: script.map(|script| SoakRun {
+            script,
+            started: None,
+            frames: 0,
+            next_action: 0,
+            samples: Vec::new(),
+        }),
         lose_device_at: std::env::var("CANOPY_TEST_LOSE_DEVICE_AT_FRAME")
             .ok()
             .and_then(|v| v.parse().ok()),
@@ -198,6 +213,15 @@ impl BakeJob {
     }
 }
 
+/// A soak script's run: its clock starts once the bake is on show.
+struct SoakRun {
+    script: soak::Script,
+    started: Option<Instant>,
+    frames: u64,
+    next_action: usize,
+    samples: Vec<soak::Sample>,
+}
+
 /// An edit of the scene file that changes the bake: its bake runs while the old scene
 /// stays on show.
 struct Rebake {
@@ -233,6 +257,8 @@ struct App {
     /// The scene file, watched for edits (none for the embedded default forest).
     watch: Option<reload::Watch>,
     rebake: Option<Rebake>,
+    /// The soak script being run.
+    soak: Option<SoakRun>,
     /// For tests: destroy the device at this frame (`CANOPY_TEST_LOSE_DEVICE_AT_FRAME`), to
     /// check that the viewer recovers.
     lose_device_at: Option<u64>,
@@ -546,6 +572,107 @@ impl App {
         }
     }
 
+    /// One frame of the soak script: the next action, a memory sample when due, and at
+    /// the end the report and the verdict.
+    fn tend_soak(&mut self, event_loop: &ActiveEventLoop) {
+        let (Some(run), Some(r)) = (self.soak.as_mut(), self.running.as_ref()) else {
+            return;
+        };
+        let gpu_bytes = r.renderer.btf_bytes() + r.renderer.texel_bytes() + r.renderer.mesh_bytes();
+        let sample = |t: f64| soak::Sample {
+            seconds: t,
+            resident_bytes: soak::resident_bytes(),
+            gpu_bytes,
+        };
+        let Some(started) = run.started else {
+            if r.renderer.has_btf() || self.bake_failed {
+                run.started = Some(Instant::now());
+                run.samples.push(sample(0.0));
+            }
+            return;
+        };
+        let t = started.elapsed().as_secs_f64();
+        run.frames += 1;
+        let mut action = None;
+        if run.frames % u64::from(run.script.every_frames) == 0 && !run.script.actions.is_empty() {
+            action = Some(run.script.actions[run.next_action % run.script.actions.len()]);
+            run.next_action += 1;
+        }
+        let due = run.samples.len() as f64 * run.script.sample_seconds;
+        let done = t >= run.script.seconds;
+        if t >= due || done {
+            run.samples.push(sample(t));
+        }
+        if done {
+            let Some(run) = self.soak.take() else { return };
+            let csv = soak::csv(&run.samples);
+            print!("{csv}");
+            if let Some(path) = &run.script.report
+                && let Err(e) = std::fs::write(path, &csv)
+            {
+                self.fail(
+                    event_loop,
+                    Error::Io {
+                        path: path.clone(),
+                        source: e,
+                    },
+                );
+                return;
+            }
+            match soak::growth(&run.samples, run.script.sample_seconds) {
+                Some((res, gpu)) if res > soak::MAX_GROWTH || gpu > soak::MAX_GROWTH => {
+                    self.fail(
+                        event_loop,
+                        Error::BadInput(format!(
+                            "soak: memory grew after the first {} s: resident {:+.1} %, GPU {:+.1} % (at most {:.0} %)",
+                            run.script.sample_seconds,
+                            res * 100.0,
+                            gpu * 100.0,
+                            soak::MAX_GROWTH * 100.0
+                        )),
+                    );
+                }
+                g => {
+                    if let Some((res, gpu)) = g {
+                        println!(
+                            "soak: {} frames; after the first {} s resident memory {:+.1} %, GPU memory {:+.1} %",
+                            run.frames,
+                            run.script.sample_seconds,
+                            res * 100.0,
+                            gpu * 100.0
+                        );
+                    }
+                    event_loop.exit();
+                }
+            }
+            return;
+        }
+        match action {
+            Some(soak::Action::Fly) => {
+                let c = &mut self.frame.camera;
+                c.position += c.forward() * 3.0;
+                c.yaw += 5f32.to_radians();
+            }
+            Some(soak::Action::Sun) => {
+                self.frame.sun.azimuth_deg = (self.frame.sun.azimuth_deg + 7.0) % 360.0;
+            }
+            Some(soak::Action::Method(m)) => self.frame.method = m,
+            Some(soak::Action::TexelMode(m)) => self.frame.texel.mode = m,
+            Some(soak::Action::LodScale(v)) => self.frame.btf.lod_scale = v,
+            Some(soak::Action::Resize(w, h)) => {
+                let _ = r
+                    .window
+                    .request_inner_size(winit::dpi::PhysicalSize::new(w, h));
+            }
+            Some(soak::Action::Screenshot) => {
+                let path =
+                    std::env::temp_dir().join(format!("canopy-soak-{}.png", std::process::id()));
+                self.screenshot(&path);
+            }
+            None => {}
+        }
+    }
+
     fn redraw(&mut self, event_loop: &ActiveEventLoop) {
         self.tend_bake();
         self.tend_reload();
@@ -768,6 +895,7 @@ impl App {
                 self.open(&path);
             }
         }
+        self.tend_soak(event_loop);
         if let Some(path) = self.options.screenshot.clone()
             && self.frames >= u64::from(self.options.after_frames.max(1))
         {

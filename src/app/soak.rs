@@ -1,0 +1,249 @@
+//! Scripted viewer runs (`canopy view --script FILE`): the soak test. A script is a small
+//! TOML file:
+//!
+//! ```toml
+//! seconds = 120          # how long to run once the bake is on show
+//! sample_seconds = 60    # memory sampled this often (and at the start and the end)
+//! every_frames = 4       # one action per this many frames, cycling through `actions`
+//! report = "soak.csv"    # optional: the samples as CSV
+//! actions = ["fly", "sun", "method texel", "resize 900x600", "screenshot", "lod_scale 2"]
+//! ```
+//!
+//! Actions: `fly` (a few metres forward and a turn), `sun` (the sun swept 7 degrees),
+//! `method NAME`, `texel_mode NAME`, `lod_scale PX`, `resize WxH`, `screenshot` (written
+//! over one file in the temporary folder). Resident memory (from /proc) and the GPU memory
+//! the renderer holds are sampled; at the end the run fails if either grew by more than
+//! [`MAX_GROWTH`] from the first sample after the first interval to the last.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::render::Method;
+use crate::render::method::texel::TexelMode;
+use crate::{Error, Result};
+
+/// Largest growth allowed between the sample after the first interval and the last.
+pub const MAX_GROWTH: f64 = 0.05;
+
+/// A soak script as written.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+struct ScriptFile {
+    seconds: f64,
+    #[serde(default = "default_sample")]
+    sample_seconds: f64,
+    #[serde(default = "default_every")]
+    every_frames: u32,
+    report: Option<PathBuf>,
+    actions: Vec<String>,
+}
+
+fn default_sample() -> f64 {
+    60.0
+}
+fn default_every() -> u32 {
+    4
+}
+
+/// One scripted action.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Action {
+    Fly,
+    Sun,
+    Method(Method),
+    TexelMode(TexelMode),
+    LodScale(f32),
+    Resize(u32, u32),
+    Screenshot,
+}
+
+impl Action {
+    fn parse(s: &str) -> std::result::Result<Action, String> {
+        let mut words = s.split_whitespace();
+        let head = words.next().unwrap_or("");
+        let arg = words.next();
+        let need = |what: &str| format!("`{s}`: give {what}");
+        let action = match (head, arg) {
+            ("fly", None) => Action::Fly,
+            ("sun", None) => Action::Sun,
+            ("screenshot", None) => Action::Screenshot,
+            ("method", Some(m)) => {
+                Action::Method(Method::parse(m).ok_or_else(|| need("a method name"))?)
+            }
+            ("texel_mode", Some(m)) => Action::TexelMode(
+                TexelMode::parse(m).ok_or_else(|| need("slices3d, stacks or polygons"))?,
+            ),
+            ("lod_scale", Some(v)) => Action::LodScale(
+                v.parse::<f32>()
+                    .ok()
+                    .filter(|x| (0.05..=64.0).contains(x))
+                    .ok_or_else(|| need("a number in 0.05..=64"))?,
+            ),
+            ("resize", Some(v)) => {
+                let (w, h) = v.split_once('x').ok_or_else(|| need("WIDTHxHEIGHT"))?;
+                let (w, h) = (w.parse::<u32>(), h.parse::<u32>());
+                match (w, h) {
+                    (Ok(w), Ok(h)) if (64..=8192).contains(&w) && (64..=8192).contains(&h) => {
+                        Action::Resize(w, h)
+                    }
+                    _ => return Err(need("WIDTHxHEIGHT, each 64..=8192")),
+                }
+            }
+            _ => {
+                return Err(format!(
+                    "`{s}` is not an action; the actions are fly, sun, method NAME, texel_mode NAME, lod_scale PX, resize WxH, screenshot"
+                ));
+            }
+        };
+        if words.next().is_some() {
+            return Err(format!("`{s}`: too many words"));
+        }
+        Ok(action)
+    }
+}
+
+/// A checked soak script.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Script {
+    pub seconds: f64,
+    pub sample_seconds: f64,
+    pub every_frames: u32,
+    pub report: Option<PathBuf>,
+    pub actions: Vec<Action>,
+}
+
+impl Script {
+    pub fn parse(text: &str, origin: &str) -> Result<Script> {
+        let f: ScriptFile = toml::from_str(text)
+            .map_err(|e| Error::BadInput(format!("{origin}: {}", e.message())))?;
+        let bad = |what: String| Error::BadInput(format!("{origin}: {what}"));
+        if !(f.seconds.is_finite() && f.seconds > 0.0 && f.seconds <= 86_400.0) {
+            return Err(bad(format!("seconds = {}: give 0..=86400", f.seconds)));
+        }
+        if !(f.sample_seconds.is_finite() && f.sample_seconds >= 1.0) {
+            return Err(bad(format!(
+                "sample_seconds = {}: give at least 1",
+                f.sample_seconds
+            )));
+        }
+        if f.every_frames == 0 || f.actions.len() > 1000 {
+            return Err(bad(
+                "every_frames must be at least 1, and at most 1000 actions".into(),
+            ));
+        }
+        let actions = f
+            .actions
+            .iter()
+            .map(|a| Action::parse(a).map_err(bad))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Script {
+            seconds: f.seconds,
+            sample_seconds: f.sample_seconds,
+            every_frames: f.every_frames,
+            report: f.report,
+            actions,
+        })
+    }
+
+    pub fn load(path: &Path) -> Result<Script> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::parse(&text, &path.display().to_string())
+    }
+}
+
+/// One memory sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sample {
+    pub seconds: f64,
+    pub resident_bytes: u64,
+    pub gpu_bytes: u64,
+}
+
+/// Resident memory of this process (Linux /proc; 0 where it cannot be read).
+pub fn resident_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/statm")
+        .ok()
+        .and_then(|s| s.split_whitespace().nth(1)?.parse::<u64>().ok())
+        .map_or(0, |pages| pages * 4096)
+}
+
+/// The samples as CSV.
+pub fn csv(samples: &[Sample]) -> String {
+    let mut out = String::from("seconds,resident_bytes,gpu_bytes\n");
+    for s in samples {
+        out.push_str(&format!(
+            "{:.1},{},{}\n",
+            s.seconds, s.resident_bytes, s.gpu_bytes
+        ));
+    }
+    out
+}
+
+/// Growth of resident and GPU memory from the first sample taken after `after` seconds
+/// to the last, as fractions; `None` with fewer than two such samples.
+pub fn growth(samples: &[Sample], after: f64) -> Option<(f64, f64)> {
+    let from = samples.iter().find(|s| s.seconds >= after - 1e-6)?;
+    let to = samples.last()?;
+    if std::ptr::eq(from, to) {
+        return None;
+    }
+    let g = |a: u64, b: u64| (b as f64 - a as f64) / (a.max(1) as f64);
+    Some((
+        g(from.resident_bytes, to.resident_bytes),
+        g(from.gpu_bytes, to.gpu_bytes),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scripts_parse_and_bad_ones_say_what_is_wrong() {
+        let s = Script::parse(
+            "seconds = 120\nactions = [\"fly\", \"method texel\", \"resize 900x600\", \"lod_scale 2\"]\n",
+            "s.toml",
+        )
+        .unwrap();
+        assert_eq!(s.sample_seconds, 60.0);
+        assert_eq!(
+            s.actions,
+            vec![
+                Action::Fly,
+                Action::Method(Method::Texel),
+                Action::Resize(900, 600),
+                Action::LodScale(2.0)
+            ]
+        );
+        for (text, want) in [
+            ("seconds = 1\nactions = [\"jump\"]", "not an action"),
+            ("seconds = 1\nactions = [\"resize 10x10\"]", "WIDTHxHEIGHT"),
+            ("seconds = 1\nactions = [\"method photo\"]", "method name"),
+            ("seconds = -1\nactions = []", "seconds"),
+            ("seconds = 1\nactons = []", "actons"),
+        ] {
+            let e = Script::parse(text, "s.toml").unwrap_err().to_string();
+            assert!(e.contains("s.toml") && e.contains(want), "{text}: {e}");
+        }
+    }
+
+    #[test]
+    fn growth_is_measured_from_the_first_interval_to_the_end() {
+        let s = |t: f64, r: u64, g: u64| Sample {
+            seconds: t,
+            resident_bytes: r,
+            gpu_bytes: g,
+        };
+        // The warm-up's growth (0 to 60 s) does not count.
+        let samples = [s(0.0, 100, 10), s(60.0, 200, 20), s(120.0, 210, 20)];
+        let (r, g) = growth(&samples, 60.0).unwrap();
+        assert!((r - 0.05).abs() < 1e-9 && g == 0.0);
+        assert_eq!(growth(&samples[..2], 60.0), None);
+        assert!(resident_bytes() > 0);
+        assert!(csv(&samples).starts_with("seconds,resident_bytes,gpu_bytes\n0.0,100,10\n"));
+    }
+}
