@@ -488,3 +488,66 @@ fn concurrent_bakes_leave_one_valid_file_and_an_unwritable_cache_is_only_a_warni
     assert!(err.contains("could not cache the bake"), "{err}");
     assert!(tmp("uncached.png").exists());
 }
+
+/// A full disk (a 64 KiB tmpfs, where the machine lets the tests mount one): a screenshot
+/// that does not fit is an error naming the path and the reason, and leaves no file, not
+/// even a temporary; a bake the cache cannot hold is drawn from memory with a warning.
+#[test]
+fn a_full_disk_is_reported_and_leaves_nothing_half_written() {
+    let dir = tmp("full-disk");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=64k", "tmpfs"])
+        .arg(&dir)
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !mounted {
+        eprintln!("skipped: cannot mount a small tmpfs here (needs root)");
+        return;
+    }
+    let result = std::panic::catch_unwind(|| {
+        // A 512 x 512 image of noise does not compress into 64 KiB.
+        let mut seed = 1u32;
+        let img = image::RgbaImage::from_fn(512, 512, |_, _| {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            image::Rgba([
+                (seed >> 24) as u8,
+                (seed >> 16) as u8,
+                (seed >> 8) as u8,
+                255,
+            ])
+        });
+        let shot = dir.join("shot.png");
+        let e = canopy::imageio::save_png(&shot, &img)
+            .expect_err("no room")
+            .to_string();
+        assert!(e.contains("shot.png"), "{e}");
+        assert!(e.to_lowercase().contains("space"), "{e}");
+        let left: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+        assert!(left.is_empty(), "left behind: {left:?}");
+        // The cache on the full disk: drawn anyway, the reason printed.
+        let o = canopy()
+            .env("CANOPY_CACHE_DIR", dir.join("cache"))
+            .env("RUST_LOG", "warn")
+            .arg("render")
+            .arg(common::data("lone_tree.toml"))
+            .args([
+                "--method", "btf", "--size", "32x24", "--frames", "1", "--cpu",
+            ])
+            .arg("--out")
+            .arg(tmp("full-disk.png"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(o.status.success(), "{err}");
+        assert!(err.contains("could not cache the bake"), "{err}");
+        let cached: Vec<_> = std::fs::read_dir(dir.join("cache"))
+            .map(|d| d.flatten().map(|e| e.path()).collect())
+            .unwrap_or_default();
+        assert!(cached.is_empty(), "nothing half-written: {cached:?}");
+    });
+    let _ = Command::new("umount").arg(&dir).output();
+    if let Err(p) = result {
+        std::panic::resume_unwind(p);
+    }
+}
