@@ -17,6 +17,9 @@ use crate::{Error, Result};
 
 /// Chart size when the caller has no preference (pixels).
 pub const DEFAULT_CHART_SIZE: (u32, u32) = (1200, 800);
+/// Up to this many configurations, every point of the chart is labelled.
+const MAX_ALL_LABELLED: usize = 8;
+
 /// Smallest chart side that still leaves room for axes and labels.
 pub const MIN_CHART_SIDE: u32 = 200;
 /// Largest chart side.
@@ -294,10 +297,17 @@ pub fn speed_accuracy_chart(path: &Path, points: &[ChartPoint], size: (u32, u32)
         }
         let label_px = text(15.0).1;
         let label_style = TextStyle::from((FONT, label_px)).color(&BLACK);
+        // The Pareto front's points are labelled, and every point when there are few (a
+        // handful of configurations reads better named than by colour alone).
+        let labelled: Vec<usize> = if usable.len() <= MAX_ALL_LABELLED {
+            (0..usable.len()).collect()
+        } else {
+            front.clone()
+        };
         // Labels of points in the right fifth go to their left, so they stay inside. (The
         // embedded font is monospaced: a character is 0.6 em wide.) Labels that would
         // overlap an earlier one move down a line.
-        let boxes: Vec<LabelBox> = front
+        let boxes: Vec<LabelBox> = labelled
             .iter()
             .map(|&i| {
                 let label = &usable[i].label;
@@ -318,12 +328,12 @@ pub fn speed_accuracy_chart(path: &Path, points: &[ChartPoint], size: (u32, u32)
             })
             .collect();
         let shifts = stack_labels(&boxes);
-        let anchors: Vec<(i32, i32)> = front
+        let anchors: Vec<(i32, i32)> = labelled
             .iter()
             .map(|&i| chart.backend_coord(&coords[i]))
             .collect();
         chart
-            .draw_series(front.iter().zip(&boxes).zip(&shifts).zip(&anchors).map(
+            .draw_series(labelled.iter().zip(&boxes).zip(&shifts).zip(&anchors).map(
                 |(((&i, b), &dy), &(px, py))| {
                     EmptyElement::at(coords[i])
                         + Text::new(
