@@ -50,6 +50,10 @@ enum Command {
         /// been baked from the scene, and is never re-baked.
         #[arg(long)]
         baked: Option<PathBuf>,
+        /// The 3D view's resolution as a fraction of the window (0.25..=1), or `auto` to
+        /// hold a frame time by lowering it (the default on a software renderer).
+        #[arg(long, value_parser = parse_render_scale)]
+        render_scale: Option<canopy::render::scale::RenderScale>,
         /// Run a soak script (camera moves, sun sweeps, method and knob changes, resizes,
         /// screenshots; memory sampled), then quit; fails if memory grew over 5 %.
         #[arg(long)]
@@ -285,6 +289,26 @@ struct RenderArgs {
     json: bool,
 }
 
+fn parse_render_scale(s: &str) -> Result<canopy::render::scale::RenderScale, String> {
+    use canopy::render::scale::{MIN_SCALE, RenderScale};
+    if s == "auto" {
+        return Ok(RenderScale {
+            auto: true,
+            ..RenderScale::default()
+        });
+    }
+    match s.parse::<f32>() {
+        Ok(v) if (MIN_SCALE..=1.0).contains(&v) => Ok(RenderScale {
+            scale: v,
+            auto: false,
+            ..RenderScale::default()
+        }),
+        _ => Err(format!(
+            "{s:?} is not a render scale: give a fraction in {MIN_SCALE}..=1, or auto"
+        )),
+    }
+}
+
 fn parse_texel_mode(s: &str) -> Result<TexelMode, String> {
     TexelMode::parse(s)
         .ok_or_else(|| format!("unknown texel mode {s:?}; expected slices3d, stacks or polygons"))
@@ -400,6 +424,7 @@ fn main() -> ExitCode {
             method,
             baked,
             script,
+            render_scale,
         }) => canopy::app::run_with(
             scene.as_deref(),
             canopy::app::ViewOptions {
@@ -408,6 +433,7 @@ fn main() -> ExitCode {
                 method,
                 baked,
                 script,
+                render_scale,
             },
         )
         .map_err(anyhow::Error::from),

@@ -40,6 +40,8 @@ pub struct ViewOptions {
     pub baked: Option<PathBuf>,
     /// A soak script to run, then quit (see [`soak`]).
     pub script: Option<PathBuf>,
+    /// The render scale to start with (none: automatic on a software renderer, else 1).
+    pub render_scale: Option<crate::render::scale::RenderScale>,
 }
 
 impl Default for ViewOptions {
@@ -50,6 +52,7 @@ impl Default for ViewOptions {
             method: Method::Btf,
             baked: None,
             script: None,
+            render_scale: None,
         }
     }
 }
@@ -86,6 +89,9 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
     event_loop.set_control_flow(ControlFlow::Poll);
     let mut frame = FrameDesc::from_scene(&scene);
     frame.method = options.method;
+    if let Some(s) = options.render_scale {
+        frame.render_scale = s;
+    }
     let mut app = App {
         frame,
         scene,
@@ -115,6 +121,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
             next_action: 0,
             samples: Vec::new(),
         }),
+        scale_chosen: false,
         lose_device_at: std::env::var("CANOPY_TEST_LOSE_DEVICE_AT_FRAME")
             .ok()
             .and_then(|v| v.parse().ok()),
@@ -182,6 +189,8 @@ struct Running {
     renderer: Renderer,
     egui_state: egui_winit::State,
     egui_renderer: egui_wgpu::Renderer,
+    /// Draws the 3D view at the render scale and stretches it over the window.
+    upscaler: crate::render::scale::Upscaler,
 }
 
 /// A bake running on its own thread and GPU device, so the viewer stays responsive.
@@ -259,6 +268,8 @@ struct App {
     rebake: Option<Rebake>,
     /// The soak script being run.
     soak: Option<SoakRun>,
+    /// The render scale's start was set (from the adapter or `--render-scale`).
+    scale_chosen: bool,
     /// For tests: destroy the device at this frame (`CANOPY_TEST_LOSE_DEVICE_AT_FRAME`), to
     /// check that the viewer recovers.
     lose_device_at: Option<u64>,
@@ -330,7 +341,15 @@ impl App {
             egui_wgpu::Renderer::new(&ctx.device, config.format, Default::default());
         self.stats.adapter = ctx.adapter_name();
         self.stats.trees_total = self.world.forest.instances.len();
+        if self.options.render_scale.is_none() && !self.scale_chosen {
+            // A software renderer starts on the automatic render scale.
+            let software = ctx.adapter.get_info().device_type == wgpu::DeviceType::Cpu;
+            self.frame.render_scale = crate::render::scale::RenderScale::for_adapter(software);
+            self.scale_chosen = true;
+        }
+        let upscaler = crate::render::scale::Upscaler::new(&ctx);
         Ok(Running {
+            upscaler,
             window,
             surface,
             config,
@@ -747,17 +766,33 @@ impl App {
                 format: Some(r.scene_format),
                 ..Default::default()
             });
-        match r.renderer.render(
-            &r.ctx,
-            &frame,
-            crate::render::FrameTarget {
-                view: &scene_view,
-                format: r.scene_format,
-                width: r.config.width,
-                height: r.config.height,
-            },
-            false,
-        ) {
+        // The 3D view at the render scale, stretched over the window when smaller.
+        let (w, h) = (r.config.width, r.config.height);
+        let (sw, sh) = crate::render::scale::scaled_size(w, h, frame.render_scale.scale);
+        let scaled = (sw, sh) != (w, h);
+        let drawn_into = if scaled {
+            r.upscaler.target(&r.ctx, (sw, sh), r.scene_format).cloned()
+        } else {
+            Ok(scene_view.clone())
+        };
+        let result = drawn_into.and_then(|into| {
+            r.renderer.render(
+                &r.ctx,
+                &frame,
+                crate::render::FrameTarget {
+                    view: &into,
+                    format: r.scene_format,
+                    width: sw,
+                    height: sh,
+                },
+                false,
+            )
+        });
+        if scaled {
+            r.upscaler.blit(&r.ctx, &scene_view, r.scene_format);
+        }
+        self.stats.render_size = (sw, sh);
+        match result {
             Ok(s) => {
                 self.stats.trees_drawn = s.trees_drawn;
                 self.stats.triangles = s.triangles;
@@ -774,6 +809,13 @@ impl App {
             }
         }
         self.stats.gpu_frame_ms = r.renderer.last_gpu_ms();
+        if self.frame.render_scale.auto {
+            // The whole frame's time, what the user waits for (the GPU's arrives frames
+            // late and would overshoot).
+            let ms = dt * 1e3;
+            let s = &mut self.frame.render_scale;
+            s.scale = crate::render::scale::next_scale(s.scale, ms, s.target_ms);
+        }
         self.stats.sun_update_gpu_ms = r.renderer.last_sun_update_gpu_ms();
         self.stats.cpu_frame_ms = 0.9 * self.stats.cpu_frame_ms + 0.1 * f64::from(dt) * 1e3;
         self.stats

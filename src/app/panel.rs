@@ -9,6 +9,8 @@ use crate::render::{FrameDesc, Method};
 #[derive(Clone, Debug, Default)]
 pub struct PanelStats {
     pub cpu_frame_ms: f64,
+    /// The size the 3D view was drawn at (the render scale applied).
+    pub render_size: (u32, u32),
     pub gpu_frame_ms: Option<f64>,
     pub trees_drawn: u32,
     pub trees_total: usize,
@@ -212,6 +214,27 @@ pub fn controls(
     });
     ui.add(egui::Slider::new(&mut frame.fog_density, 0.0..=0.005).text("fog"));
     ui.add(egui::Slider::new(&mut frame.camera.fov_y_deg, 20.0..=100.0).text("field of view °"));
+    let rs = &mut frame.render_scale;
+    ui.add_enabled(
+        !rs.auto,
+        egui::Slider::new(&mut rs.scale, crate::render::scale::MIN_SCALE..=1.0)
+            .text("render scale"),
+    )
+    .on_hover_text("the 3D view drawn at this fraction of the window and stretched over it");
+    ui.horizontal(|ui| {
+        ui.checkbox(&mut rs.auto, "automatic, hold");
+        ui.add(
+            egui::DragValue::new(&mut rs.target_ms)
+                .range(5.0..=1000.0)
+                .suffix(" ms"),
+        );
+    });
+    if stats.render_size != (0, 0) {
+        ui.label(format!(
+            "3D view drawn at {} x {}",
+            stats.render_size.0, stats.render_size.1
+        ));
+    }
     ui.separator();
 
     ui.horizontal(|ui| {

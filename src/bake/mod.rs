@@ -278,6 +278,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         ground_shadows: false,
         sun_held: false,
         reference: Some(Reference::default()),
+        render_scale: Default::default(),
     }
 }
 

@@ -175,6 +175,9 @@ pub struct FrameDesc {
     pub sun_held: bool,
     /// Draw `geometry` as the reference (other methods ignore it).
     pub reference: Option<Reference>,
+    /// The fraction of the window the viewer draws the 3D view at (the render core draws
+    /// at whatever size it is given; the viewer applies this).
+    pub render_scale: super::scale::RenderScale,
 }
 
 impl FrameDesc {
@@ -205,6 +208,7 @@ impl FrameDesc {
             ground_shadows: true,
             sun_held: false,
             reference: None,
+            render_scale: Default::default(),
         }
     }
 }

@@ -18,6 +18,7 @@ pub mod ground;
 pub mod measure;
 pub mod method;
 mod pipelines;
+pub mod scale;
 pub mod shaders;
 pub mod shadow;
 pub mod sky_visibility;

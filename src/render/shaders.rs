@@ -13,6 +13,7 @@ const SKY: &str = include_str!("../../shaders/sky.wgsl");
 const BTF: &str = include_str!("../../shaders/btf.wgsl");
 const GROUND_MAP: &str = include_str!("../../shaders/ground_map.wgsl");
 const TEXEL: &str = include_str!("../../shaders/texel.wgsl");
+const BLIT: &str = include_str!("../../shaders/blit.wgsl");
 
 /// A mesh pass's module: frame uniforms, instancing, then the pass's own file.
 fn with_instancing(pass: &str) -> String {
@@ -38,6 +39,7 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("btf", btf()),
         ("ground_map", ground_map()),
         ("texel", texel()),
+        ("blit", blit()),
     ]
 }
 
@@ -60,6 +62,11 @@ pub fn btf() -> String {
 /// The `texel` method's pass: frame uniforms, then its file.
 pub fn texel() -> String {
     with_frame(TEXEL)
+}
+
+/// The render scale's upscaling pass (no frame uniforms).
+pub fn blit() -> String {
+    BLIT.to_string()
 }
 
 /// The ground shadow maps' pass: its terrain is drawn with `shadow()`'s vertex stage.
