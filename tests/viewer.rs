@@ -121,3 +121,86 @@ fn a_two_minute_soak_does_not_grow() {
     );
     assert!(out.contains("soak:"), "{out}");
 }
+
+/// Live reload in the running viewer: a sun edit is applied without a bake, a tree-count
+/// edit is baked and shown, a typo is reported and the last good scene stays (the viewer's
+/// log says each; the test waits for each line before the next edit).
+#[test]
+fn the_viewer_applies_scene_edits_live() {
+    use std::io::BufRead;
+    if std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
+        assert!(
+            std::env::var_os("CANOPY_REQUIRE_DISPLAY").is_none(),
+            "CANOPY_REQUIRE_DISPLAY is set but there is no DISPLAY"
+        );
+        eprintln!("skipped: no display (run under Xvfb with DISPLAY set)");
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("canopy-reload-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("scene.toml");
+    let text = std::fs::read_to_string(common::data("lone_tree.toml")).unwrap();
+    std::fs::write(&scene, &text).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .env("RUST_LOG", "canopy=info")
+        .arg("view")
+        .arg(&scene)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    let stderr = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut seen = Vec::new();
+    let mut wait_for = |what: &str, seen: &mut Vec<String>| -> bool {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(180);
+        while std::time::Instant::now() < deadline {
+            if let Ok(line) = rx.recv_timeout(std::time::Duration::from_millis(200)) {
+                let hit = line.contains(what);
+                seen.push(line);
+                if hit {
+                    return true;
+                }
+            }
+        }
+        false
+    };
+    // Running once the window's device exists.
+    let started = wait_for("GPU:", &mut seen);
+    let edit = |from: &str, to: &str| {
+        let now = std::fs::read_to_string(&scene).unwrap();
+        assert!(now.contains(from), "{from}");
+        std::fs::write(&scene, now.replace(from, to)).unwrap();
+    };
+    let steps = started
+        && {
+            edit("elevation = 45.0", "elevation = 20.0");
+            wait_for("applied the edit", &mut seen)
+        }
+        && {
+            edit("count = 1\n", "count = 3\n");
+            wait_for("the edited scene is baked and on show", &mut seen)
+        }
+        && {
+            edit("elevation = 20.0", "elevaton = 20.0");
+            wait_for("elevaton", &mut seen)
+        };
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(steps, "the viewer's log:\n{}", seen.join("\n"));
+    assert!(
+        !seen.iter().any(|l| l.contains("panicked")),
+        "{}",
+        seen.join("\n")
+    );
+}

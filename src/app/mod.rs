@@ -531,9 +531,11 @@ impl App {
                 reload::Reload::Frame(new) => {
                     reload::apply_frame_edit(&self.scene, &new, &mut self.frame);
                     self.scene = *new;
+                    log::info!("applied the edit of {origin}");
                     self.message = Some((format!("applied the edit of {origin}"), false));
                 }
                 reload::Reload::Rebake(new, world) => {
+                    log::info!("{origin} changes what is baked: baking it");
                     self.rebake = Some(Rebake {
                         job: BakeJob::start(&new, &world),
                         scene: *new,
@@ -547,6 +549,7 @@ impl App {
                     ));
                 }
                 reload::Reload::Broken(why) => {
+                    log::warn!("{why} (the last good scene stays)");
                     self.message = Some((format!("{why} (the last good scene stays)"), true));
                 }
             }
@@ -580,6 +583,7 @@ impl App {
                 self.bake_job = None;
                 self.bake_failed = false;
                 self.stats.trees_total = self.world.forest.instances.len();
+                log::info!("the edited scene is baked and on show");
                 self.message = Some(("the edited scene is baked and on show".into(), false));
             }
             Err(e) => {
