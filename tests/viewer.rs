@@ -162,7 +162,7 @@ fn the_viewer_applies_scene_edits_live() {
         }
     });
     let mut seen = Vec::new();
-    let mut wait_for = |what: &str, seen: &mut Vec<String>| -> bool {
+    let wait_for = |what: &str, seen: &mut Vec<String>| -> bool {
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(180);
         while std::time::Instant::now() < deadline {
             if let Ok(line) = rx.recv_timeout(std::time::Duration::from_millis(200)) {
