@@ -1100,6 +1100,37 @@ fn make_bind_group(
     })
 }
 
+/// A pipeline drawing `vertex` and `fragment` of texel.wgsl into one `format` target over
+/// what is behind (premultiplied "over"), faces `cull`ed, depth-tested against the terrain
+/// (reversed Z) and never written: what the stacks, tiles and polygons draw with.
+pub(crate) fn over_pipeline(
+    device: &wgpu::Device,
+    layouts: [&wgpu::BindGroupLayout; 2],
+    label: &str,
+    (vertex, fragment): (&str, &str),
+    format: wgpu::TextureFormat,
+    cull: Option<wgpu::Face>,
+) -> wgpu::RenderPipeline {
+    crate::render::pipelines::blended_pipeline(
+        device,
+        crate::render::pipelines::Blended {
+            label,
+            layouts,
+            source: crate::render::shaders::texel(),
+            vertex,
+            fragment,
+            format,
+            blend: wgpu::BlendComponent {
+                src_factor: wgpu::BlendFactor::One,
+                dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
+                operation: wgpu::BlendOperation::Add,
+            },
+            cull,
+            depth: (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
+        },
+    )
+}
+
 /// A pipeline drawing the texel boxes with `fragment` of texel.wgsl into one `format`
 /// target blended by `blend`, faces `cull`ed, depth-tested (never written) against `depth`.
 fn texel_pipeline(

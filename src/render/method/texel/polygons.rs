@@ -215,23 +215,13 @@ impl PolyAssets {
     ) -> &wgpu::RenderPipeline {
         let layout = &self.layout;
         self.pipelines.entry(format).or_insert_with(|| {
-            crate::render::pipelines::blended_pipeline(
+            super::over_pipeline(
                 device,
-                crate::render::pipelines::Blended {
-                    label: "texel.wgsl polygons",
-                    layouts: [frame_layout, layout],
-                    source: crate::render::shaders::texel(),
-                    vertex: "vs_poly",
-                    fragment: "fs_poly",
-                    format,
-                    blend: wgpu::BlendComponent {
-                        src_factor: wgpu::BlendFactor::One,
-                        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-                        operation: wgpu::BlendOperation::Add,
-                    },
-                    cull: None,
-                    depth: (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
-                },
+                [frame_layout, layout],
+                "texel.wgsl polygons",
+                ("vs_poly", "fs_poly"),
+                format,
+                None,
             )
         })
     }

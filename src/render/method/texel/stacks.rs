@@ -623,23 +623,13 @@ impl StackAssets {
     ) -> &wgpu::RenderPipeline {
         let layout = &self.layout;
         self.pipelines.entry(format).or_insert_with(|| {
-            crate::render::pipelines::blended_pipeline(
+            super::over_pipeline(
                 device,
-                crate::render::pipelines::Blended {
-                    label: "texel.wgsl stacks",
-                    layouts: [frame_layout, layout],
-                    source: crate::render::shaders::texel(),
-                    vertex: "vs_stack",
-                    fragment: "fs_stack",
-                    format,
-                    blend: wgpu::BlendComponent {
-                        src_factor: wgpu::BlendFactor::One,
-                        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-                        operation: wgpu::BlendOperation::Add,
-                    },
-                    cull: None,
-                    depth: (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
-                },
+                [frame_layout, layout],
+                "texel.wgsl stacks",
+                ("vs_stack", "fs_stack"),
+                format,
+                None,
             )
         })
     }

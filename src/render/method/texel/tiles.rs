@@ -663,23 +663,13 @@ impl TileAssets {
     ) -> &wgpu::RenderPipeline {
         let layout = &self.layout;
         self.pipelines.entry(format).or_insert_with(|| {
-            crate::render::pipelines::blended_pipeline(
+            super::over_pipeline(
                 device,
-                crate::render::pipelines::Blended {
-                    label: "texel.wgsl tiles",
-                    layouts: [frame_layout, layout],
-                    source: crate::render::shaders::texel(),
-                    vertex: "vs_tile",
-                    fragment: "fs_tile",
-                    format,
-                    blend: wgpu::BlendComponent {
-                        src_factor: wgpu::BlendFactor::One,
-                        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-                        operation: wgpu::BlendOperation::Add,
-                    },
-                    cull: Some(wgpu::Face::Back),
-                    depth: (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
-                },
+                [frame_layout, layout],
+                "texel.wgsl tiles",
+                ("vs_tile", "fs_tile"),
+                format,
+                Some(wgpu::Face::Back),
             )
         })
     }
