@@ -602,10 +602,15 @@ impl App {
             return;
         };
         let gpu_bytes = r.renderer.btf_bytes() + r.renderer.texel_bytes() + r.renderer.mesh_bytes();
-        let sample = |t: f64| soak::Sample {
-            seconds: t,
-            resident_bytes: soak::resident_bytes(),
-            gpu_bytes,
+        let sample = |t: f64| {
+            let (heap_used_bytes, heap_free_bytes) = soak::heap_bytes();
+            soak::Sample {
+                seconds: t,
+                resident_bytes: soak::resident_bytes(),
+                gpu_bytes,
+                heap_used_bytes,
+                heap_free_bytes,
+            }
         };
         let Some(started) = run.started else {
             if r.renderer.has_btf() || self.bake_failed {

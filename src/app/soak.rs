@@ -161,6 +161,26 @@ pub struct Sample {
     pub seconds: f64,
     pub resident_bytes: u64,
     pub gpu_bytes: u64,
+    /// The C heap (glibc's `mallinfo2`, every arena): bytes handed out and not freed,
+    /// mmapped blocks included; 0 where it cannot be read.
+    pub heap_used_bytes: u64,
+    /// Bytes the heap holds free in its arenas (freed, not given back to the system):
+    /// resident growth here with `heap_used_bytes` flat is fragmentation, not a leak.
+    pub heap_free_bytes: u64,
+}
+
+/// The C heap's bytes in use and free (see [`Sample`]); zeros off glibc.
+pub fn heap_bytes() -> (u64, u64) {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        // SAFETY: mallinfo2 only reads the allocator's counters.
+        let m = unsafe { libc::mallinfo2() };
+        ((m.uordblks + m.hblkhd) as u64, m.fordblks as u64)
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    {
+        (0, 0)
+    }
 }
 
 /// Resident memory of this process (Linux /proc; 0 where it cannot be read).
@@ -173,11 +193,11 @@ pub fn resident_bytes() -> u64 {
 
 /// The samples as CSV.
 pub fn csv(samples: &[Sample]) -> String {
-    let mut out = String::from("seconds,resident_bytes,gpu_bytes\n");
+    let mut out = String::from("seconds,resident_bytes,gpu_bytes,heap_used_bytes,heap_free_bytes\n");
     for s in samples {
         out.push_str(&format!(
-            "{:.1},{},{}\n",
-            s.seconds, s.resident_bytes, s.gpu_bytes
+            "{:.1},{},{},{},{}\n",
+            s.seconds, s.resident_bytes, s.gpu_bytes, s.heap_used_bytes, s.heap_free_bytes
         ));
     }
     out
@@ -237,6 +257,8 @@ mod tests {
             seconds: t,
             resident_bytes: r,
             gpu_bytes: g,
+            heap_used_bytes: 0,
+            heap_free_bytes: 0,
         };
         // The warm-up's growth (0 to 60 s) does not count.
         let samples = [s(0.0, 100, 10), s(60.0, 200, 20), s(120.0, 210, 20)];
@@ -244,6 +266,10 @@ mod tests {
         assert!((r - 0.05).abs() < 1e-9 && g == 0.0);
         assert_eq!(growth(&samples[..2], 60.0), None);
         assert!(resident_bytes() > 0);
-        assert!(csv(&samples).starts_with("seconds,resident_bytes,gpu_bytes\n0.0,100,10\n"));
+        assert!(csv(&samples).starts_with(
+            "seconds,resident_bytes,gpu_bytes,heap_used_bytes,heap_free_bytes\n0.0,100,10,0,0\n"
+        ));
+        #[cfg(all(target_os = "linux", target_env = "gnu"))]
+        assert!(heap_bytes().0 > 0);
     }
 }
