@@ -28,6 +28,7 @@ struct VertexOut {
     @location(1) normal: vec3<f32>,
     @location(2) color: vec3<f32>,
     @location(3) foliage: f32,
+    @location(4) @interpolate(flat) opacity: f32,
 }
 
 @vertex
@@ -40,7 +41,14 @@ fn vs_main(v: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
     out.normal = (model * vec4<f32>(v.normal, 0.0)).xyz;
     out.color = v.color * mix(vec3<f32>(1.0), instance_tint(instance), v.foliage);
     out.foliage = v.foliage;
+    out.opacity = instance_opacity(instance);
     return out;
+}
+
+// A threshold in [0, 1) per pixel, evenly spread over any small block of pixels
+// (interleaved gradient noise): a tree of opacity `a` keeps the pixels under `a`.
+fn dither_threshold(pixel: vec2<f32>) -> f32 {
+    return fract(52.9829189 * fract(dot(floor(pixel), vec2<f32>(0.06711056, 0.00583715))));
 }
 
 fn cascade_for(view_depth: f32) -> u32 {
@@ -103,6 +111,11 @@ fn sun_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> f32 {
     if frame.terrain_depth_on != 0u {
         return terrain_visibility(world, normal);
     }
+    return cascade_visibility(world, normal, view_depth);
+}
+
+// The cascades' part of `sun_visibility` (1 past the last cascade).
+fn cascade_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> f32 {
     if view_depth >= frame.cascade_splits.z {
         return 1.0;
     }
@@ -143,6 +156,13 @@ fn ground_transmittance(world: vec3<f32>) -> f32 {
 
 // The lit colour of a fragment (before fog and exposure).
 fn shade(in: VertexOut, front: bool) -> vec3<f32> {
+    return shade_as(in, front, false);
+}
+
+// `shade`; with `own_cascades` (a `hybrid` tree drawn as geometry among image-based ones)
+// the sun is hidden by the terrain's map and by the cascades, which hold the geometry trees
+// alone, instead of by the trees' alpha map (which holds this tree as a billboard too).
+fn shade_as(in: VertexOut, front: bool, own_cascades: bool) -> vec3<f32> {
     var n = normalize(in.normal);
     let leaf = in.foliage > 0.5;
     if leaf && !front {
@@ -160,7 +180,15 @@ fn shade(in: VertexOut, front: bool) -> vec3<f32> {
     let view_depth = dot(-to_eye, frame.camera_forward);
     let offset_normal = select(n, sign(ndl) * n, leaf);
     var vis = sun_visibility(in.world, offset_normal, view_depth);
-    if frame.ground_alpha_on != 0u {
+    if own_cascades {
+        vis = 1.0;
+        if frame.shadows_on != 0u {
+            vis = cascade_visibility(in.world, offset_normal, view_depth);
+            if frame.terrain_depth_on != 0u {
+                vis *= terrain_visibility(in.world, offset_normal);
+            }
+        }
+    } else if frame.ground_alpha_on != 0u {
         vis *= ground_transmittance(in.world);
     }
     // Hemispherical sky light; in the reference its sky part only where the sky is open.
@@ -173,8 +201,22 @@ fn shade(in: VertexOut, front: bool) -> vec3<f32> {
 
 @fragment
 fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    return lit_and_fogged(in, front, false);
+}
+
+fn lit_and_fogged(in: VertexOut, front: bool, own_cascades: bool) -> vec4<f32> {
     let dist = length(frame.camera_pos - in.world);
-    return vec4<f32>(fog_and_exposure(shade(in, front), 1.0, dist), 1.0);
+    return vec4<f32>(fog_and_exposure(shade_as(in, front, own_cascades), 1.0, dist), 1.0);
+}
+
+// `fs_main` for `hybrid`'s trees drawn as geometry: shadowed by their own cascades, and
+// only the pixels under their opacity while they fade in.
+@fragment
+fn fs_faded(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    if dither_threshold(in.clip.xy) >= in.opacity {
+        discard;
+    }
+    return lit_and_fogged(in, front, true);
 }
 
 // The texel bake's voxelisation (src/render/voxelize.rs): every fragment of an

@@ -38,3 +38,9 @@ fn instance_tint(instance: u32) -> vec3<f32> {
     let count = max(part_set.count, 1u);
     return trees[instance / count].tint.rgb;
 }
+
+// The tree's opacity: 1, or less while `hybrid` fades it in over its twig billboards.
+fn instance_opacity(instance: u32) -> f32 {
+    let count = max(part_set.count, 1u);
+    return trees[instance / count].tint.a;
+}

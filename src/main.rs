@@ -110,9 +110,9 @@ struct BenchArgs {
     #[arg(long, default_value = "walk")]
     flight: String,
     /// Methods to measure, comma-separated.
-    #[arg(long, value_delimiter = ',', value_parser = parse_method, default_value = "geometry,btf,billboard,texel")]
+    #[arg(long, value_delimiter = ',', value_parser = parse_method, default_value = "geometry,btf,billboard,texel,hybrid")]
     methods: Vec<Method>,
-    /// Sweep a knob: KEY=V1,V2,... (btf: lod_scale, weight_threshold, lod_fade, planes,
+    /// Sweep a knob: KEY=V1,V2,... (btf and hybrid: lod_scale, weight_threshold, lod_fade, planes,
     /// vcm; texel: slice_d0, slice_d1, max_slices, texel_mode, texel_tiles, tile_distance);
     /// repeat for a grid.
     #[arg(long, value_parser = parse_sweep)]
@@ -539,7 +539,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.baked {
         if !args.method.needs_bake() {
             return Err(canopy::Error::BadInput(format!(
-                "--baked is for the methods that draw baked images (btf, billboard, texel), not {}",
+                "--baked is for the methods that draw baked images (btf, billboard, texel, hybrid), not {}",
                 args.method.name()
             ))
             .into());

@@ -107,7 +107,7 @@ pub fn controls(
         ui.label(format!("baking BTF images: {what}"));
         ui.add(egui::ProgressBar::new(f).show_percentage());
     }
-    if frame.method == Method::Btf {
+    if frame.method.is_btf() {
         let b = &mut frame.btf;
         ui.add(
             egui::Slider::new(&mut b.lod_scale, 0.25..=16.0)
@@ -147,6 +147,11 @@ pub fn controls(
                 ui.label("trees cross-fading");
                 ui.label(s.faded_trees.to_string());
                 ui.end_row();
+                if frame.method == Method::Hybrid {
+                    ui.label("trees as geometry");
+                    ui.label(s.geometry_trees.to_string());
+                    ui.end_row();
+                }
                 ui.label("images per billboard");
                 ui.label(format!("{:.2}", s.images_per_billboard()));
                 ui.end_row();

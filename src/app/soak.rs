@@ -193,7 +193,8 @@ pub fn resident_bytes() -> u64 {
 
 /// The samples as CSV.
 pub fn csv(samples: &[Sample]) -> String {
-    let mut out = String::from("seconds,resident_bytes,gpu_bytes,heap_used_bytes,heap_free_bytes\n");
+    let mut out =
+        String::from("seconds,resident_bytes,gpu_bytes,heap_used_bytes,heap_free_bytes\n");
     for s in samples {
         out.push_str(&format!(
             "{:.1},{},{},{},{}\n",

@@ -81,7 +81,7 @@ pub fn summary_json(run: &RunInfo, results: &BenchResults) -> String {
         .zip(&results.configs)
         .map(|(summary, c)| ConfigJson {
             summary,
-            settings: (c.method == crate::render::Method::Btf).then(|| Settings::from(&c.btf)),
+            settings: c.method.is_btf().then(|| Settings::from(&c.btf)),
             texel_settings: (c.method == crate::render::Method::Texel).then_some(c.texel),
         })
         .collect();

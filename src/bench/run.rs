@@ -67,6 +67,12 @@ impl Knob {
         }
     }
 
+    /// The knob changes `method` (the `btf` knobs also drive `hybrid`).
+    pub fn applies_to(self, method: Method) -> bool {
+        let own = self.method();
+        own == method || (own == Method::Btf && method == Method::Hybrid)
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Knob::LodScale => "lod_scale",
@@ -192,7 +198,7 @@ pub fn configurations(
     for &method in methods {
         let mut combos: Vec<(String, BtfSettings, TexelSettings)> =
             vec![(String::new(), base, TexelSettings::default())];
-        for sweep in sweeps.iter().filter(|s| s.knob.method() == method) {
+        for sweep in sweeps.iter().filter(|s| s.knob.applies_to(method)) {
             let mut next = Vec::new();
             for (label, s, t) in &combos {
                 for v in &sweep.values {

@@ -20,6 +20,9 @@ pub enum Method {
     /// Each tree as a volumetric texel: its baked volumes sliced parallel to the screen
     /// (needs a bake with texel volumes).
     Texel,
+    /// `btf`, with a tree drawn as geometry wherever even its twig level's texels project
+    /// above the LOD bound (cross-faded): no more detail than the view needs, and no less.
+    Hybrid,
 }
 
 impl Method {
@@ -28,6 +31,7 @@ impl Method {
         Method::Btf,
         Method::Billboard,
         Method::Texel,
+        Method::Hybrid,
     ];
 
     pub fn name(self) -> &'static str {
@@ -36,12 +40,21 @@ impl Method {
             Method::Btf => "btf",
             Method::Billboard => "billboard",
             Method::Texel => "texel",
+            Method::Hybrid => "hybrid",
         }
     }
 
     /// The method draws baked images (and needs a bake).
     pub fn needs_bake(self) -> bool {
-        matches!(self, Method::Btf | Method::Billboard | Method::Texel)
+        matches!(
+            self,
+            Method::Btf | Method::Billboard | Method::Texel | Method::Hybrid
+        )
+    }
+
+    /// The method draws the BTF hierarchy and takes the `btf` knobs.
+    pub fn is_btf(self) -> bool {
+        matches!(self, Method::Btf | Method::Hybrid)
     }
 
     pub fn parse(s: &str) -> Option<Method> {

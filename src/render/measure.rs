@@ -7,7 +7,7 @@ use image::RgbaImage;
 use serde::{Serialize, Serializer};
 
 use super::btf::BtfStats;
-use super::{FrameDesc, FrameStats, GpuContext, Method, Renderer};
+use super::{FrameDesc, FrameStats, GpuContext, Renderer};
 use crate::Result;
 
 /// Degrees the sun turns for each of the sun-move frames.
@@ -128,8 +128,8 @@ pub fn measure_frame_with(
         stats = s;
         on_frame();
     }
-    // Only the btf method has sun-dependent state.
-    let sun_update = if frame.method == Method::Btf {
+    // Only the btf methods have sun-dependent state.
+    let sun_update = if frame.method.is_btf() {
         Some(measure_sun_update(renderer, ctx, frame, width, height, ss)?)
     } else {
         None
@@ -342,6 +342,7 @@ fn btf_counts<S: Serializer>(b: &BtfStats, ser: S) -> Result<S::Ok, S::Error> {
         billboards: crate::model::PerLevel<u32>,
         trees_per_level: crate::model::PerLevel<u32>,
         faded_trees: u32,
+        geometry_trees: u32,
         images_per_billboard: f64,
         fetches_saved: u64,
         vcm: bool,
@@ -350,6 +351,7 @@ fn btf_counts<S: Serializer>(b: &BtfStats, ser: S) -> Result<S::Ok, S::Error> {
         billboards: b.billboards,
         trees_per_level: b.trees_per_level,
         faded_trees: b.faded_trees,
+        geometry_trees: b.geometry_trees,
         images_per_billboard: b.images_per_billboard(),
         fetches_saved: b.fetches_saved,
         vcm: b.vcm,

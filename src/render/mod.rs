@@ -344,7 +344,7 @@ impl Renderer {
             return Err(Error::Gpu("the GPU device was lost; restart canopy".into()));
         }
         let studio = frame.stage == Stage::Studio;
-        let is_btf = frame.method == Method::Btf;
+        let is_btf = frame.method.is_btf();
         let is_texel = frame.method == Method::Texel;
         // The reference: sky visibility, and sun cascades with larger maps reaching
         // every point of the scene.
@@ -426,7 +426,7 @@ impl Renderer {
         let mut sun_update_ms = 0.0;
         let mut sun_moved = false;
         let prepared = match (frame.method, self.btf.as_mut()) {
-            (Method::Btf, Some(b)) => {
+            (Method::Btf | Method::Hybrid, Some(b)) => {
                 if frame.btf.vcm && frame.trees {
                     let t0 = std::time::Instant::now();
                     if b.update_sun(to_sun) {
@@ -443,6 +443,7 @@ impl Renderer {
                     to_sun,
                     &frustum,
                     &frame.btf,
+                    frame.method == Method::Hybrid,
                 ))
             }
             (Method::Billboard, Some(b)) => Prepared::Billboard(method::billboard::prepare_frame(
@@ -494,12 +495,24 @@ impl Renderer {
                 g.cascades,
                 g.shadows_on,
             ),
-            Prepared::Btf(b) | Prepared::Billboard(b) => (
-                self.world
-                    .upload_lists(ctx, &[b.trunk_only.clone(), b.trunk_and_limbs.clone()]),
-                Cascades::none(),
-                false,
-            ),
+            Prepared::Btf(b) | Prepared::Billboard(b) => {
+                // `hybrid`'s geometry trees: whole trunks and limbs, fading twigs; they cast
+                // and receive cascaded sun shadows fitted to them alone.
+                let whole: Vec<Vec<(u32, f32)>> = b
+                    .twigs
+                    .iter()
+                    .map(|l| l.iter().map(|&(t, _)| (t, 1.0)).collect())
+                    .collect();
+                let runs = self.world.upload_lists_faded(
+                    ctx,
+                    &[b.trunk_only.clone(), b.trunk_and_limbs.clone()],
+                    &[&whole, &b.twigs],
+                    frame.btf.show_lod.then_some(btf::GEOMETRY_COLOUR),
+                );
+                let cascades = self.geometry_tree_cascades(frame, aspect, &b.twigs);
+                let on = cascades.is_some();
+                (runs, cascades.unwrap_or_else(Cascades::none), on)
+            }
             // No tree parts as geometry; the list still holds the terrain's instance.
             Prepared::Texel(_) => (
                 self.world
@@ -557,9 +570,8 @@ impl Renderer {
         }
         ctx.queue
             .write_buffer(&self.frame_uniforms, 0, bytemuck::bytes_of(&uniforms));
-        if let Prepared::Geometry(g) = &prepared {
-            self.geometry.write_uniforms(ctx, &uniforms, g);
-        }
+        self.geometry
+            .write_uniforms(ctx, &uniforms, &cascades, shadows_on);
 
         let mut stats = FrameStats {
             width,
@@ -600,17 +612,24 @@ impl Renderer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
+        let hybrid_casters;
         let casters = match &prepared {
             Prepared::Geometry(g) if g.shadows_on => Some(&runs[1..]),
+            Prepared::Btf(_) if shadows_on => {
+                // Every cascade: the geometry trees, whole (the terrain has its own map).
+                hybrid_casters = vec![runs[2].clone(); CASCADES];
+                Some(&hybrid_casters[..])
+            }
             _ => None,
         };
+        let geometry_casts_terrain = matches!(prepared, Prepared::Geometry(_)) && !studio;
         encode_cascades(
             &mut encoder,
             bindings,
             &self.geometry,
             &self.world,
             casters,
-            !studio,
+            geometry_casts_terrain,
             queries.as_ref(),
             &mut stats,
         );
@@ -723,6 +742,38 @@ impl Renderer {
         Ok(stats)
     }
 
+    /// `hybrid`: sun cascades for the trees it draws as geometry (`trees`, per species),
+    /// reaching only as far as the farthest of them so that their texels stay small; None
+    /// when there are none, shadows are off or the sun is down.
+    fn geometry_tree_cascades(
+        &self,
+        frame: &FrameDesc,
+        aspect: f32,
+        trees: &[Vec<(u32, f32)>],
+    ) -> Option<Cascades> {
+        if !frame.shadows.enabled || frame.sun.elevation_deg <= 0.0 {
+            return None;
+        }
+        let eye = frame.camera.position;
+        let reach = trees
+            .iter()
+            .flatten()
+            .filter_map(|&(t, _)| self.world.tree_bounds.get(t as usize))
+            .map(|b| (b.center() - eye).length() + 0.5 * b.extent().length())
+            .fold(None, |m: Option<f32>, d| Some(m.map_or(d, |m| m.max(d))))?;
+        let settings = ShadowSettings {
+            distance: reach.min(frame.shadows.distance),
+            ..frame.shadows
+        };
+        Some(Cascades::fit(
+            &frame.camera,
+            aspect,
+            frame.sun.direction(),
+            &settings,
+            &self.world.scene_bounds,
+        ))
+    }
+
     /// The uniforms of `frame` with its sun shadows on or off as prepared, and the sky
     /// visibility in them when the frame is a reference.
     fn frame_uniforms_for(
@@ -795,7 +846,8 @@ impl Renderer {
         );
         ctx.queue
             .write_buffer(&self.frame_uniforms, 0, bytemuck::bytes_of(&uniforms));
-        self.geometry.write_uniforms(ctx, &uniforms, &g);
+        self.geometry
+            .write_uniforms(ctx, &uniforms, &g.cascades, g.shadows_on);
         let (Some(bindings), Some(depth), Some(voxel)) =
             (&self.bindings, &self.depth, &self.voxel_pipeline)
         else {

@@ -242,6 +242,10 @@ pub struct MeshPipelines<'a> {
 pub struct ColorPipelines {
     pub opaque: wgpu::RenderPipeline,
     pub foliage: wgpu::RenderPipeline,
+    /// The same two, dithering each tree by its opacity (`hybrid`'s cross-fade; kept apart
+    /// so that the other draws keep their early depth test).
+    pub faded_opaque: wgpu::RenderPipeline,
+    pub faded_foliage: wgpu::RenderPipeline,
     pub sky: wgpu::RenderPipeline,
 }
 
@@ -250,6 +254,13 @@ impl ColorPipelines {
         MeshPipelines {
             opaque: &self.opaque,
             foliage: &self.foliage,
+        }
+    }
+
+    pub fn faded_meshes(&self) -> MeshPipelines<'_> {
+        MeshPipelines {
+            opaque: &self.faded_opaque,
+            foliage: &self.faded_foliage,
         }
     }
 
@@ -281,7 +292,7 @@ impl ColorPipelines {
             blend: None,
             write_mask: wgpu::ColorWrites::ALL,
         })];
-        let mesh_pipeline = |label: &str, cull_mode: Option<wgpu::Face>| {
+        let mesh_pipeline = |label: &str, cull_mode: Option<wgpu::Face>, fragment: &str| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(&layout),
@@ -306,7 +317,7 @@ impl ColorPipelines {
                 multisample: Default::default(),
                 fragment: Some(wgpu::FragmentState {
                     module: &geometry,
-                    entry_point: Some("fs_main"),
+                    entry_point: Some(fragment),
                     compilation_options: Default::default(),
                     targets: &target,
                 }),
@@ -314,8 +325,10 @@ impl ColorPipelines {
                 cache: None,
             })
         };
-        let opaque = mesh_pipeline("geometry opaque", Some(wgpu::Face::Back));
-        let foliage = mesh_pipeline("geometry foliage", None);
+        let opaque = mesh_pipeline("geometry opaque", Some(wgpu::Face::Back), "fs_main");
+        let foliage = mesh_pipeline("geometry foliage", None, "fs_main");
+        let faded_opaque = mesh_pipeline("faded opaque", Some(wgpu::Face::Back), "fs_faded");
+        let faded_foliage = mesh_pipeline("faded foliage", None, "fs_faded");
         let sky = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("sky"),
             layout: Some(&sky_layout),
@@ -345,6 +358,8 @@ impl ColorPipelines {
         });
         Self {
             opaque,
+            faded_opaque,
+            faded_foliage,
             foliage,
             sky,
         }

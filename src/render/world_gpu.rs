@@ -384,6 +384,20 @@ impl WorldGpu {
     /// Builds the instance list for this frame: index 0 is the terrain's identity, then each
     /// list's trees by species. Returns the runs of each list. Uploads once per frame.
     pub fn upload_lists(&self, ctx: &GpuContext, lists: &[Vec<Vec<u32>>]) -> Vec<Vec<TreeRun>> {
+        self.upload_lists_faded(ctx, lists, &[], None)
+    }
+
+    /// [`Self::upload_lists`], then the `faded` lists, whose trees carry an opacity (per
+    /// species: tree index and opacity, written in the instance's `tint.w`; the faded
+    /// pipelines dither a tree below 1 away in that fraction of its pixels) and, when given,
+    /// a foliage tint in place of their own.
+    pub fn upload_lists_faded(
+        &self,
+        ctx: &GpuContext,
+        lists: &[Vec<Vec<u32>>],
+        faded: &[&[Vec<(u32, f32)>]],
+        tint: Option<[f32; 3]>,
+    ) -> Vec<Vec<TreeRun>> {
         let mut data = Vec::with_capacity(self.capacity);
         data.push(TreeGpu {
             model: Mat4::IDENTITY.to_cols_array_2d(),
@@ -398,6 +412,29 @@ impl WorldGpu {
                 }
                 let first = data.len() as u32;
                 data.extend(trees.iter().map(|&t| self.tree_data[t as usize]));
+                list_runs.push(TreeRun {
+                    species,
+                    first,
+                    count: trees.len() as u32,
+                });
+            }
+            runs.push(list_runs);
+        }
+        for faded in faded {
+            let mut list_runs = Vec::new();
+            for (species, trees) in faded.iter().enumerate() {
+                if trees.is_empty() || data.len() + trees.len() > self.capacity {
+                    continue;
+                }
+                let first = data.len() as u32;
+                data.extend(trees.iter().map(|&(t, opacity)| {
+                    let mut d = self.tree_data[t as usize];
+                    if let Some(c) = tint {
+                        d.tint[..3].copy_from_slice(&c);
+                    }
+                    d.tint[3] = opacity.clamp(0.0, 1.0);
+                    d
+                }));
                 list_runs.push(TreeRun {
                     species,
                     first,

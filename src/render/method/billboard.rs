@@ -138,6 +138,7 @@ pub fn prepare(
     BtfFrame {
         trunk_only: vec![Vec::new(); scene.species_count()],
         trunk_and_limbs: vec![Vec::new(); scene.species_count()],
+        twigs: vec![Vec::new(); scene.species_count()],
         billboards: records.len() as u32,
         records,
         stats,

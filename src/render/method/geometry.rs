@@ -107,18 +107,20 @@ impl GeometryMethod {
         })
     }
 
-    /// Uploads each cascade's uniforms (the frame's, seen from the cascade's light).
+    /// Uploads each cascade's uniforms (the frame's, seen from the cascade's light), when
+    /// the cascades are on.
     pub fn write_uniforms(
         &self,
         ctx: &GpuContext,
         uniforms: &FrameUniforms,
-        prepared: &GeometryFrame,
+        cascades: &Cascades,
+        shadows_on: bool,
     ) {
-        if !prepared.shadows_on {
+        if !shadows_on {
             return;
         }
         for (i, (buf, _)) in self.cascade_uniforms.iter().enumerate() {
-            let u = uniforms.for_light(prepared.cascades.matrices[i]);
+            let u = uniforms.for_light(cascades.matrices[i]);
             ctx.queue.write_buffer(buf, 0, bytemuck::bytes_of(&u));
         }
     }

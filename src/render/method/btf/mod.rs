@@ -17,7 +17,7 @@ use glam::Vec3;
 
 pub use billboard::{BillboardGpu, BillboardMode};
 pub use prepare::{BtfFrame, BtfScene, LevelChoice, PrepareView, choose_level};
-pub use settings::{BtfSettings, BtfStats, LOD_COLOURS, PlaneMode};
+pub use settings::{BtfSettings, BtfStats, GEOMETRY_COLOUR, LOD_COLOURS, PlaneMode};
 
 use crate::format::Baked;
 use crate::lod::LevelTexels;
@@ -215,6 +215,7 @@ impl BtfAssets {
         to_sun: Vec3,
         frustum: &Frustum,
         settings: &BtfSettings,
+        hybrid: bool,
     ) -> BtfFrame {
         let view = PrepareView {
             camera,
@@ -228,6 +229,7 @@ impl BtfAssets {
             &view,
             settings,
             self.max_capacity,
+            hybrid,
         );
         let records = std::mem::take(&mut out.records);
         self.upload(ctx, &records);
@@ -236,7 +238,8 @@ impl BtfAssets {
 
     /// The frame's draws in the main pass: the trunks (and limbs) of the trees drawn at the
     /// finer levels as geometry (`runs`: trunk only, then trunk and limbs; the terrain with
-    /// the first when asked), then every billboard in one instanced draw, back to front.
+    /// the first when asked), `hybrid`'s geometry trees (`runs[2]` whole, `runs[3]` fading),
+    /// then every billboard in one instanced draw, back to front.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn draw_main(
         &self,
@@ -263,9 +266,18 @@ impl BtfAssets {
             false,
             &[PartKind::Trunk, PartKind::Limbs],
         );
-        stats.triangles = t0 + t1 + 2 * u64::from(bf.billboards);
-        stats.trees_drawn = bf.stats.trees_per_level.iter().sum();
-        stats.draw_calls += c0 + c1;
+        // `hybrid`'s trees past the twig level, with their own shadows: trunk and limbs
+        // whole, twigs faded in.
+        let mut hybrid = |list: usize, kinds: &[PartKind]| match runs.get(list) {
+            Some(r) => world.draw(pass, r, Some(pipes.faded_meshes()), false, kinds),
+            None => (0, 0, 0),
+        };
+        let (t2a, _, c2a) = hybrid(2, &[PartKind::Trunk, PartKind::Limbs]);
+        let (t2b, _, c2b) = hybrid(3, &[PartKind::Twigs]);
+        let (t2, c2) = (t2a + t2b, c2a + c2b);
+        stats.triangles = t0 + t1 + t2 + 2 * u64::from(bf.billboards);
+        stats.trees_drawn = bf.stats.trees_per_level.iter().sum::<u32>() + bf.stats.geometry_trees;
+        stats.draw_calls += c0 + c1 + c2;
         if let Some(pipeline) = pipeline
             && bf.billboards > 0
         {

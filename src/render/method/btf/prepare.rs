@@ -67,6 +67,10 @@ pub struct BtfFrame {
     pub trunk_only: Vec<Vec<u32>>,
     /// Per species: trees at the twig level (trunk and limbs are geometry).
     pub trunk_and_limbs: Vec<Vec<u32>>,
+    /// `hybrid` only, per species: trees drawn as geometry (their twig texels project above
+    /// the bound; not in the two lists above), each with the opacity its twigs fade in at
+    /// (1 = whole; its trunk and limbs are always whole).
+    pub twigs: Vec<Vec<(u32, f32)>>,
     /// The billboard records, back to front.
     pub records: Vec<BillboardGpu>,
     /// Billboards drawn (`records.len()` until the records are handed to the GPU).
@@ -88,6 +92,29 @@ impl LevelChoice {
     pub fn draws(self) -> impl Iterator<Item = (Level, f32)> {
         let fade = self.fading_in.map_or(0.0, |(_, f)| f);
         std::iter::once((self.level, 1.0 - fade)).chain(self.fading_in)
+    }
+}
+
+/// How much of a tree `hybrid` draws as geometry (0 = none, 1 = all of it): the twig
+/// level is the finest image level, valid while its texel projects below the LOD scale;
+/// past that the tree is geometry, faded in over the last `lod_fade` fraction before the
+/// bound as the finer levels are (so that the bound itself changes nothing).
+pub fn geometry_fade(
+    texels: &LevelTexels,
+    scale: f32,
+    focal_px: f32,
+    z: f32,
+    settings: &BtfSettings,
+) -> f32 {
+    let px = lod::projected_px(texels[Level::Twig] * scale, focal_px, z);
+    let bound = settings.lod_scale;
+    let start = bound * (1.0 - settings.lod_fade.clamp(0.0, 1.0));
+    if px >= bound {
+        1.0
+    } else if settings.lod_fade > 0.0 && px > start {
+        ((px - start) / (bound - start).max(1e-6)).clamp(0.0, 1.0)
+    } else {
+        0.0
     }
 }
 
@@ -269,7 +296,8 @@ impl BtfScene {
     }
 
     /// The billboards of the trees in `visible` (per species, indices into `trees`), back to
-    /// front; past `max_billboards` the farthest are dropped (and counted).
+    /// front; past `max_billboards` the farthest are dropped (and counted). With `hybrid`,
+    /// a tree whose twig texels project above the bound is geometry instead (cross-faded).
     pub fn prepare(
         &self,
         trees: &[TreeGpu],
@@ -277,10 +305,12 @@ impl BtfScene {
         view: &PrepareView,
         settings: &BtfSettings,
         max_billboards: usize,
+        hybrid: bool,
     ) -> BtfFrame {
         let mut stats = BtfStats::default();
         let mut trunk_only = vec![Vec::new(); self.species.len()];
         let mut trunk_and_limbs = vec![Vec::new(); self.species.len()];
+        let mut twigs = vec![Vec::new(); self.species.len()];
         let mut sorted: Vec<(f32, BillboardGpu)> = Vec::new();
         let vcm = self.vcm.as_ref().filter(|_| settings.vcm);
         stats.vcm = vcm.is_some();
@@ -297,9 +327,23 @@ impl BtfScene {
                 let scale = m.x_axis.truncate().length();
                 let z = (m.transform_point3(parts.bounds.center()) - cam).length();
                 let choice = choose_level(&parts.texels, scale, view.focal_px, z, settings);
+                // Only a tree at the twig level alone can be past it.
+                let geometry = if hybrid && choice.level == Level::Twig {
+                    geometry_fade(&parts.texels, scale, view.focal_px, z, settings)
+                } else {
+                    0.0
+                };
+                if geometry >= 1.0 {
+                    stats.geometry_trees += 1;
+                    twigs[sp].push((t, 1.0));
+                    continue;
+                }
                 stats.trees_per_level[choice.level] += 1;
-                if choice.fading_in.is_some() {
+                if choice.fading_in.is_some() || geometry > 0.0 {
                     stats.faded_trees += 1;
+                }
+                if geometry > 0.0 {
+                    twigs[sp].push((t, geometry));
                 }
                 let shading = vcm.map(|v| v.for_tree(t as usize, sp, &m, &parts.frames));
                 let mut pusher = Pusher {
@@ -315,7 +359,7 @@ impl BtfScene {
                     opacity: 1.0,
                 };
                 for (level, opacity) in choice.draws() {
-                    pusher.opacity = opacity;
+                    pusher.opacity = opacity * (1.0 - geometry);
                     if settings.show_lod {
                         pusher.tint = (LOD_COLOURS[level], BillboardMode::Tint);
                     } else if settings.show_shadow {
@@ -325,6 +369,7 @@ impl BtfScene {
                 }
                 // The finest level drawn decides which parts are geometry.
                 match choice.draws().map(|(l, _)| l).min_by_key(|l| l.index()) {
+                    _ if geometry > 0.0 => {}
                     Some(Level::Branch) => trunk_only[sp].push(t),
                     Some(Level::Twig) => trunk_and_limbs[sp].push(t),
                     _ => {}
@@ -341,6 +386,7 @@ impl BtfScene {
         BtfFrame {
             trunk_only,
             trunk_and_limbs,
+            twigs,
             billboards: records.len() as u32,
             records,
             stats,
@@ -611,6 +657,15 @@ pub(crate) mod tests {
 
     /// Prepares `trees`, all visible, seen from `eye` looking at the origin's tree centre.
     fn run(trees: &[TreeGpu], eye: Vec3, settings: &BtfSettings) -> (BtfFrame, Camera) {
+        run_as(trees, eye, settings, false)
+    }
+
+    fn run_as(
+        trees: &[TreeGpu],
+        eye: Vec3,
+        settings: &BtfSettings,
+        hybrid: bool,
+    ) -> (BtfFrame, Camera) {
         let camera = Camera::look_at(eye, Vec3::new(0.0, 5.0, 0.0), 60.0);
         let frustum = camera.frustum(16.0 / 9.0);
         let view = PrepareView {
@@ -620,8 +675,55 @@ pub(crate) mod tests {
             frustum: &frustum,
         };
         let visible = vec![(0..trees.len() as u32).collect::<Vec<_>>()];
-        let frame = scene().prepare(trees, &visible, &view, settings, usize::MAX);
+        let frame = scene().prepare(trees, &visible, &view, settings, usize::MAX, hybrid);
         (frame, camera)
+    }
+
+    #[test]
+    fn hybrid_draws_a_tree_as_geometry_where_its_twig_texels_pass_the_bound() {
+        let s = BtfSettings {
+            lod_fade: 0.2,
+            ..BtfSettings::default()
+        };
+        // The twig texel (4 mm) is 1 px at 2 m, 0.8 px (the band's start) at 2.5 m.
+        assert_eq!(geometry_fade(&TEXELS, 1.0, FOCAL, 1.9, &s), 1.0);
+        assert_eq!(geometry_fade(&TEXELS, 1.0, FOCAL, 2.6, &s), 0.0);
+        let half = geometry_fade(&TEXELS, 1.0, FOCAL, 0.004 * FOCAL / 0.9, &s);
+        assert!((half - 0.5).abs() < 1e-4, "{half}");
+        // Abrupt without a band; a coarser LOD scale lets the twig images come closer.
+        assert_eq!(geometry_fade(&TEXELS, 1.0, FOCAL, 2.2, &no_fade()), 0.0);
+        let coarse = BtfSettings {
+            lod_scale: 2.0,
+            ..s
+        };
+        assert_eq!(geometry_fade(&TEXELS, 1.0, FOCAL, 1.5, &coarse), 0.0);
+
+        let trees = [tree_at(0.0, 0.0, 0.3)];
+        // Near: the whole tree as geometry, no billboards.
+        let (near, _) = run_as(&trees, Vec3::new(0.0, 5.0, 1.5), &s, true);
+        assert_eq!(near.stats.geometry_trees, 1);
+        assert_eq!(near.twigs[0], vec![(0, 1.0)]);
+        assert!(near.trunk_and_limbs[0].is_empty() && near.trunk_only[0].is_empty());
+        assert!(near.records.is_empty() && near.stats.trees_per_level.iter().sum::<u32>() == 0);
+        // The same view in `btf`: twig billboards, nothing as whole geometry.
+        let (plain, _) = run_as(&trees, Vec3::new(0.0, 5.0, 1.5), &s, false);
+        assert!(plain.twigs[0].is_empty() && plain.stats.billboards.twig > 0);
+        // In the band: both, the billboards at the complement of the geometry's opacity.
+        let z = 0.004 * FOCAL / 0.9;
+        let (band, _) = run_as(&trees, Vec3::new(0.0, 5.0, z), &s, true);
+        let (t, g) = band.twigs[0][0];
+        assert!(t == 0 && (g - 0.5).abs() < 1e-3, "{g}");
+        assert_eq!(band.stats.geometry_trees, 0);
+        assert_eq!(band.stats.faded_trees, 1);
+        assert!(band.trunk_and_limbs[0].is_empty());
+        assert!(!band.records.is_empty());
+        for r in &band.records {
+            assert!((r.opacity - (1.0 - g)).abs() < 1e-4, "{}", r.opacity);
+        }
+        // Far: billboards only.
+        let (far, _) = run_as(&trees, Vec3::new(0.0, 5.0, 8.0), &s, true);
+        assert!(far.twigs[0].is_empty() && far.stats.geometry_trees == 0);
+        assert_eq!(far.stats.trees_per_level.twig, 1);
     }
 
     fn no_fade() -> BtfSettings {
@@ -841,7 +943,7 @@ pub(crate) mod tests {
         };
         let visible = vec![(0..trees.len() as u32).collect::<Vec<_>>()];
         let cap = 10;
-        let capped = scene().prepare(&trees, &visible, &view, &no_fade(), cap);
+        let capped = scene().prepare(&trees, &visible, &view, &no_fade(), cap, false);
         assert_eq!(capped.records.len(), cap);
         assert_eq!(capped.stats.dropped as usize, f.records.len() - cap);
         let nearest: Vec<f32> = f.records[f.records.len() - cap..]

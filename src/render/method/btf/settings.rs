@@ -75,8 +75,11 @@ pub struct BtfStats {
     pub billboards: PerLevel<u32>,
     /// Trees drawn at each level (by the coarser level while fading).
     pub trees_per_level: PerLevel<u32>,
-    /// Trees drawn at two levels at once, cross-fading.
+    /// Trees drawn at two levels at once, cross-fading (in `hybrid`, also a twig level
+    /// fading into geometry).
     pub faded_trees: u32,
+    /// `hybrid`: trees drawn wholly as geometry (not in `trees_per_level`).
+    pub geometry_trees: u32,
     /// Image fetches per fragment summed over billboards (views x (lights + ambient)).
     pub images_sampled: u64,
     /// Fetches skipped by image-weight culling, against 3 x (3 + 1) = 12 per billboard.
@@ -109,3 +112,7 @@ pub const LOD_COLOURS: PerLevel<[f32; 3]> = PerLevel {
     branch: [0.95, 0.8, 0.1],
     tree: [0.2, 0.45, 0.95],
 };
+
+/// The show-level overlay's colour of `hybrid`'s trees drawn as geometry (their foliage
+/// tint; white on the leaves' own colour reads as pale, so a strong magenta).
+pub const GEOMETRY_COLOUR: [f32; 3] = [1.6, 0.3, 1.8];
