@@ -448,3 +448,138 @@ fn blur_up_close_grows_with_the_texel_size_and_stays_bounded() {
         fine[0]
     );
 }
+
+/// `hybrid`'s switch to geometry: the camera comes at a tree across the distance where its
+/// twig texels pass the LOD bound (from above, where that lies outside the crown), 17 frames
+/// from 1.04 to 0.96 times that distance in 0.5 % steps. Past the bound the tree is
+/// geometry (stats), before it twig billboards.
+///
+/// The suite's pop metric (change beyond the truth's, scaled to the method's median) does
+/// not fit this switch: as the geometry fades in the method's frame-to-frame change rises
+/// steadily from the billboards' level to the truth's (0.053 to 0.077 a frame against the
+/// truth's 0.069 to 0.074), and the scaled excess of the last frames, 0.0106, measures that
+/// regime change, not a pop (the abrupt switch: 0.092). So the switch is judged by the jump:
+/// the largest rise of the method's change from one frame to the next beyond the truth's
+/// rise there. Measured on lavapipe (128x128): cross-fade 0.2: 0.0030; abrupt (`lod_fade` 0):
+/// 0.092 at the switch. Bound between them, and the abrupt switch must exceed it.
+const HYBRID_SWITCH_MAX_JUMP: f64 = 0.015;
+
+#[test]
+fn hybrid_switches_a_near_tree_to_geometry_and_cross_fades_the_switch() {
+    let ctx = gpu();
+    let (scene, world, mut renderer) = setup(&ctx);
+    let (tree, centre) = first_tree(&world);
+    let size = 128;
+    let focal = Camera::look_at(Vec3::ZERO, Vec3::Z, 40.0).focal_px(size);
+    let texels = renderer.btf_texels(tree.species as usize).unwrap();
+    let lod_scale = 1.0;
+    let bound = canopy::lod::valid_beyond(texels.twig * tree.scale, focal, lod_scale);
+    // From above and to the side, away from the neighbours.
+    let dir = Vec3::new(-0.45, 0.75, -0.45).normalize();
+    let hybrid = |label: &str, fade: f32| {
+        let mut c = btf(label, |s| {
+            s.lod_scale = lod_scale;
+            s.lod_fade = fade;
+        });
+        c.method = Method::Hybrid;
+        c
+    };
+    let mut b = base(&scene);
+    b.camera.fov_y_deg = 40.0;
+
+    // Stats: geometry inside the bound, billboards outside; the other trees stay images.
+    let mut at = |k: f32, fade: f32| {
+        let mut d = b;
+        d.method = Method::Hybrid;
+        d.btf = hybrid("", fade).btf;
+        frame(0, centre + dir * bound * k, centre, None).apply(&mut d);
+        let (_, stats) = renderer.render_image(&ctx, &d, size, size, 1).unwrap();
+        stats.btf.expect("hybrid reports btf stats")
+    };
+    // The fade band runs from 1.25 times the bound (twig texels of 0.8 px) in to it.
+    let inside = at(0.9, 0.2);
+    let outside = at(1.3, 0.2);
+    let band = at(1.12, 0.2);
+    eprintln!(
+        "hybrid at 0.9 / 1.3 / 1.12 times the bound {bound:.2} m: geometry trees {} / {} / {}, faded {} / {} / {}, twig trees {} / {} / {}",
+        inside.geometry_trees,
+        outside.geometry_trees,
+        band.geometry_trees,
+        inside.faded_trees,
+        outside.faded_trees,
+        band.faded_trees,
+        inside.trees_per_level.twig,
+        outside.trees_per_level.twig,
+        band.trees_per_level.twig
+    );
+    // (A neighbour may be inside its own bound too.)
+    assert!(inside.geometry_trees >= 1, "{inside:?}");
+    assert_eq!(outside.geometry_trees, 0, "{outside:?}");
+    assert!(outside.trees_per_level.twig >= 1, "{outside:?}");
+    assert!(
+        inside.trees_per_level.iter().sum::<u32>() >= 1,
+        "far trees stay images"
+    );
+    assert!(
+        band.faded_trees >= 1 && band.geometry_trees == 0,
+        "{band:?}"
+    );
+
+    let n = 17;
+    let frames: Vec<FlightFrame> = (0..n)
+        .map(|i| {
+            let k = 1.04 - 0.005 * i as f32;
+            frame(i, centre + dir * bound * k, centre, None)
+        })
+        .collect();
+    let configs = [hybrid("hybrid fade 0.2", 0.2), hybrid("hybrid abrupt", 0.0)];
+    let r = run::run(
+        &ctx,
+        &mut renderer,
+        &b,
+        &frames,
+        &configs,
+        &options("hybrid", size),
+        &mut |_| {},
+    )
+    .unwrap();
+    for (c, s) in r.summaries.iter().enumerate() {
+        let changes: Vec<String> = r
+            .rows
+            .iter()
+            .filter(|row| row.config == c)
+            .filter_map(|row| Some(format!("{:.4}/{:.4}", row.change?, row.truth_change?)))
+            .collect();
+        eprintln!(
+            "{}: change / truth's per frame {}",
+            s.label,
+            changes.join(" ")
+        );
+        eprintln!(
+            "geometry switch, {}: worst pop {:?}, flicker ratio {:.3}, mean FLIP {:.4}",
+            s.label, s.worst_pop, s.flicker_ratio, s.mean_flip
+        );
+    }
+    let jump = |c: usize| {
+        let series: Vec<(f64, f64)> = r
+            .rows
+            .iter()
+            .filter(|row| row.config == c)
+            .filter_map(|row| Some((row.change?, row.truth_change?)))
+            .collect();
+        series
+            .windows(2)
+            .map(|w| (w[1].0 - w[0].0) - (w[1].1 - w[0].1))
+            .fold(f64::MIN, f64::max)
+    };
+    let (fade, abrupt) = (jump(0), jump(1));
+    eprintln!("geometry switch: largest jump, cross-fade {fade:.4}, abrupt {abrupt:.4}");
+    assert!(
+        fade < HYBRID_SWITCH_MAX_JUMP,
+        "with the cross-fade the largest jump is {fade:.4}"
+    );
+    assert!(
+        abrupt > HYBRID_SWITCH_MAX_JUMP,
+        "the abrupt switch must show as a jump above the bound: {abrupt:.4}"
+    );
+}
