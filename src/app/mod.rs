@@ -4,6 +4,7 @@
 
 pub mod bench_view;
 pub mod fly;
+pub mod heap;
 pub mod history;
 pub mod panel;
 pub mod reload;
@@ -63,6 +64,8 @@ pub fn run(scene: Option<&Path>) -> Result<()> {
 }
 
 pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
+    // Before any thread allocates: a viewer runs for hours (see `heap`).
+    heap::limit_arenas();
     let scene = match scene_path {
         Some(p) => Scene::load(p)?,
         None => Scene::default_scene(),
@@ -93,6 +96,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         frame.render_scale = s;
     }
     let mut app = App {
+        heap: heap::Upkeep::default(),
         frame,
         scene,
         world,
@@ -240,6 +244,8 @@ struct Rebake {
 }
 
 struct App {
+    /// Gives the C heap's free pages back every few seconds.
+    heap: heap::Upkeep,
     frame: FrameDesc,
     scene: Scene,
     world: World,
@@ -603,7 +609,7 @@ impl App {
         };
         let gpu_bytes = r.renderer.btf_bytes() + r.renderer.texel_bytes() + r.renderer.mesh_bytes();
         let sample = |t: f64| {
-            let (heap_used_bytes, heap_free_bytes) = soak::heap_bytes();
+            let (heap_used_bytes, heap_free_bytes) = heap::heap_bytes();
             soak::Sample {
                 seconds: t,
                 resident_bytes: soak::resident_bytes(),
@@ -702,6 +708,7 @@ impl App {
     }
 
     fn redraw(&mut self, event_loop: &ActiveEventLoop) {
+        self.heap.tend();
         self.tend_bake();
         self.tend_reload();
         let now = Instant::now();
