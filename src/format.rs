@@ -748,6 +748,47 @@ fn texel_record_len(t: &TexelVolume) -> u64 {
     TEXEL_RECORD_FIXED_BYTES + t.voxels.len() as u64
 }
 
+/// Bytes of a BTF image-set record of these sizes.
+pub fn btf_record_bytes(views: u32, lights: u32, resolution: u32) -> u64 {
+    let image = u64::from(resolution).pow(2) * 4;
+    BTF_RECORD_FIXED_BYTES + (u64::from(views) * u64::from(lights) + u64::from(views)) * image
+}
+
+/// Bytes of a VCM set record (8 corners x 6 faces) of this face resolution.
+pub fn vcm_record_bytes(resolution: u32) -> u64 {
+    VCM_RECORD_FIXED_BYTES + 8 * 6 * u64::from(resolution).pow(2)
+}
+
+/// Bytes of a texel volume record with `lights` light volumes (and the sky's) of `dims`.
+pub fn texel_record_bytes(lights: u32, dims: [u32; 3]) -> u64 {
+    let voxels: u64 = dims.iter().map(|&d| u64::from(d)).product();
+    TEXEL_RECORD_FIXED_BYTES + (u64::from(lights) + 1) * voxels * 4
+}
+
+/// The length of the file the writer makes of records of these sizes (each list in file
+/// order: BTF sets, VCM sets, texel volumes), or `Err` with the size of a record too
+/// large for any section ([`MAX_SECTION_BYTES`]).
+pub fn file_bytes_for(btf: &[u64], vcm: &[u64], texel: &[u64]) -> Result<u64, u64> {
+    if let Some(&big) = btf
+        .iter()
+        .chain(vcm)
+        .chain(texel)
+        .find(|&&s| s.saturating_add(SECTION_PREFIX_BYTES) > MAX_SECTION_BYTES)
+    {
+        return Err(big);
+    }
+    let mut plans = Vec::new();
+    for (kind, sizes) in [
+        (SectionKind::Btf, btf),
+        (SectionKind::Vcm, vcm),
+        (SectionKind::Texel, texel),
+    ] {
+        pack(kind, sizes.iter().copied(), MAX_SECTION_BYTES, &mut plans);
+    }
+    let payloads: u64 = plans.iter().map(|p| p.len).sum();
+    Ok((FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * plans.len() + 4) as u64 + payloads)
+}
+
 /// Packs records into sections greedily, each at most `limit` bytes unless one record alone
 /// is larger (which [`Baked::validate`] rejects).
 fn plan_sections(baked: &Baked, limit: u64) -> Vec<PlannedSection> {
@@ -1678,6 +1719,34 @@ mod tests {
             vcm: vec![vcm_set(0, Level::Twig, 8), vcm_set(7, Level::Branch, 16)],
             texels: vec![texel_volume(0, [8, 16, 8])],
         }
+    }
+
+    #[test]
+    fn the_file_size_is_known_from_the_record_sizes_alone() {
+        for b in [sample(), small()] {
+            let btf: Vec<u64> = b
+                .btf
+                .iter()
+                .map(|s| btf_record_bytes(s.views, s.lights, s.resolution))
+                .collect();
+            let vcm: Vec<u64> = b
+                .vcm
+                .iter()
+                .map(|s| vcm_record_bytes(s.resolution))
+                .collect();
+            let texel: Vec<u64> = b
+                .texels
+                .iter()
+                .map(|t| texel_record_bytes(t.lights, t.dims))
+                .collect();
+            assert_eq!(
+                file_bytes_for(&btf, &vcm, &texel),
+                Ok(to_bytes(&b).len() as u64)
+            );
+        }
+        // 258 views x 258 lights at 128² is one 4.4 GB record: no section holds it.
+        let huge = btf_record_bytes(258, 258, 128);
+        assert_eq!(file_bytes_for(&[huge], &[], &[]), Err(huge));
     }
 
     /// A few KB: two small VCM sets, no BTF.

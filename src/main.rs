@@ -679,6 +679,10 @@ fn bake(
 ) -> anyhow::Result<()> {
     let scene = load_scene(scene_path)?;
     let world = scene.build_world().map_err(canopy::Error::from)?;
+    // Refused before any work when the file or this machine cannot hold it.
+    let settings = canopy::bake::cache::settings_of(&scene);
+    let e = canopy::bake::estimate::check(&settings, &world)?;
+    eprintln!("{}", estimate_line(&e));
     let ctx = GpuContext::headless(adapter(cpu))?;
     let path = out
         .map(Path::to_path_buf)
@@ -761,13 +765,41 @@ fn compare(a: &Path, b: &Path, json: bool, diff: Option<&Path>) -> anyhow::Resul
     Ok(())
 }
 
+/// One line with a bake's estimated time, file size and memory.
+fn estimate_line(e: &canopy::bake::estimate::Estimate) -> String {
+    format!(
+        "bake estimate: about {:.0} s on a software renderer, a {:.1} MB file ({:.1} MB BTF images, {:.1} MB visibility cube maps, {:.1} MB texel volumes), about {:.0} MB of memory to view",
+        e.seconds,
+        e.file_bytes as f64 / 1e6,
+        e.btf_bytes as f64 / 1e6,
+        e.vcm_bytes as f64 / 1e6,
+        e.texel_bytes as f64 / 1e6,
+        e.memory_bytes as f64 / 1e6
+    )
+}
+
 fn info(scene: Option<&Path>, json: bool) -> anyhow::Result<()> {
     let scene = load_scene(scene)?;
     let t0 = Instant::now();
     let world = scene.build_world().map_err(canopy::Error::from)?;
     let r = WorldSummary::new(&world, t0.elapsed().as_secs_f64() * 1e3);
+    let settings = canopy::bake::cache::settings_of(&scene);
+    // A bake the format cannot hold is reported here, not refused: `info` only describes.
+    let estimate = canopy::bake::estimate::estimate(&settings, &world);
     if json {
-        println!("{}", serde_json::to_string(&r).context("encoding JSON")?);
+        #[derive(serde::Serialize)]
+        struct Info<'a> {
+            #[serde(flatten)]
+            world: &'a WorldSummary,
+            bake_estimate: Option<canopy::bake::estimate::Estimate>,
+            bake_refused: Option<String>,
+        }
+        let info = Info {
+            world: &r,
+            bake_estimate: estimate.as_ref().ok().copied(),
+            bake_refused: estimate.as_ref().err().map(|e| e.to_string()),
+        };
+        println!("{}", serde_json::to_string(&info).context("encoding JSON")?);
     } else {
         println!(
             "{} trees on a {} m terrain ({}x{} heights), built in {:.0} ms",
@@ -786,6 +818,10 @@ fn info(scene: Option<&Path>, json: bool) -> anyhow::Result<()> {
                 s.leaves,
                 s.height_m
             );
+        }
+        match &estimate {
+            Ok(e) => println!("{}", estimate_line(e)),
+            Err(e) => println!("bake refused: {e}"),
         }
     }
     Ok(())

@@ -1,6 +1,15 @@
-//! Progress bars on the terminal for the commands' long work (bakes, benches).
+//! Progress bars on the terminal for the commands' long work (bakes, benches); where
+//! stderr is not a terminal (a log, CI), a bake's progress is written as a line every few
+//! seconds instead.
+
+use std::io::IsTerminal;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
+
+/// How often a bake's progress is logged where no bar can be drawn.
+pub const LOG_EVERY: Duration = Duration::from_secs(5);
 
 /// The bar of a bake.
 pub const BAKE_BAR: &str = "baking {msg:24} [{bar:30}] {pos}/{len} steps ({eta} left)";
@@ -17,9 +26,58 @@ pub fn bar(show: bool, len: u64, template: &str) -> ProgressBar {
     bar
 }
 
-/// Shows a bake's progress on `bar`.
+/// Shows a bake's progress on `bar`, or, where stderr is not a terminal, logs it every
+/// [`LOG_EVERY`] with the time left.
 pub fn show_bake(bar: &ProgressBar, p: &crate::bake::Progress) {
     bar.set_length(p.total);
     bar.set_position(p.done);
     bar.set_message(p.what.clone());
+    if !std::io::stderr().is_terminal() {
+        static LAST: Mutex<Option<Instant>> = Mutex::new(None);
+        let Ok(mut last) = LAST.lock() else { return };
+        if last.is_none_or(|t| t.elapsed() >= LOG_EVERY) || p.done == p.total {
+            *last = Some(Instant::now());
+            eprintln!("{}", log_line(p, bar.elapsed()));
+        }
+    }
+}
+
+/// `baking STAGE: DONE/TOTAL steps (P %), about S s left`, the time left extrapolated
+/// from the time so far.
+pub fn log_line(p: &crate::bake::Progress, elapsed: Duration) -> String {
+    let f = p.done as f64 / p.total.max(1) as f64;
+    let left = if p.done > 0 {
+        format!(
+            ", about {:.0} s left",
+            elapsed.as_secs_f64() * (1.0 - f) / f
+        )
+    } else {
+        String::new()
+    };
+    format!(
+        "baking {}: {}/{} steps ({:.0} %){left}",
+        p.what,
+        p.done,
+        p.total,
+        f * 100.0
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_log_line_says_the_stage_and_the_time_left() {
+        let p = crate::bake::Progress {
+            done: 25,
+            total: 100,
+            what: "vcm tree 12".into(),
+        };
+        let l = log_line(&p, Duration::from_secs(10));
+        assert_eq!(
+            l,
+            "baking vcm tree 12: 25/100 steps (25 %), about 30 s left"
+        );
+    }
 }

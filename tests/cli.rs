@@ -551,3 +551,91 @@ fn a_full_disk_is_reported_and_leaves_nothing_half_written() {
         std::panic::resume_unwind(p);
     }
 }
+
+/// A bake's cost is known before it starts: `info` gives the file's size exactly (the bake
+/// then writes that many bytes); a bake the format cannot hold, or one needing more memory
+/// than there is (`CANOPY_MEMORY_LIMIT` stands for a small machine), is refused with exit
+/// code 2 and the key to lower, before any work and with nothing written.
+#[test]
+fn bakes_are_estimated_and_refused_before_they_start() {
+    let cache = tmp("estimate-cache");
+    let lone = common::data("lone_tree.toml");
+    let o = canopy()
+        .arg("info")
+        .arg(&lone)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let info: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let estimate = &info["bake_estimate"];
+    let file = tmp("estimated.canopy");
+    let o = canopy()
+        .env("CANOPY_CACHE_DIR", &cache)
+        .args(["bake"])
+        .arg(&lone)
+        .arg("--out")
+        .arg(&file)
+        .args(["--cpu", "--json"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("bake estimate: about"), "{err}");
+    let written = std::fs::metadata(&file).unwrap().len();
+    assert_eq!(estimate["file_bytes"].as_u64(), Some(written), "{estimate}");
+    assert!(estimate["memory_bytes"].as_u64().unwrap() > written);
+
+    let refused = |o: std::process::Output, want: &str| {
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(err.contains(want), "expected {want:?} in: {err}");
+        assert!(!err.contains("baking"), "no work started: {err}");
+    };
+    // Too little memory: the bake and a render that would bake are refused.
+    let small = common::data("small.toml");
+    let bake_small = || {
+        canopy()
+            .env("CANOPY_CACHE_DIR", &cache)
+            .env("CANOPY_MEMORY_LIMIT", "100000000")
+            .arg("bake")
+            .arg(&small)
+            .arg("--cpu")
+            .output()
+            .unwrap()
+    };
+    refused(bake_small(), "only 0.1 GB is available; lower [");
+    let o = canopy()
+        .env("CANOPY_CACHE_DIR", &cache)
+        .env("CANOPY_MEMORY_LIMIT", "100000000")
+        .arg("render")
+        .arg(&small)
+        .args(["--method", "btf", "--size", "32x32", "--cpu", "--out"])
+        .arg(tmp("refused.png"))
+        .output()
+        .unwrap();
+    refused(o, "GB of memory to bake and view");
+    assert!(!tmp("refused.png").exists());
+    // A BTF set larger than a section of the file.
+    let text = std::fs::read_to_string(&small).unwrap();
+    let huge = tmp("huge.toml");
+    assert!(
+        !text.contains("[bake]"),
+        "the small scene keeps the default bake"
+    );
+    let edited = format!("{text}\n[bake]\nviews = 258\nlights = 258\nresolution = 128\n");
+    std::fs::write(&huge, edited).unwrap();
+    let o = canopy()
+        .env("CANOPY_CACHE_DIR", &cache)
+        .arg("bake")
+        .arg(&huge)
+        .arg("--cpu")
+        .output()
+        .unwrap();
+    refused(o, "lower [bake] resolution, views or lights");
+    let o = canopy().arg("info").arg(&huge).output().unwrap();
+    assert!(o.status.success());
+    assert!(String::from_utf8_lossy(&o.stdout).contains("bake refused"));
+    let cached = std::fs::read_dir(&cache).map_or(0, |d| d.count());
+    assert_eq!(cached, 0, "nothing written to the cache");
+}

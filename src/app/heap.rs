@@ -80,7 +80,11 @@ mod tests {
         let garbage: Vec<Vec<u8>> = (0..64).map(|_| vec![0u8; 100_000]).collect();
         drop(garbage);
         trim();
-        assert!(keep.iter().enumerate().all(|(i, v)| v.iter().all(|&b| b == i as u8)));
+        assert!(
+            keep.iter()
+                .enumerate()
+                .all(|(i, v)| v.iter().all(|&b| b == i as u8))
+        );
         #[cfg(all(target_os = "linux", target_env = "gnu"))]
         assert!(heap_bytes().0 >= 64 * 100_000);
     }

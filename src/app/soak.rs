@@ -256,6 +256,5 @@ mod tests {
         assert!(csv(&samples).starts_with(
             "seconds,resident_bytes,gpu_bytes,heap_used_bytes,heap_free_bytes\n0.0,100,10,0,0\n"
         ));
-
     }
 }

@@ -8,6 +8,7 @@
 //! volumes (`texel`), photographed slab by slab.
 
 pub mod cache;
+pub mod estimate;
 pub mod report;
 pub mod texel;
 pub mod vcm;
@@ -117,6 +118,8 @@ pub fn bake(
     scene_hash: u64,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<(Baked, BakeTimes)> {
+    // Refused here, before any work, if the file or this machine cannot hold it.
+    estimate::check(settings, world)?;
     let total = step_count(settings, world);
     let t0 = std::time::Instant::now();
     let mut baked = bake_btf(ctx, world, settings, scene_hash, &mut |p| {
