@@ -200,12 +200,25 @@ struct Running {
 /// A bake running on its own thread and GPU device, so the viewer stays responsive.
 struct BakeJob {
     progress: Arc<Mutex<crate::bake::Progress>>,
+    /// What the bake costs, estimated before it starts (shown under its progress bar).
+    estimate: Option<String>,
     handle: std::thread::JoinHandle<Result<(crate::format::Baked, crate::bake::Source)>>,
 }
 
 impl BakeJob {
     /// Loads `scene`'s bake from the cache, or bakes it, on its own thread.
     fn start(scene: &Scene, world: &World) -> Self {
+        let settings = crate::bake::cache::settings_of(scene);
+        let estimate = crate::bake::estimate::estimate(&settings, world)
+            .ok()
+            .map(|e| {
+                format!(
+                    "if not cached: about {:.0} s, {:.0} MB file, {:.0} MB of memory",
+                    e.seconds,
+                    e.file_bytes as f64 / 1e6,
+                    e.memory_bytes as f64 / 1e6
+                )
+            });
         let progress = Arc::new(Mutex::new(crate::bake::Progress {
             done: 0,
             total: 1,
@@ -222,7 +235,11 @@ impl BakeJob {
                 }
             })
         });
-        Self { progress, handle }
+        Self {
+            progress,
+            estimate,
+            handle,
+        }
     }
 }
 
@@ -469,6 +486,11 @@ impl App {
                     .ok()
                     .map(|p| (p.done, p.total, p.what.clone()))
             });
+        self.stats.bake_estimate = self
+            .bake_job
+            .as_ref()
+            .or(self.rebake.as_ref().map(|r| &r.job))
+            .and_then(|j| j.estimate.clone());
         if self
             .bake_job
             .as_ref()

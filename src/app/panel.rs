@@ -36,6 +36,8 @@ pub struct PanelStats {
     pub sun_update_gpu_ms: Option<f64>,
     /// A bake running in the background: done, total, what.
     pub bake_progress: Option<(u64, u64, String)>,
+    /// That bake's estimated cost, in words.
+    pub bake_estimate: Option<String>,
     /// The last frames' CPU and GPU times, for the plot.
     pub history: super::history::FrameTimeHistory,
 }
@@ -106,6 +108,9 @@ pub fn controls(
         };
         ui.label(format!("baking BTF images: {what}"));
         ui.add(egui::ProgressBar::new(f).show_percentage());
+        if let Some(e) = &stats.bake_estimate {
+            ui.small(e);
+        }
     }
     if frame.method.is_btf() {
         let b = &mut frame.btf;
