@@ -32,7 +32,9 @@ struct Frame {
     sky_vis_texel_world: f32,
     // Background colours (not scaled by intensity).
     sky_zenith: vec3<f32>,
-    _pad2: f32,
+    // 1: every pass draws its pixels' class instead of their colour (sky black, ground red,
+    // near trees green, far trees blue; src/render/frame.rs, `pixel_classes`).
+    pixel_classes: u32,
     sky_horizon: vec3<f32>,
     _pad3: f32,
     // Far distance of each cascade (view depth, m).

@@ -29,6 +29,8 @@ struct VertexOut {
     @location(2) color: vec3<f32>,
     @location(3) foliage: f32,
     @location(4) @interpolate(flat) opacity: f32,
+    // 1 for a tree's parts, 0 for the terrain (drawn as instance 0).
+    @location(5) @interpolate(flat) tree: f32,
 }
 
 @vertex
@@ -42,6 +44,7 @@ fn vs_main(v: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
     out.color = v.color * mix(vec3<f32>(1.0), instance_tint(instance), v.foliage);
     out.foliage = v.foliage;
     out.opacity = instance_opacity(instance);
+    out.tree = select(1.0, 0.0, instance / max(part_set.count, 1u) == 0u);
     return out;
 }
 
@@ -201,7 +204,22 @@ fn shade_as(in: VertexOut, front: bool, own_cascades: bool) -> vec3<f32> {
 
 @fragment
 fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    if frame.pixel_classes != 0u {
+        return pixel_class(in);
+    }
     return lit_and_fogged(in, front, false);
+}
+
+// The pixel's class (see `Frame::pixel_classes`): ground red, near trees green (the
+// distance matches NEAR_TREE_M in src/render/frame.rs), far trees blue.
+fn pixel_class(in: VertexOut) -> vec4<f32> {
+    if in.tree < 0.5 {
+        return vec4<f32>(1.0, 0.0, 0.0, 1.0);
+    }
+    if length(frame.camera_pos - in.world) < 100.0 {
+        return vec4<f32>(0.0, 1.0, 0.0, 1.0);
+    }
+    return vec4<f32>(0.0, 0.0, 1.0, 1.0);
 }
 
 fn lit_and_fogged(in: VertexOut, front: bool, own_cascades: bool) -> vec4<f32> {

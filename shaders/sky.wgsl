@@ -18,6 +18,9 @@ fn vs_sky(@builtin(vertex_index) i: u32) -> SkyOut {
 
 @fragment
 fn fs_sky(in: SkyOut) -> @location(0) vec4<f32> {
+    if frame.pixel_classes != 0u {
+        return vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    }
     let p = frame.inv_view_proj * vec4<f32>(in.ndc, 0.5, 1.0);
     let dir = normalize(p.xyz / p.w - frame.camera_pos);
     let up = clamp(dir.y, 0.0, 1.0);

@@ -85,6 +85,10 @@ enum Command {
         /// Also write the FLIP error map (magma colours) to this PNG.
         #[arg(long)]
         diff: Option<PathBuf>,
+        /// Split the error by pixel class, from an image of A's classes (`render --method
+        /// geometry --pixel-classes`, same camera and size).
+        #[arg(long)]
+        classes: Option<PathBuf>,
     },
     /// Speed against accuracy along a flight: every method (and every swept btf knob value)
     /// timed and compared with the geometry ground truth, frame by frame; writes
@@ -220,6 +224,10 @@ struct RenderArgs {
     /// hills, sun shadows over the whole scene from 4096² cascades); slower.
     #[arg(long)]
     reference: bool,
+    /// geometry: draw each pixel's class instead of its colour (sky black, ground red,
+    /// trees nearer than 100 m green, farther blue), for `compare --classes`.
+    #[arg(long)]
+    pixel_classes: bool,
     /// geometry --reference: directions over the sky whose depth maps give the sky
     /// visibility.
     #[arg(long, default_value_t = canopy::render::sky_visibility::SKY_DIRECTIONS,
@@ -444,7 +452,13 @@ fn main() -> ExitCode {
             cpu,
             json,
         }) => bake(scene.as_deref(), out.as_deref(), cpu, json),
-        Some(Command::Compare { a, b, json, diff }) => compare(&a, &b, json, diff.as_deref()),
+        Some(Command::Compare {
+            a,
+            b,
+            json,
+            diff,
+            classes,
+        }) => compare(&a, &b, json, diff.as_deref(), classes.as_deref()),
         Some(Command::Info { scene, json }) => info(scene.as_deref(), json),
         Some(Command::Bench(args)) => bench(args),
         Some(Command::Tune(args)) => tune(args),
@@ -468,6 +482,15 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     frame.method = args.method;
     frame.shadows.map_size = args.shadow_map;
     frame.ground_shadows = args.ground_shadows;
+    if args.pixel_classes {
+        if args.method != Method::Geometry {
+            return Err(canopy::Error::BadInput(
+                "--pixel-classes draws the geometry's pixel classes; use --method geometry".into(),
+            )
+            .into());
+        }
+        frame.pixel_classes = true;
+    }
     if args.reference {
         if args.method != Method::Geometry {
             return Err(canopy::Error::BadInput(
@@ -741,15 +764,39 @@ fn bake(
     Ok(())
 }
 
-fn compare(a: &Path, b: &Path, json: bool, diff: Option<&Path>) -> anyhow::Result<()> {
+fn compare(
+    a: &Path,
+    b: &Path,
+    json: bool,
+    diff: Option<&Path>,
+    classes: Option<&Path>,
+) -> anyhow::Result<()> {
     let r = canopy::metrics::compare_files(a, b)?;
     if let Some(d) = diff {
         let img = image::DynamicImage::ImageRgb8(r.error_image()).to_rgba8();
         canopy::imageio::save_png(d, &img)?;
     }
+    let by_class = match classes {
+        Some(path) => {
+            let mask = canopy::metrics::load_rgb(path)?;
+            Some(canopy::metrics::by_class(&r, &mask)?)
+        }
+        None => None,
+    };
     let s = r.stats;
     if json {
-        println!("{}", serde_json::to_string(&s).context("encoding JSON")?);
+        #[derive(serde::Serialize)]
+        struct Json<'a> {
+            #[serde(flatten)]
+            stats: canopy::metrics::FlipStats,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            classes: Option<&'a [canopy::metrics::ClassFlip]>,
+        }
+        let j = Json {
+            stats: s,
+            classes: by_class.as_deref(),
+        };
+        println!("{}", serde_json::to_string(&j).context("encoding JSON")?);
     } else {
         println!(
             "FLIP {} vs {}: mean {:.4}, p50 {:.4}, p90 {:.4}, p99 {:.4}, max {:.4}",
@@ -761,6 +808,16 @@ fn compare(a: &Path, b: &Path, json: bool, diff: Option<&Path>) -> anyhow::Resul
             s.p99,
             s.max
         );
+        for c in by_class.iter().flatten() {
+            println!(
+                "  {:<11} {:>5.1} % of pixels, mean {:.4}, p90 {:.4}, share of the error {:>5.1} %",
+                c.class.name(),
+                c.pixel_fraction * 100.0,
+                c.stats.mean,
+                c.stats.p90,
+                c.error_share * 100.0
+            );
+        }
     }
     Ok(())
 }

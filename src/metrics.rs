@@ -105,6 +105,98 @@ pub fn summarise(errors: &[f32]) -> FlipStats {
     }
 }
 
+/// What a pixel of the truth shows (`render --pixel-classes` draws them).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PixelClass {
+    Sky,
+    Ground,
+    NearTrees,
+    FarTrees,
+}
+
+impl PixelClass {
+    pub const ALL: [PixelClass; 4] = [
+        PixelClass::Sky,
+        PixelClass::Ground,
+        PixelClass::NearTrees,
+        PixelClass::FarTrees,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            PixelClass::Sky => "sky",
+            PixelClass::Ground => "ground",
+            PixelClass::NearTrees => "near trees",
+            PixelClass::FarTrees => "far trees",
+        }
+    }
+
+    /// The class of a pixel of a class image: its strongest channel (black: sky).
+    pub fn of(p: [u8; 3]) -> PixelClass {
+        let [r, g, b] = p;
+        if r.max(g).max(b) < 128 {
+            PixelClass::Sky
+        } else if r >= g && r >= b {
+            PixelClass::Ground
+        } else if g >= b {
+            PixelClass::NearTrees
+        } else {
+            PixelClass::FarTrees
+        }
+    }
+}
+
+/// FLIP over the pixels of one class.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct ClassFlip {
+    pub class: PixelClass,
+    /// Of all pixels.
+    pub pixel_fraction: f64,
+    pub stats: FlipStats,
+    /// This class's part of the whole image's summed error.
+    pub error_share: f64,
+}
+
+/// `result`'s error split by the classes in `classes` (an image of the same size); the
+/// classes no pixel has are left out.
+pub fn by_class(result: &FlipResult, classes: &RgbImage) -> Result<Vec<ClassFlip>> {
+    if classes.dimensions() != (result.width, result.height) {
+        let (bw, bh) = classes.dimensions();
+        return Err(Error::ImageSizeMismatch {
+            a: "compared images".into(),
+            aw: result.width,
+            ah: result.height,
+            b: "class image".into(),
+            bw,
+            bh,
+        });
+    }
+    let total: f64 = result.errors.iter().map(|&e| f64::from(e)).sum();
+    let n = result.errors.len().max(1) as f64;
+    let mut out = Vec::new();
+    for class in PixelClass::ALL {
+        let errors: Vec<f32> = result
+            .errors
+            .iter()
+            .zip(classes.pixels())
+            .filter(|(_, p)| PixelClass::of(p.0) == class)
+            .map(|(&e, _)| e)
+            .collect();
+        if errors.is_empty() {
+            continue;
+        }
+        let sum: f64 = errors.iter().map(|&e| f64::from(e)).sum();
+        out.push(ClassFlip {
+            class,
+            pixel_fraction: errors.len() as f64 / n,
+            stats: summarise(&errors),
+            error_share: if total > 0.0 { sum / total } else { 0.0 },
+        });
+    }
+    Ok(out)
+}
+
 /// Loads a PNG (or any format `image` reads) as 8-bit RGB, dropping alpha.
 pub fn load_rgb(path: &Path) -> Result<RgbImage> {
     let img = image::open(path).map_err(|source| Error::ReadImage {
@@ -134,6 +226,33 @@ pub fn compare_files(reference: &Path, test: &Path) -> Result<FlipResult> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_error_splits_by_class_and_the_shares_add_up() {
+        // 4x1 pixels: sky, ground, near trees, far trees; errors 0.1 .. 0.4.
+        let classes =
+            RgbImage::from_raw(4, 1, vec![0, 0, 0, 255, 0, 0, 0, 255, 0, 0, 0, 255]).unwrap();
+        let r = FlipResult {
+            stats: summarise(&[0.1, 0.2, 0.3, 0.4]),
+            width: 4,
+            height: 1,
+            errors: vec![0.1, 0.2, 0.3, 0.4],
+        };
+        let c = by_class(&r, &classes).unwrap();
+        assert_eq!(
+            c.iter().map(|c| c.class).collect::<Vec<_>>(),
+            PixelClass::ALL.to_vec()
+        );
+        for (k, c) in c.iter().enumerate() {
+            assert!((c.stats.mean - 0.1 * (k + 1) as f32).abs() < 1e-6);
+            assert!((c.pixel_fraction - 0.25).abs() < 1e-9);
+            assert!((c.error_share - 0.1 * (k + 1) as f64).abs() < 1e-6);
+        }
+        let total: f64 = c.iter().map(|c| c.error_share).sum();
+        assert!((total - 1.0).abs() < 1e-9);
+        let small = RgbImage::new(2, 1);
+        assert!(by_class(&r, &small).is_err());
+    }
 
     #[test]
     fn identical_images_have_zero_error() {

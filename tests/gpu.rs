@@ -224,3 +224,45 @@ fn the_view_drawn_at_half_size_is_stretched_over_the_target() {
     assert!(f > 0.0 && f < 0.2, "{f}");
     assert!(upside_down > 3.0 * f, "{upside_down} against {f}");
 }
+
+/// Pixel classes: the small scene drawn as classes holds only the four class colours, the
+/// sky above and the ground below, trees both nearer and farther than 100 m; a tree seen
+/// from 30 m is all near trees.
+#[test]
+fn pixel_classes_tell_sky_ground_and_near_and_far_trees_apart() {
+    use canopy::metrics::PixelClass;
+    let ctx = gpu();
+    let scene = small_scene();
+    let world = scene.build_world().unwrap();
+    let mut frame = FrameDesc::from_scene(&scene);
+    frame.pixel_classes = true;
+    let (w, h) = (160, 120);
+    let img = rgb(&render(&ctx, &world, &frame, w, h));
+    let mut counts = [0usize; 4];
+    for p in img.pixels() {
+        assert!(
+            [[0, 0, 0], [255, 0, 0], [0, 255, 0], [0, 0, 255]].contains(&p.0),
+            "only class colours: {:?}",
+            p.0
+        );
+        counts[PixelClass::ALL
+            .iter()
+            .position(|c| *c == PixelClass::of(p.0))
+            .unwrap()] += 1;
+    }
+    eprintln!("small scene's pixel classes (sky, ground, near, far): {counts:?}");
+    assert!(counts.iter().all(|&c| c > 0), "{counts:?}");
+    assert_eq!(PixelClass::of(img.get_pixel(w / 2, 0).0), PixelClass::Sky);
+    assert_eq!(
+        PixelClass::of(img.get_pixel(w / 2, h - 1).0),
+        PixelClass::Ground
+    );
+    // Other methods ignore the flag.
+    let btf = FrameDesc {
+        method: canopy::render::Method::Btf,
+        ..frame
+    };
+    let none = canopy::render::shadow::Cascades::none();
+    let u = |f: &FrameDesc| canopy::render::frame::FrameUniforms::new(f, 1.0, &none).pixel_classes;
+    assert_eq!((u(&frame), u(&btf)), (1, 0));
+}

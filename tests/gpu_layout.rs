@@ -79,7 +79,7 @@ fn frame_uniforms_match_frame_wgsl() {
         ground_ambient,
         sky_vis_texel_world,
         sky_zenith,
-        _pad2,
+        pixel_classes,
         sky_horizon,
         _pad3,
         cascade_splits,

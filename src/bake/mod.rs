@@ -282,6 +282,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         sun_held: false,
         reference: Some(Reference::default()),
         render_scale: Default::default(),
+        pixel_classes: false,
     }
 }
 

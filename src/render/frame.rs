@@ -191,7 +191,14 @@ pub struct FrameDesc {
     /// The fraction of the window the viewer draws the 3D view at (the render core draws
     /// at whatever size it is given; the viewer applies this).
     pub render_scale: super::scale::RenderScale,
+    /// `geometry` only: draw each pixel's class instead of its colour (sky black, ground
+    /// red, trees nearer than [`NEAR_TREE_M`] green, farther ones blue), so that an error
+    /// map can be split by what each pixel shows.
+    pub pixel_classes: bool,
 }
+
+/// Where the pixel classes' near trees end (m).
+pub const NEAR_TREE_M: f32 = 100.0;
 
 impl FrameDesc {
     /// The frame a scene file describes: its start camera, sun and sky.
@@ -222,6 +229,7 @@ impl FrameDesc {
             sun_held: false,
             reference: None,
             render_scale: Default::default(),
+            pixel_classes: false,
         }
     }
 }
@@ -304,7 +312,8 @@ pub struct FrameUniforms {
     /// Side of one cell of the sky visibility volume (m).
     pub sky_vis_texel_world: f32,
     pub sky_zenith: [f32; 3],
-    pub _pad2: f32,
+    /// 1: draw pixel classes instead of colours (see [`FrameDesc::pixel_classes`]).
+    pub pixel_classes: u32,
     pub sky_horizon: [f32; 3],
     pub _pad3: f32,
     /// Far view depth of each cascade (m).
@@ -357,7 +366,7 @@ impl FrameUniforms {
             ground_ambient: ground.to_array(),
             sky_vis_texel_world: 0.0,
             sky_zenith: frame.sky.color.to_array(),
-            _pad2: 0.0,
+            pixel_classes: u32::from(frame.pixel_classes && frame.method == Method::Geometry),
             sky_horizon: horizon.to_array(),
             _pad3: 0.0,
             cascade_splits: cascades.splits,
