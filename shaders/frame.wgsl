@@ -36,7 +36,9 @@ struct Frame {
     // near trees green, far trees blue; src/render/frame.rs, `pixel_classes`).
     pixel_classes: u32,
     sky_horizon: vec3<f32>,
-    _pad3: f32,
+    // 1 when the cascades hold `hybrid`'s geometry trees alone (left out of the ground
+    // alpha map): everything else takes their shadows from the cascades too.
+    hybrid_cascades: u32,
     // Far distance of each cascade (view depth, m).
     cascade_splits: vec3<f32>,
     // 1 / the side of a cascade's map (one texel in uv).

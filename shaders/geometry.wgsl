@@ -193,6 +193,9 @@ fn shade_as(in: VertexOut, front: bool, own_cascades: bool) -> vec3<f32> {
         }
     } else if frame.ground_alpha_on != 0u {
         vis *= ground_transmittance(in.world);
+        if frame.hybrid_cascades != 0u {
+            vis *= cascade_visibility(in.world, offset_normal, view_depth);
+        }
     }
     // Hemispherical sky light; in the reference its sky part only where the sky is open.
     // (Leaves take the side of their normal that faces up.)

@@ -81,7 +81,7 @@ fn frame_uniforms_match_frame_wgsl() {
         sky_zenith,
         pixel_classes,
         sky_horizon,
-        _pad3,
+        hybrid_cascades,
         cascade_splits,
         cascade_texel_uv,
         cascade_texel_world,

@@ -315,7 +315,9 @@ pub struct FrameUniforms {
     /// 1: draw pixel classes instead of colours (see [`FrameDesc::pixel_classes`]).
     pub pixel_classes: u32,
     pub sky_horizon: [f32; 3],
-    pub _pad3: f32,
+    /// 1 when the cascades hold `hybrid`'s geometry trees alone, whose shadows then fall on
+    /// the rest of the scene through them (they are left out of the ground alpha map).
+    pub hybrid_cascades: u32,
     /// Far view depth of each cascade (m).
     pub cascade_splits: [f32; 3],
     /// One texel of a cascade's map in uv (1 / its side).
@@ -368,7 +370,7 @@ impl FrameUniforms {
             sky_zenith: frame.sky.color.to_array(),
             pixel_classes: u32::from(frame.pixel_classes && frame.method == Method::Geometry),
             sky_horizon: horizon.to_array(),
-            _pad3: 0.0,
+            hybrid_cascades: 0,
             cascade_splits: cascades.splits,
             cascade_texel_uv: 1.0 / frame.shadows.map_size.max(1) as f32,
             cascade_texel_world: cascades.texel_world,

@@ -35,6 +35,9 @@ pub struct GroundKey {
     pub texels: bool,
     /// Side of the part of the textures in use.
     pub size: u32,
+    /// A hash of the trees left out of the alpha map (`hybrid`'s geometry trees, which
+    /// cast their own shadows through cascades); 0 when none are.
+    pub excluded: u64,
 }
 
 /// The textures the colour passes sample (the maps, or the placeholders).
@@ -165,13 +168,15 @@ impl GroundMaps {
     }
 
     /// The key of the maps a frame needs, and whether the ones held must be rebuilt for
-    /// it: the sun moved, the trees came or went, or the sun was let go after a preview.
+    /// it: the sun moved, the trees came or went, the trees left out changed, or the sun
+    /// was let go after a preview.
     pub fn wanted(
         &self,
         to_sun: glam::Vec3,
         trees: bool,
         texels: bool,
         held: bool,
+        excluded: u64,
     ) -> (GroundKey, bool) {
         let capacity = self.textures.capacity;
         let size = if held {
@@ -184,6 +189,7 @@ impl GroundMaps {
             trees,
             texels,
             size,
+            excluded,
         };
         let rebuild = match self.built {
             None => true,
@@ -191,6 +197,7 @@ impl GroundMaps {
                 k.to_sun != to_sun
                     || k.trees != trees
                     || k.texels != texels
+                    || k.excluded != excluded
                     || (!held && k.size != size)
             }
         };

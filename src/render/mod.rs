@@ -525,11 +525,26 @@ impl Renderer {
         let prepare_ms = prepare_start.elapsed().as_secs_f64() * 1e3 - sun_update_ms;
         let mut uniforms =
             self.frame_uniforms_for(frame, aspect, &cascades, shadows_on, reference.is_some());
+        if matches!(prepared, Prepared::Btf(_)) && shadows_on {
+            uniforms.hybrid_cascades = 1;
+        }
 
         // The ground shadow maps follow the sun, not the camera. They are submitted on their
         // own so that their cost can be timed (blocking, when measuring).
         if let Some(ground) = self.ground.as_mut().filter(|_| ground_on) {
-            let (want, rebuild) = ground.wanted(to_sun, frame.trees, is_texel, frame.sun_held);
+            // `hybrid`'s geometry trees cast through their cascades, not the alpha map.
+            let mut excluded: Vec<u32> = match &prepared {
+                Prepared::Btf(b) if shadows_on => {
+                    b.twigs.iter().flatten().map(|&(t, _)| t).collect()
+                }
+                _ => Vec::new(),
+            };
+            excluded.sort_unstable();
+            let excluded_key = excluded.iter().fold(0u64, |h, &t| {
+                (h ^ u64::from(t) ^ 0x9e37_79b9_7f4a_7c15).wrapping_mul(0x0100_0000_01b3)
+            });
+            let (want, rebuild) =
+                ground.wanted(to_sun, frame.trees, is_texel, frame.sun_held, excluded_key);
             if rebuild {
                 let t0 = std::time::Instant::now();
                 // The trees' opacity from the sun: the texels' boxes, or the BTF billboards.
@@ -543,7 +558,7 @@ impl Renderer {
                         Some((pipeline, count, t.sun_bind_group().clone(), 36))
                     }
                     (false, _, Some(b)) => {
-                        let count = b.prepare_sun(ctx, &self.world, want.to_sun);
+                        let count = b.prepare_sun(ctx, &self.world, want.to_sun, &excluded);
                         let pipeline = b
                             .opacity_pipeline(&ctx.device, &self.layouts.shadow_frame)
                             .clone();

@@ -317,12 +317,19 @@ impl BtfAssets {
 
     /// Every tree's tree-level billboard as the sun sees it (for the ground alpha shadow
     /// map). Returns how many were uploaded.
-    pub fn prepare_sun(&mut self, ctx: &GpuContext, world: &WorldGpu, to_sun: Vec3) -> u32 {
+    pub fn prepare_sun(
+        &mut self,
+        ctx: &GpuContext,
+        world: &WorldGpu,
+        to_sun: Vec3,
+        excluded: &[u32],
+    ) -> u32 {
         let out = self.scene.sun_billboards(
             &world.tree_data,
             &world.tree_species,
             to_sun,
             self.sun_capacity,
+            excluded,
         );
         if !out.is_empty() {
             ctx.queue

@@ -394,18 +394,23 @@ impl BtfScene {
     }
 
     /// Every tree's tree-level billboard as the sun sees it (for the ground alpha shadow
-    /// map), at most `max` of them. `tree_species[i]` is the species of `trees[i]`.
+    /// map), at most `max` of them, but those in `excluded` (sorted tree indices).
+    /// `tree_species[i]` is the species of `trees[i]`.
     pub fn sun_billboards(
         &self,
         trees: &[TreeGpu],
         tree_species: &[u32],
         to_sun: Vec3,
         max: usize,
+        excluded: &[u32],
     ) -> Vec<BillboardGpu> {
         let mut out = Vec::with_capacity(trees.len().min(max));
-        for (data, &sp) in trees.iter().zip(tree_species) {
+        for (i, (data, &sp)) in trees.iter().zip(tree_species).enumerate() {
             if out.len() >= max {
                 break;
+            }
+            if excluded.binary_search(&(i as u32)).is_ok() {
+                continue;
             }
             let Some(parts) = self.species.get(sp as usize) else {
                 continue;
@@ -677,6 +682,20 @@ pub(crate) mod tests {
         let visible = vec![(0..trees.len() as u32).collect::<Vec<_>>()];
         let frame = scene().prepare(trees, &visible, &view, settings, usize::MAX, hybrid);
         (frame, camera)
+    }
+
+    #[test]
+    fn trees_left_out_of_the_sun_billboards_are_skipped() {
+        let trees = [
+            tree_at(0.0, 0.0, 0.0),
+            tree_at(20.0, 0.0, 0.0),
+            tree_at(40.0, 0.0, 0.0),
+        ];
+        let sun = Vec3::new(0.3, 0.8, 0.2).normalize();
+        let all = scene().sun_billboards(&trees, &[0, 0, 0], sun, usize::MAX, &[]);
+        let some = scene().sun_billboards(&trees, &[0, 0, 0], sun, usize::MAX, &[1]);
+        assert_eq!((all.len(), some.len()), (3, 2));
+        assert_eq!(some[1].center, all[2].center);
     }
 
     #[test]
