@@ -12,8 +12,8 @@ use crate::model::World;
 use crate::model::mesh::{Aabb, Mesh, Vertex};
 use crate::{Error, Result};
 
-/// Largest forest the GPU buffers are sized for (the scene file allows no more).
-pub const MAX_TREES: usize = 100_000;
+/// Largest forest the GPU buffers are sized for: the scene file's own limit.
+pub const MAX_TREES: usize = crate::model::params::MAX_TREES as usize;
 
 /// One tree instance as `instancing.wgsl` reads it (`struct TreeInstance`).
 #[repr(C)]
