@@ -75,6 +75,7 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
                 tree: 3,
             },
             faded_trees: 4,
+            geometry_trees: 0,
             images_sampled: 540,
             fetches_saved: 180,
             dropped: 0,
