@@ -33,7 +33,7 @@ fn bake_of(scene: &Scene) -> Baked {
 }
 
 /// Measured on lavapipe (200x200, a broadleaf's crown from 7 m, sun 45 degrees), mean FLIP
-/// against the reference (x2 supersampled, sky visibility): hybrid 0.121 (0.132 while its
+/// against the reference (x2 supersampled, sky visibility): hybrid 0.116 (0.132 while its
 /// ground shadow still came from the alpha map), the interactive `geometry` 0.145 (what is left is mostly aliasing at 1x and the sky visibility), btf
 /// 0.301. Hybrid must be within `NEAR_MARGIN` of the interactive geometry, and btf at least
 /// twice as far off as hybrid.

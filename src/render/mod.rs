@@ -509,7 +509,7 @@ impl Renderer {
                     &[&whole, &b.twigs],
                     frame.btf.show_lod.then_some(btf::GEOMETRY_COLOUR),
                 );
-                let cascades = self.geometry_tree_cascades(frame, aspect, &b.twigs);
+                let cascades = self.geometry_tree_cascades(frame, &b.twigs);
                 let on = cascades.is_some();
                 (runs, cascades.unwrap_or_else(Cascades::none), on)
             }
@@ -631,8 +631,8 @@ impl Renderer {
         let casters = match &prepared {
             Prepared::Geometry(g) if g.shadows_on => Some(&runs[1..]),
             Prepared::Btf(_) if shadows_on => {
-                // Every cascade: the geometry trees, whole (the terrain has its own map).
-                hybrid_casters = vec![runs[2].clone(); CASCADES];
+                // One map: the geometry trees, whole (the terrain has its own map).
+                hybrid_casters = vec![runs[2].clone()];
                 Some(&hybrid_casters[..])
             }
             _ => None,
@@ -757,35 +757,37 @@ impl Renderer {
         Ok(stats)
     }
 
-    /// `hybrid`: sun cascades for the trees it draws as geometry (`trees`, per species),
-    /// reaching only as far as the farthest of them so that their texels stay small; None
+    /// `hybrid`: one sun shadow map around the trees it draws as geometry (`trees`, per
+    /// species; every cascade the same, the first one used), so that its texels stay
+    /// small, reaching down past them to the lowest ground their shadows can fall on; None
     /// when there are none, shadows are off or the sun is down.
     fn geometry_tree_cascades(
         &self,
         frame: &FrameDesc,
-        aspect: f32,
         trees: &[Vec<(u32, f32)>],
     ) -> Option<Cascades> {
         if !frame.shadows.enabled || frame.sun.elevation_deg <= 0.0 {
             return None;
         }
-        let eye = frame.camera.position;
-        let reach = trees
+        let bounds = trees
             .iter()
             .flatten()
             .filter_map(|&(t, _)| self.world.tree_bounds.get(t as usize))
-            .map(|b| (b.center() - eye).length() + 0.5 * b.extent().length())
-            .fold(None, |m: Option<f32>, d| Some(m.map_or(d, |m| m.max(d))))?;
-        let settings = ShadowSettings {
-            distance: reach.min(frame.shadows.distance),
-            ..frame.shadows
-        };
-        Some(Cascades::fit(
-            &frame.camera,
-            aspect,
-            frame.sun.direction(),
-            &settings,
-            &self.world.scene_bounds,
+            .fold(None, |u: Option<crate::model::mesh::Aabb>, b| {
+                Some(u.map_or(*b, |u| u.union(*b)))
+            })?;
+        let to_sun = frame.sun.direction();
+        let radius = 0.5 * bounds.extent().length();
+        // The shadow of the top reaches the ground at most this far along the sun's ray.
+        let scene = &self.world.scene_bounds;
+        let drop = (bounds.max.y - scene.min.y).max(0.0);
+        let below = (drop / to_sun.y.max(0.05)).min(2000.0);
+        Some(Cascades::fit_sphere_reaching(
+            to_sun,
+            bounds.center(),
+            radius,
+            below,
+            frame.shadows.map_size,
         ))
     }
 

@@ -98,14 +98,27 @@ impl Cascades {
 impl Cascades {
     /// One map covering a sphere (the bake's studio: every pixel uses cascade 0).
     pub fn fit_sphere(to_sun: Vec3, center: Vec3, radius: f32, map_size: u32) -> Self {
+        Self::fit_sphere_reaching(to_sun, center, radius, radius, map_size)
+    }
+
+    /// [`Self::fit_sphere`], with the map's depth reaching `below` metres past the sphere's
+    /// centre away from the sun (where its shadows may fall), at least the radius.
+    pub fn fit_sphere_reaching(
+        to_sun: Vec3,
+        center: Vec3,
+        radius: f32,
+        below: f32,
+        map_size: u32,
+    ) -> Self {
         let up = if to_sun.y.abs() > 0.99 {
             Vec3::Z
         } else {
             Vec3::Y
         };
         let r = radius.max(1e-3);
+        let depth = 2.0 * r + below.max(r);
         let view = glam::camera::rh::view::look_to_mat4(center + to_sun * 2.0 * r, -to_sun, up);
-        let proj = glam::camera::rh::proj::directx::orthographic(-r, r, -r, r, 0.0, 4.0 * r);
+        let proj = glam::camera::rh::proj::directx::orthographic(-r, r, -r, r, 0.0, depth);
         let m = proj * view;
         Self {
             matrices: [m; CASCADES],
