@@ -40,9 +40,14 @@ pub fn scene_hash(scene: &Scene) -> u64 {
     })
     .unwrap_or_default();
     h = fnv1a(species.as_bytes(), h);
+    // The horizon ring is drawn only: it changes nothing baked.
+    let terrain = crate::model::params::TerrainParams {
+        horizon: false,
+        ..scene.terrain.clone()
+    };
     let forest = toml::to_string(&ForestOnly {
         forest: &scene.forest,
-        terrain: &scene.terrain,
+        terrain: &terrain,
     })
     .unwrap_or_default();
     h = fnv1a(forest.as_bytes(), h);

@@ -153,6 +153,11 @@ pub struct TerrainParams {
     /// default 0.5.
     #[serde(default = "default_roughness")]
     pub roughness: f32,
+    /// Optional, default false: continue the same hills, coarser, to
+    /// [`crate::model::terrain::HORIZON_REACH_M`] from the centre, so that no edge of the
+    /// world shows (drawn only; trees, shadow maps and bakes keep to the square).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub horizon: bool,
 }
 
 impl Default for TerrainParams {
@@ -165,6 +170,7 @@ impl Default for TerrainParams {
             feature_size: default_feature_size(),
             octaves: default_octaves(),
             roughness: default_roughness(),
+            horizon: false,
         }
     }
 }

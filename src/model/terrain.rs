@@ -21,6 +21,63 @@ pub struct Terrain {
     /// `resolution * resolution` heights (m), row-major: z rows (from -size/2), x columns
     /// (from -size/2).
     pub heights: Vec<f32>,
+    /// The same hills continued to the horizon (`[terrain] horizon`), for the mesh only.
+    pub far: Option<FarField>,
+}
+
+/// How far the horizon ring reaches from the centre (m): past the distance where the
+/// default fog (0.0006 per metre) hides 99 % of anything (7.7 km), from anywhere on a
+/// terrain of up to 1.5 km.
+pub const HORIZON_REACH_M: f32 = 8_500.0;
+
+/// Segments along each side of the horizon ring's squares.
+const HORIZON_SIDE_SEGMENTS: usize = 64;
+
+/// The noise of the heightfield, to continue it past its square.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FarField {
+    seed: u64,
+    feature_size: f32,
+    octaves: u32,
+    roughness: f32,
+    /// The square's normalisation: height = (noise - lo) * scale.
+    lo: f32,
+    scale: f32,
+}
+
+impl FarField {
+    /// The continued heightfield at `(x, z)`, on the square's scale (it may leave
+    /// 0..relief out there).
+    pub fn height(&self, x: f32, z: f32) -> f32 {
+        let n = fbm(
+            self.seed,
+            Vec2::new(x, z) / self.feature_size,
+            self.octaves,
+            self.roughness,
+        );
+        (n - self.lo) * self.scale
+    }
+
+    fn normal(&self, x: f32, z: f32, d: f32) -> Vec3 {
+        let hx = (self.height(x + d, z) - self.height(x - d, z)) / (2.0 * d);
+        let hz = (self.height(x, z + d) - self.height(x, z - d)) / (2.0 * d);
+        Vec3::new(-hx, 1.0, -hz).try_normalize().unwrap_or(Vec3::Y)
+    }
+}
+
+/// The point at `t` (0..1) along the perimeter of the square of half-side `h` centred on
+/// the origin, counter-clockwise seen from above from its (-h, -h) corner.
+fn perimeter(t: f32, h: f32) -> Vec2 {
+    let s = (t.rem_euclid(1.0)) * 4.0;
+    let side = (s.floor() as u32).min(3);
+    let f = s - side as f32;
+    let a = -h + 2.0 * h * f;
+    match side {
+        0 => Vec2::new(a, -h),
+        1 => Vec2::new(h, a),
+        2 => Vec2::new(-a, h),
+        _ => Vec2::new(-h, -a),
+    }
 }
 
 /// Perlin-style gradient noise in roughly -0.7..0.7, lattice spacing 1.
@@ -112,10 +169,19 @@ impl Terrain {
                 0.0
             };
         }
+        let far = p.horizon.then_some(FarField {
+            seed: p.seed,
+            feature_size: p.feature_size,
+            octaves: p.octaves,
+            roughness: p.roughness,
+            lo,
+            scale: if span > 1e-9 { p.relief / span } else { 0.0 },
+        });
         Ok(Terrain {
             size: p.size,
             resolution: p.resolution,
             heights,
+            far,
         })
     }
 
@@ -127,6 +193,7 @@ impl Terrain {
             size,
             resolution: res,
             heights: vec![0.0; (res as usize) * (res as usize)],
+            far: None,
         }
     }
 
@@ -146,9 +213,17 @@ impl Terrain {
             .unwrap_or(0.0)
     }
 
-    /// Height at world `(x, z)`, bilinear between grid vertices, clamped to the edge outside
-    /// the terrain.
+    /// Height at world `(x, z)`, bilinear between grid vertices; outside the square the
+    /// horizon's hills where there are some, else clamped to the edge.
     pub fn height_at(&self, x: f32, z: f32) -> f32 {
+        let half = 0.5 * self.size;
+        if let Some(far) = &self.far
+            && (x.abs() > half || z.abs() > half)
+            && x.is_finite()
+            && z.is_finite()
+        {
+            return far.height(x, z);
+        }
         let n = (self.resolution.max(2) - 1) as f32;
         let gx = ((x / self.size + 0.5) * n).clamp(0.0, n);
         let gz = ((z / self.size + 0.5) * n).clamp(0.0, n);
@@ -257,7 +332,132 @@ impl Terrain {
                 indices.extend_from_slice(&[v00, v01, v10, v10, v01, v11]);
             }
         }
-        Mesh { vertices, indices }
+        let mut mesh = Mesh { vertices, indices };
+        if let Some(far) = &self.far {
+            self.add_horizon(far, &mut mesh, |p, y, n| {
+                let slope = (1.0 - n.y * n.y).max(0.0).sqrt() / n.y.max(1e-3);
+                let h01 = ((y - lo) / span).clamp(0.0, 1.0);
+                let patches = value_noise(colour_seed, p / 37.0);
+                let mut c = valley.lerp(grass, smoothstep(0.0, 0.6, h01));
+                c = c.lerp(
+                    dry,
+                    (0.7 * smoothstep(0.22, 0.45, slope) + 0.35 * smoothstep(0.55, 0.9, patches))
+                        .min(1.0),
+                );
+                c.lerp(rock, smoothstep(0.5, 0.8, slope))
+                    .clamp(Vec3::ZERO, Vec3::ONE)
+            });
+        }
+        mesh
+    }
+
+    /// Side length of the horizon ring's outer square (m); the square's own side without one.
+    pub fn drawn_size(&self) -> f32 {
+        if self.far.is_some() {
+            (2.0 * HORIZON_REACH_M).max(self.size)
+        } else {
+            self.size
+        }
+    }
+
+    /// Appends the horizon ring: squares growing outward from the heightfield's border to
+    /// [`HORIZON_REACH_M`], each with [`HORIZON_SIDE_SEGMENTS`] segments a side and as far
+    /// from the last as its segments are long, the first one zipped to the border's own
+    /// vertices (no crack). Heights come from `far`, colours from `colour(xz, y, normal)`.
+    fn add_horizon(
+        &self,
+        far: &FarField,
+        mesh: &mut Mesh,
+        colour: impl Fn(Vec2, f32, Vec3) -> Vec3,
+    ) {
+        let res = self.resolution.max(2) as usize;
+        let half = 0.5 * self.size;
+        let reach = HORIZON_REACH_M;
+        if !(half > 0.0 && half < reach) {
+            return;
+        }
+        // The border of the grid, counter-clockwise from the (-h, -h) corner, and each
+        // vertex's place along the perimeter (0..1).
+        let n = res - 1;
+        let mut border: Vec<(u32, f32)> = Vec::with_capacity(4 * n);
+        let idx = |i: usize, j: usize| (j * res + i) as u32;
+        for k in 0..n {
+            border.push((idx(k, 0), k as f32 / (4 * n) as f32));
+        }
+        for k in 0..n {
+            border.push((idx(n, k), (n + k) as f32 / (4 * n) as f32));
+        }
+        for k in 0..n {
+            border.push((idx(n - k, n), (2 * n + k) as f32 / (4 * n) as f32));
+        }
+        for k in 0..n {
+            border.push((idx(0, n - k), (3 * n + k) as f32 / (4 * n) as f32));
+        }
+        let m = HORIZON_SIDE_SEGMENTS;
+        let per_ring = 4 * m;
+        let grow = 1.0 + 2.0 / m as f32;
+        let push_ring = |mesh: &mut Mesh, h: f32| -> u32 {
+            let first = mesh.vertices.len() as u32;
+            let d = 2.0 * h / m as f32;
+            for k in 0..per_ring {
+                let p = perimeter(k as f32 / per_ring as f32, h);
+                let y = far.height(p.x, p.y);
+                let nrm = far.normal(p.x, p.y, d);
+                mesh.vertices.push(Vertex::new(
+                    Vec3::new(p.x, y, p.y),
+                    nrm,
+                    colour(p, y, nrm),
+                    0.0,
+                ));
+            }
+            first
+        };
+        // Every triangle faces up: wound counter-clockwise seen from above.
+        let push_tri = |mesh: &mut Mesh, a: u32, b: u32, c: u32| {
+            let v = |i: u32| mesh.vertices[i as usize].position;
+            let up = (Vec3::from(v(b)) - Vec3::from(v(a)))
+                .cross(Vec3::from(v(c)) - Vec3::from(v(a)))
+                .y;
+            if up >= 0.0 {
+                mesh.indices.extend_from_slice(&[a, b, c]);
+            } else {
+                mesh.indices.extend_from_slice(&[a, c, b]);
+            }
+        };
+        // The first ring, zipped to the border: advance along whichever perimeter is behind.
+        let mut h = half * grow;
+        let mut inner = push_ring(mesh, h);
+        let (mut a, mut b) = (0usize, 0usize);
+        while a < border.len() || b < per_ring {
+            let ta = if a < border.len() { border[a].1 } else { 1.0 };
+            let tb = if b < per_ring {
+                b as f32 / per_ring as f32
+            } else {
+                1.0
+            };
+            let a0 = border[a % border.len()].0;
+            let b0 = inner + (b % per_ring) as u32;
+            if ta <= tb && a < border.len() {
+                let a1 = border[(a + 1) % border.len()].0;
+                push_tri(mesh, a0, a1, b0);
+                a += 1;
+            } else {
+                let b1 = inner + ((b + 1) % per_ring) as u32;
+                push_tri(mesh, a0, b1, b0);
+                b += 1;
+            }
+        }
+        // Then ring after ring, quads between equal counts.
+        while h < reach {
+            h = (h * grow).min(reach);
+            let outer = push_ring(mesh, h);
+            for k in 0..per_ring as u32 {
+                let k1 = (k + 1) % per_ring as u32;
+                push_tri(mesh, inner + k, inner + k1, outer + k);
+                push_tri(mesh, inner + k1, outer + k1, outer + k);
+            }
+            inner = outer;
+        }
     }
 }
 
@@ -415,8 +615,65 @@ mod tests {
     }
 
     #[test]
+    fn the_horizon_ring_continues_the_hills_without_a_crack() {
+        let p = TerrainParams {
+            horizon: true,
+            ..params(65)
+        };
+        let t = Terrain::generate(&p).unwrap();
+        let plain = terrain(65).mesh();
+        let m = t.mesh();
+        assert_eq!(
+            m.vertices[..plain.vertices.len()],
+            plain.vertices[..],
+            "the square is unchanged"
+        );
+        let grid_indices = plain.indices.len();
+        // Every border vertex of the grid is a corner of a ring triangle: no crack.
+        let n = 64usize;
+        let ring: std::collections::HashSet<u32> =
+            m.indices[grid_indices..].iter().copied().collect();
+        for k in 0..=n {
+            for (i, j) in [(k, 0), (n, k), (k, n), (0, k)] {
+                assert!(
+                    ring.contains(&((j * 65 + i) as u32)),
+                    "border vertex {i},{j}"
+                );
+            }
+        }
+        // Every ring triangle faces up and the ring reaches the horizon.
+        for tri in m.indices[grid_indices..].chunks(3) {
+            let v = |i: u32| Vec3::from(m.vertices[i as usize].position);
+            let up = (v(tri[1]) - v(tri[0])).cross(v(tri[2]) - v(tri[0])).y;
+            assert!(up >= 0.0, "{tri:?}");
+        }
+        let reach = m
+            .vertices
+            .iter()
+            .map(|v| v.position[0].abs().max(v.position[2].abs()))
+            .fold(0.0f32, f32::max);
+        assert!((reach - HORIZON_REACH_M).abs() < 1.0, "{reach}");
+        assert_eq!(t.drawn_size(), 2.0 * HORIZON_REACH_M);
+        // The hills go on: the first ring's heights continue the border's (within the
+        // relief's slope over one ring step), and far away they still vary.
+        let far = t.far.unwrap();
+        let at_border = t.height_at(500.0, 0.0);
+        assert!((far.height(500.0, 0.0) - at_border).abs() < 0.5);
+        let samples: Vec<f32> = (0..50)
+            .map(|k| far.height(3000.0 + 97.0 * k as f32, 2500.0))
+            .collect();
+        let (lo, hi) = samples
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(a, b), &h| (a.min(h), b.max(h)));
+        assert!(hi - lo > 5.0, "hills far away: {lo}..{hi}");
+        // Without the option, no ring.
+        assert_eq!(terrain(65).mesh().indices.len(), grid_indices);
+    }
+
+    #[test]
     fn hand_made_inconsistent_terrain_does_not_panic() {
         let t = Terrain {
+            far: None,
             size: 10.0,
             resolution: 0,
             heights: Vec::new(),
