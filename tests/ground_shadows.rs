@@ -131,6 +131,7 @@ fn ridge_world() -> World {
             size,
             resolution: res,
             heights,
+            far: None,
         },
         species,
         forest: Forest {
