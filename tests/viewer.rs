@@ -78,8 +78,10 @@ fn the_viewer_recovers_from_a_lost_device() {
 
 /// The soak's two-minute run: the viewer flies, sweeps the sun, switches methods and texel
 /// modes, changes knobs, resizes and takes screenshots for 120 s after its bake is on
-/// show; resident and GPU memory sampled every 60 s must not grow by more than 5 % over the
-/// second minute (the first warms up what is built on first use), or the run fails.
+/// show; resident memory (its floor over each 40 s) and GPU memory must not grow by more
+/// than 5 % from the first interval wholly after the warm-up (the first 40 s, and every
+/// action run twice: what is built on first use) to the last, or the run fails. A slow
+/// machine runs on until it has those intervals.
 #[test]
 fn a_two_minute_soak_does_not_grow() {
     if std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
@@ -97,7 +99,7 @@ fn a_two_minute_soak_does_not_grow() {
     std::fs::write(
         &script,
         format!(
-            "seconds = 120\nsample_seconds = 60\nevery_frames = 2\nreport = {:?}\nactions = [\"fly\", \"sun\", \"method texel\", \"texel_mode stacks\", \"resize 700x500\", \"method geometry\", \"screenshot\", \"method btf\", \"lod_scale 2\", \"resize 900x600\", \"texel_mode slices3d\", \"lod_scale 1\", \"method billboard\"]\n",
+            "seconds = 120\nsample_seconds = 40\nevery_frames = 2\nreport = {:?}\nactions = [\"fly\", \"sun\", \"method texel\", \"texel_mode stacks\", \"resize 700x500\", \"method geometry\", \"screenshot\", \"method btf\", \"lod_scale 2\", \"resize 900x600\", \"texel_mode slices3d\", \"lod_scale 1\", \"method billboard\"]\n",
             report.display().to_string()
         ),
     )
@@ -114,10 +116,10 @@ fn a_two_minute_soak_does_not_grow() {
     eprintln!("{out}");
     assert!(o.status.success(), "soak failed: {err}\n{out}");
     let csv = std::fs::read_to_string(&report).unwrap();
-    assert_eq!(
-        csv.lines().count(),
-        1 + 3,
-        "samples at 0, 60 and 120 s: {csv}"
+    // At 0, 40, 80 and 120 s, and on while a slow machine is still warming up.
+    assert!(
+        csv.lines().count() > 4,
+        "samples at 0, 40, 80, 120 s...: {csv}"
     );
     assert!(out.contains("soak:"), "{out}");
 }

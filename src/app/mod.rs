@@ -124,6 +124,8 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
             frames: 0,
             next_action: 0,
             samples: Vec::new(),
+            warm_at: None,
+            resident: soak::Range::default(),
         }),
         scale_chosen: false,
         lose_device_at: std::env::var("CANOPY_TEST_LOSE_DEVICE_AT_FRAME")
@@ -250,6 +252,11 @@ struct SoakRun {
     frames: u64,
     next_action: usize,
     samples: Vec<soak::Sample>,
+    /// When every action had run [`soak::WARM_CYCLES`] times (what is built on first use
+    /// is built by then, however slow the frames).
+    warm_at: Option<f64>,
+    /// Resident memory read every frame since the last sample: its floor and its peak.
+    resident: soak::Range,
 }
 
 /// An edit of the scene file that changes the bake: its bake runs while the old scene
@@ -630,11 +637,14 @@ impl App {
             return;
         };
         let gpu_bytes = r.renderer.btf_bytes() + r.renderer.texel_bytes() + r.renderer.mesh_bytes();
-        let sample = |t: f64| {
+        run.resident.add(soak::resident_bytes());
+        let sample = |t: f64, resident: &mut soak::Range| {
             let (heap_used_bytes, heap_free_bytes) = heap::heap_bytes();
+            let (floor, peak) = resident.take();
             soak::Sample {
                 seconds: t,
-                resident_bytes: soak::resident_bytes(),
+                resident_bytes: floor,
+                resident_peak_bytes: peak,
                 gpu_bytes,
                 heap_used_bytes,
                 heap_free_bytes,
@@ -643,7 +653,7 @@ impl App {
         let Some(started) = run.started else {
             if r.renderer.has_btf() || self.bake_failed {
                 run.started = Some(Instant::now());
-                run.samples.push(sample(0.0));
+                run.samples.push(sample(0.0, &mut run.resident));
             }
             return;
         };
@@ -654,10 +664,20 @@ impl App {
             action = Some(run.script.actions[run.next_action % run.script.actions.len()]);
             run.next_action += 1;
         }
+        let cycles = soak::WARM_CYCLES * run.script.actions.len().max(1);
+        if run.warm_at.is_none() && (run.next_action >= cycles || run.script.actions.is_empty()) {
+            run.warm_at = Some(t);
+        }
         let due = run.samples.len() as f64 * run.script.sample_seconds;
-        let done = t >= run.script.seconds;
-        if t >= due || done {
-            run.samples.push(sample(t));
+        if t >= due {
+            run.samples.push(sample(t, &mut run.resident));
+        }
+        let judged = soak::judgeable(&run.samples, run.script.sample_seconds, run.warm_at);
+        // The script's length, and past it until the growth can be judged (a slow machine
+        // warms up later), but never past `MAX_STRETCH` times the length.
+        let done = t >= run.script.seconds && judged || t >= run.script.seconds * soak::MAX_STRETCH;
+        if done && !judged && run.samples.last().is_some_and(|s| s.seconds < t) {
+            run.samples.push(sample(t, &mut run.resident));
         }
         if done {
             let Some(run) = self.soak.take() else { return };
@@ -675,29 +695,39 @@ impl App {
                 );
                 return;
             }
-            match soak::growth(&run.samples, run.script.sample_seconds) {
+            let after = soak::baseline_after(run.script.sample_seconds, run.warm_at);
+            match soak::growth(&run.samples, after) {
+                None => {
+                    self.fail(
+                        event_loop,
+                        Error::BadInput(format!(
+                            "soak: no two samples after the warm-up ({} s, and every action run {} times) within {:.0} s: run longer",
+                            run.script.sample_seconds,
+                            soak::WARM_CYCLES,
+                            run.script.seconds * soak::MAX_STRETCH
+                        )),
+                    );
+                }
                 Some((res, gpu)) if res > soak::MAX_GROWTH || gpu > soak::MAX_GROWTH => {
                     self.fail(
                         event_loop,
                         Error::BadInput(format!(
-                            "soak: memory grew after the first {} s: resident {:+.1} %, GPU {:+.1} % (at most {:.0} %)",
-                            run.script.sample_seconds,
+                            "soak: memory grew after the warm-up ({:.0} s): resident {:+.1} %, GPU {:+.1} % (at most {:.0} %)",
+                            after,
                             res * 100.0,
                             gpu * 100.0,
                             soak::MAX_GROWTH * 100.0
                         )),
                     );
                 }
-                g => {
-                    if let Some((res, gpu)) = g {
-                        println!(
-                            "soak: {} frames; after the first {} s resident memory {:+.1} %, GPU memory {:+.1} %",
-                            run.frames,
-                            run.script.sample_seconds,
-                            res * 100.0,
-                            gpu * 100.0
-                        );
-                    }
+                Some((res, gpu)) => {
+                    println!(
+                        "soak: {} frames; after the warm-up ({:.0} s) resident memory {:+.1} %, GPU memory {:+.1} %",
+                        run.frames,
+                        after,
+                        res * 100.0,
+                        gpu * 100.0
+                    );
                     event_loop.exit();
                 }
             }

@@ -11,9 +11,11 @@
 //!
 //! Actions: `fly` (a few metres forward and a turn), `sun` (the sun swept 7 degrees),
 //! `method NAME`, `texel_mode NAME`, `lod_scale PX`, `resize WxH`, `screenshot` (written
-//! over one file in the temporary folder). Resident memory (from /proc) and the GPU memory
-//! the renderer holds are sampled; at the end the run fails if either grew by more than
-//! [`MAX_GROWTH`] from the first sample after the first interval to the last.
+//! over one file in the temporary folder). Resident memory (from /proc), the GPU memory
+//! the renderer holds and the C heap are sampled; at the end the run fails if resident or
+//! GPU memory grew by more than [`MAX_GROWTH`] from the first sample after the warm-up (at
+//! least one interval, and every action run [`WARM_CYCLES`] times) to the last. A slow
+//! machine runs past `seconds` until there is a full interval after its warm-up.
 
 use std::path::{Path, PathBuf};
 
@@ -23,8 +25,43 @@ use crate::render::Method;
 use crate::render::method::texel::TexelMode;
 use crate::{Error, Result};
 
-/// Largest growth allowed between the sample after the first interval and the last.
+/// Largest growth allowed between the first sample after the warm-up and the last.
 pub const MAX_GROWTH: f64 = 0.05;
+
+/// The warm-up lasts until every action has run this many times (and at least one sample
+/// interval): what is built on first use (the stack atlas, the tiles, pipelines, buffers
+/// for each size) is built by then, however slow the frames.
+pub const WARM_CYCLES: usize = 2;
+
+/// A run goes on past its `seconds` until the growth can be judged, at most this many
+/// times as long.
+pub const MAX_STRETCH: f64 = 4.0;
+
+/// The growth is measured from the first sample taken at or after this time.
+pub fn baseline_after(sample_seconds: f64, warm_at: Option<f64>) -> f64 {
+    warm_at.map_or(f64::INFINITY, |w| w.max(sample_seconds))
+}
+
+/// The first sample whose whole interval lies after `after` (the one before it was taken
+/// then or later): its resident floor holds nothing of the warm-up.
+fn baseline(samples: &[Sample], after: f64) -> Option<&Sample> {
+    samples
+        .windows(2)
+        .find(|w| w[0].seconds >= after - 1e-6)
+        .map(|w| &w[1])
+}
+
+/// There is a baseline sample after the warm-up and a later one at least an interval
+/// after it.
+pub fn judgeable(samples: &[Sample], sample_seconds: f64, warm_at: Option<f64>) -> bool {
+    let after = baseline_after(sample_seconds, warm_at);
+    let Some(from) = baseline(samples, after) else {
+        return false;
+    };
+    samples
+        .last()
+        .is_some_and(|l| l.seconds >= from.seconds + sample_seconds - 1e-6)
+}
 
 /// A soak script as written.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -159,7 +196,12 @@ impl Script {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sample {
     pub seconds: f64,
+    /// The floor of resident memory over the interval before the sample (read every
+    /// frame): what stays. A lone reading swings by a whole GPU memory block (lavapipe's
+    /// 128 MiB) as blocks come and go; a leak raises the floor.
     pub resident_bytes: u64,
+    /// The peak over the same interval.
+    pub resident_peak_bytes: u64,
     pub gpu_bytes: u64,
     /// The C heap (glibc's `mallinfo2`, every arena; `super::heap::heap_bytes`): bytes
     /// handed out and not freed, mmapped blocks included; 0 where it cannot be read.
@@ -167,6 +209,27 @@ pub struct Sample {
     /// Bytes the heap holds free in its arenas (freed, not given back to the system):
     /// resident growth here with `heap_used_bytes` flat is fragmentation, not a leak.
     pub heap_free_bytes: u64,
+}
+
+/// The lowest and highest of a series of readings, taken and reset at each sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Range {
+    lo: Option<u64>,
+    hi: u64,
+}
+
+impl Range {
+    pub fn add(&mut self, v: u64) {
+        self.lo = Some(self.lo.map_or(v, |l| l.min(v)));
+        self.hi = self.hi.max(v);
+    }
+
+    /// (floor, peak) since the last take; zeros if nothing was read.
+    pub fn take(&mut self) -> (u64, u64) {
+        let r = (self.lo.unwrap_or(0), self.hi);
+        *self = Range::default();
+        r
+    }
 }
 
 /// Resident memory of this process (Linux /proc; 0 where it cannot be read).
@@ -179,21 +242,27 @@ pub fn resident_bytes() -> u64 {
 
 /// The samples as CSV.
 pub fn csv(samples: &[Sample]) -> String {
-    let mut out =
-        String::from("seconds,resident_bytes,gpu_bytes,heap_used_bytes,heap_free_bytes\n");
+    let mut out = String::from(
+        "seconds,resident_bytes,resident_peak_bytes,gpu_bytes,heap_used_bytes,heap_free_bytes\n",
+    );
     for s in samples {
         out.push_str(&format!(
-            "{:.1},{},{},{},{}\n",
-            s.seconds, s.resident_bytes, s.gpu_bytes, s.heap_used_bytes, s.heap_free_bytes
+            "{:.1},{},{},{},{},{}\n",
+            s.seconds,
+            s.resident_bytes,
+            s.resident_peak_bytes,
+            s.gpu_bytes,
+            s.heap_used_bytes,
+            s.heap_free_bytes
         ));
     }
     out
 }
 
-/// Growth of resident and GPU memory from the first sample taken after `after` seconds
-/// to the last, as fractions; `None` with fewer than two such samples.
+/// Growth of resident and GPU memory from the baseline (the first sample whose interval
+/// starts at `after` or later) to the last, as fractions; `None` without a later sample.
 pub fn growth(samples: &[Sample], after: f64) -> Option<(f64, f64)> {
-    let from = samples.iter().find(|s| s.seconds >= after - 1e-6)?;
+    let from = baseline(samples, after)?;
     let to = samples.last()?;
     if std::ptr::eq(from, to) {
         return None;
@@ -239,22 +308,47 @@ mod tests {
     }
 
     #[test]
+    fn a_range_keeps_the_floor_and_the_peak_until_taken() {
+        let mut r = Range::default();
+        assert_eq!(r.take(), (0, 0));
+        for v in [500, 300, 800, 400] {
+            r.add(v);
+        }
+        assert_eq!(r.take(), (300, 800));
+        r.add(600);
+        assert_eq!(r.take(), (600, 600));
+    }
+
+    #[test]
     fn growth_is_measured_from_the_first_interval_to_the_end() {
         let s = |t: f64, r: u64, g: u64| Sample {
             seconds: t,
             resident_bytes: r,
+            resident_peak_bytes: r,
             gpu_bytes: g,
             heap_used_bytes: 0,
             heap_free_bytes: 0,
         };
-        // The warm-up's growth (0 to 60 s) does not count.
+        // The warm-up (0 to 60 s) does not count, nor the interval that holds its end:
+        // the baseline is the first sample whose whole interval follows it.
         let samples = [s(0.0, 100, 10), s(60.0, 200, 20), s(120.0, 210, 20)];
-        let (r, g) = growth(&samples, 60.0).unwrap();
-        assert!((r - 0.05).abs() < 1e-9 && g == 0.0);
-        assert_eq!(growth(&samples[..2], 60.0), None);
+        assert_eq!(growth(&samples, baseline_after(60.0, Some(30.0))), None);
+        assert!(!judgeable(&samples, 60.0, Some(30.0)));
+        let more = [samples[0], samples[1], samples[2], s(180.0, 231, 20)];
+        assert!(judgeable(&more, 60.0, Some(30.0)));
+        let (r, g) = growth(&more, baseline_after(60.0, Some(30.0))).unwrap();
+        assert!((r - 0.1).abs() < 1e-9 && g == 0.0);
+        // Warm only at 70 s: the baseline is the 180 s sample.
+        assert_eq!(baseline_after(60.0, Some(70.0)), 70.0);
+        assert!(!judgeable(&more, 60.0, Some(70.0)));
+        assert!(!judgeable(&more, 60.0, None));
+        let longer = [more[0], more[1], more[2], more[3], s(240.0, 233, 20)];
+        assert!(judgeable(&longer, 60.0, Some(70.0)));
+        let (r, _) = growth(&longer, baseline_after(60.0, Some(70.0))).unwrap();
+        assert!((r - 2.0 / 231.0).abs() < 1e-9);
         assert!(resident_bytes() > 0);
         assert!(csv(&samples).starts_with(
-            "seconds,resident_bytes,gpu_bytes,heap_used_bytes,heap_free_bytes\n0.0,100,10,0,0\n"
+            "seconds,resident_bytes,resident_peak_bytes,gpu_bytes,heap_used_bytes,heap_free_bytes\n0.0,100,100,10,0,0\n"
         ));
     }
 }
