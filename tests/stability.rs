@@ -149,6 +149,27 @@ fn steps(
     (mean, max / median.max(1e-9))
 }
 
+/// Prints each configuration's frame-to-frame change against the truth's, and its summary.
+fn print_flight(r: &run::BenchResults, what: &str) {
+    for (c, s) in r.summaries.iter().enumerate() {
+        let changes: Vec<String> = r
+            .rows
+            .iter()
+            .filter(|row| row.config == c)
+            .filter_map(|row| Some(format!("{:.4}/{:.4}", row.change?, row.truth_change?)))
+            .collect();
+        eprintln!(
+            "{}: change / truth's per frame {}",
+            s.label,
+            changes.join(" ")
+        );
+        eprintln!(
+            "{what}, {}: worst pop {:?}, flicker ratio {:.3}, mean FLIP {:.4}",
+            s.label, s.worst_pop, s.flicker_ratio, s.mean_flip
+        );
+    }
+}
+
 /// LOD switch: the camera dollies down onto a tree across the distance where the twig
 /// level takes over from the main-branch level. The worst pop (the largest frame-to-frame
 /// change beyond the truth's own, scaled: `bench::temporal::flicker`) with the cross-fade
@@ -192,23 +213,7 @@ fn lod_switch_the_cross_fade_keeps_the_worst_pop_under_its_bound() {
         &mut |_| {},
     )
     .unwrap();
-    for (c, s) in r.summaries.iter().enumerate() {
-        let changes: Vec<String> = r
-            .rows
-            .iter()
-            .filter(|row| row.config == c)
-            .filter_map(|row| Some(format!("{:.4}/{:.4}", row.change?, row.truth_change?)))
-            .collect();
-        eprintln!(
-            "{}: change / truth's per frame {}",
-            s.label,
-            changes.join(" ")
-        );
-        eprintln!(
-            "LOD switch, {}: worst pop {:?}, flicker ratio {:.3}, mean FLIP {:.4}",
-            s.label, s.worst_pop, s.flicker_ratio, s.mean_flip
-        );
-    }
+    print_flight(&r, "LOD switch");
     let pop = |i: usize| {
         r.summaries[i]
             .worst_pop
@@ -543,23 +548,7 @@ fn hybrid_switches_a_near_tree_to_geometry_and_cross_fades_the_switch() {
         &mut |_| {},
     )
     .unwrap();
-    for (c, s) in r.summaries.iter().enumerate() {
-        let changes: Vec<String> = r
-            .rows
-            .iter()
-            .filter(|row| row.config == c)
-            .filter_map(|row| Some(format!("{:.4}/{:.4}", row.change?, row.truth_change?)))
-            .collect();
-        eprintln!(
-            "{}: change / truth's per frame {}",
-            s.label,
-            changes.join(" ")
-        );
-        eprintln!(
-            "geometry switch, {}: worst pop {:?}, flicker ratio {:.3}, mean FLIP {:.4}",
-            s.label, s.worst_pop, s.flicker_ratio, s.mean_flip
-        );
-    }
+    print_flight(&r, "geometry switch");
     let jump = |c: usize| {
         let series: Vec<(f64, f64)> = r
             .rows

@@ -403,50 +403,52 @@ impl WorldGpu {
             model: Mat4::IDENTITY.to_cols_array_2d(),
             tint: Vec3::ONE.extend(1.0).to_array(),
         });
-        let mut runs = Vec::with_capacity(lists.len());
+        let mut runs = Vec::with_capacity(lists.len() + faded.len());
         for list in lists {
-            let mut list_runs = Vec::new();
-            for (species, trees) in list.iter().enumerate() {
-                if trees.is_empty() || data.len() + trees.len() > self.capacity {
-                    continue;
-                }
-                let first = data.len() as u32;
-                data.extend(trees.iter().map(|&t| self.tree_data[t as usize]));
-                list_runs.push(TreeRun {
-                    species,
-                    first,
-                    count: trees.len() as u32,
-                });
-            }
-            runs.push(list_runs);
+            let records = list
+                .iter()
+                .map(|trees| trees.iter().map(|&t| self.tree_data[t as usize]));
+            runs.push(append_runs(&mut data, self.capacity, records));
         }
-        for faded in faded {
-            let mut list_runs = Vec::new();
-            for (species, trees) in faded.iter().enumerate() {
-                if trees.is_empty() || data.len() + trees.len() > self.capacity {
-                    continue;
-                }
-                let first = data.len() as u32;
-                data.extend(trees.iter().map(|&(t, opacity)| {
+        for list in faded {
+            let records = list.iter().map(|trees| {
+                trees.iter().map(|&(t, opacity)| {
                     let mut d = self.tree_data[t as usize];
                     if let Some(c) = tint {
                         d.tint[..3].copy_from_slice(&c);
                     }
                     d.tint[3] = opacity.clamp(0.0, 1.0);
                     d
-                }));
-                list_runs.push(TreeRun {
-                    species,
-                    first,
-                    count: trees.len() as u32,
-                });
-            }
-            runs.push(list_runs);
+                })
+            });
+            runs.push(append_runs(&mut data, self.capacity, records));
         }
         ctx.queue
             .write_buffer(&self.trees_buffer, 0, bytemuck::cast_slice(&data));
         runs
     }
+}
+
+/// Appends one list's instance records to `data`, species by species, each species' run
+/// only while it fits in `capacity`; its runs.
+fn append_runs<I: ExactSizeIterator<Item = TreeGpu>>(
+    data: &mut Vec<TreeGpu>,
+    capacity: usize,
+    per_species: impl Iterator<Item = I>,
+) -> Vec<TreeRun> {
+    let mut runs = Vec::new();
+    for (species, trees) in per_species.enumerate() {
+        if trees.len() == 0 || data.len() + trees.len() > capacity {
+            continue;
+        }
+        runs.push(TreeRun {
+            species,
+            first: data.len() as u32,
+            count: trees.len() as u32,
+        });
+        data.extend(trees);
+    }
+    runs
 }
 
 /// Vertex buffer layout of `model::mesh::Vertex`.
