@@ -56,7 +56,7 @@ fn trees_mask(
     (w, h): (u32, u32),
 ) -> Vec<bool> {
     let mut bare_scene = scene.clone();
-    bare_scene.forest.count = 0;
+    bare_scene.forest.count = Some(0);
     let bare_world = bare_scene.build_world().unwrap();
     let mut bare = Renderer::new(ctx, &bare_world).unwrap();
     frame.method = Method::Geometry;

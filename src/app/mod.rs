@@ -432,37 +432,73 @@ impl App {
     /// Opens a scene or a bake chosen with File → Open or dropped on the window; what
     /// cannot be opened is reported in the panel and the scene on show stays.
     fn open(&mut self, path: &Path) {
-        let Some(r) = &mut self.running else { return };
+        if self.running.is_none() {
+            return;
+        }
         match open_file(path, &self.scene) {
-            Ok(Opened::Scene(scene, world)) => match Renderer::new(&r.ctx, &world) {
-                Ok(renderer) => {
-                    let method = self.frame.method;
-                    r.renderer = renderer;
-                    self.scene = *scene;
-                    self.world = *world;
-                    self.frame = FrameDesc::from_scene(&self.scene);
-                    self.frame.method = method;
-                    // A bake still running for the old scene is left to finish unseen.
-                    self.bake_job = None;
-                    self.bake_failed = false;
-                    self.preloaded = None;
-                    self.title = format!("canopy: {}", path.display());
-                    r.window.set_title(&self.title);
-                    self.watch = Some(reload::Watch::new(path));
-                    self.rebake = None;
-                    self.stats.trees_total = self.world.forest.instances.len();
-                    self.message = Some((format!("opened {}", path.display()), false));
-                }
-                Err(e) => {
-                    self.message = Some((format!("cannot open {}: {e}", path.display()), true))
-                }
-            },
+            Ok(Opened::Scene(scene, world)) => self.show_scene(
+                *scene,
+                *world,
+                &path.display().to_string(),
+                Some(reload::Watch::new(path)),
+            ),
             Ok(Opened::Baked(baked)) => {
                 // Attached on the next frame, as a bake named with --baked is.
                 self.bake_job = None;
                 self.preloaded = Some((*baked, path.to_path_buf()));
             }
             Err(e) => self.message = Some((e.to_string(), true)),
+        }
+    }
+
+    /// Opens the embedded example scene `name` (the scene menu); its bake comes from the
+    /// cache or is made in the background, as for any scene.
+    fn open_example(&mut self, name: &str) {
+        let opened = match Scene::example(name) {
+            None => Err(Error::BadInput(format!("no example scene named `{name}`"))),
+            Some(scene) => scene.map_err(Error::from).and_then(|scene| {
+                let world = scene.build_world()?;
+                Ok((scene, world))
+            }),
+        };
+        match opened {
+            Ok((scene, world)) => {
+                self.show_scene(scene, world, &format!("example scene `{name}`"), None)
+            }
+            Err(e) => self.message = Some((e.to_string(), true)),
+        }
+    }
+
+    /// Puts `scene` on show in place of the current one (the method kept, its bake started
+    /// from the cache or in the background), watching its file where it has one.
+    fn show_scene(
+        &mut self,
+        scene: Scene,
+        world: World,
+        label: &str,
+        watch: Option<reload::Watch>,
+    ) {
+        let Some(r) = &mut self.running else { return };
+        match Renderer::new(&r.ctx, &world) {
+            Ok(renderer) => {
+                let method = self.frame.method;
+                r.renderer = renderer;
+                self.scene = scene;
+                self.world = world;
+                self.frame = FrameDesc::from_scene(&self.scene);
+                self.frame.method = method;
+                // A bake still running for the old scene is left to finish unseen.
+                self.bake_job = None;
+                self.bake_failed = false;
+                self.preloaded = None;
+                self.title = format!("canopy: {label}");
+                r.window.set_title(&self.title);
+                self.watch = watch;
+                self.rebake = None;
+                self.stats.trees_total = self.world.forest.instances.len();
+                self.message = Some((format!("opened {label}"), false));
+            }
+            Err(e) => self.message = Some((format!("cannot open {label}: {e}"), true)),
         }
     }
 
@@ -996,6 +1032,9 @@ impl App {
                 self.screenshot(&path);
             }
         }
+        if let Some(name) = actions.open_example {
+            self.open_example(name);
+        }
         if actions.open_file {
             let picked = rfd::FileDialog::new()
                 .set_title("Open a scene or a bake")
@@ -1127,7 +1166,7 @@ mod tests {
         let current = Scene::default_scene();
         match open_file(&data("lone_tree.toml"), &current) {
             Ok(Opened::Scene(scene, world)) => {
-                assert_eq!(scene.forest.count, 1);
+                assert_eq!(scene.forest.count, Some(1));
                 assert_eq!(world.forest.instances.len(), 1);
             }
             Ok(Opened::Baked(_)) => panic!("a scene opened as a bake"),

@@ -53,6 +53,8 @@ pub struct PanelActions {
     pub open_bench: bool,
     /// Pick a scene or a bake to open.
     pub open_file: bool,
+    /// Open the embedded example scene of this name (the scene menu).
+    pub open_example: Option<&'static str>,
 }
 
 /// Draws the panel's contents into `ui`, editing `frame` in place.
@@ -265,6 +267,16 @@ pub fn controls(
         {
             actions.open_file = true;
         }
+        ui.menu_button("Example scenes", |ui| {
+            for (name, what, _) in crate::scene::EXAMPLE_SCENES {
+                if ui.button(*name).on_hover_text(*what).clicked() {
+                    actions.open_example = Some(*name);
+                    ui.close();
+                }
+            }
+        })
+        .response
+        .on_hover_text("the scenes built into canopy");
         if ui.button("Bench results…").clicked() {
             actions.open_bench = true;
         }

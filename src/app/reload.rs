@@ -161,7 +161,7 @@ mod tests {
         assert_ne!(count, text);
         match classify(&scene, &count, "lone.toml") {
             Reload::Rebake(s, w) => {
-                assert_eq!(s.forest.count, 2);
+                assert_eq!(s.forest.count, Some(2));
                 assert_eq!(w.forest.instances.len(), 2);
             }
             _ => panic!("a count edit is a bake edit"),

@@ -1062,7 +1062,7 @@ lod_scale = 3.0
                 seed: 1,
             }],
             &ForestParams {
-                count: 30,
+                count: Some(30),
                 min_spacing: 6.0,
                 mix: vec![1.0],
                 ..ForestParams::default()

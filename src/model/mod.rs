@@ -11,6 +11,7 @@ pub mod mesh;
 pub mod params;
 pub mod rng;
 pub mod species;
+pub mod stands;
 pub mod summary;
 pub mod terrain;
 pub mod tree;
@@ -19,7 +20,7 @@ pub mod world;
 pub use forest::{Forest, TreeInstance};
 pub use level::{Level, PerLevel};
 pub use mesh::{Aabb, Mesh, Vertex};
-pub use params::{BakeParams, ForestParams, SpeciesEntry, TerrainParams};
+pub use params::{BakeParams, ForestParams, SpeciesEntry, StandParams, TerrainParams};
 pub use species::{CrownShape, FoliageKind, PRESET_NAMES, SpeciesParams, TwigArrangement, preset};
 pub use terrain::Terrain;
 pub use tree::{LevelCounts, PartCounts, TreeModel};
@@ -96,7 +97,7 @@ pub enum ModelError {
     /// The forest could not be placed with the requested count and spacing.
     #[error(
         "forest: only {placed} of the requested {requested} trees fit with forest.min_spacing = {min_spacing} m \
-         on a {size} m terrain (after {attempts} attempts); lower forest.count or forest.min_spacing, \
+         on a {size} m terrain (after {attempts} attempts); lower {asked_by} or forest.min_spacing, \
          or enlarge terrain.size"
     )]
     ForestDoesNotFit {
@@ -110,6 +111,8 @@ pub enum ModelError {
         size: f32,
         /// Dart-throwing attempts made.
         attempts: u64,
+        /// The key that asked for the trees: `forest.count` or `forest.density`.
+        asked_by: &'static str,
     },
     /// A scene entry names a species preset that does not exist.
     #[error("species `{name}`: unknown preset `{preset}`; expected one of {}", PRESET_NAMES.join(", "))]

@@ -226,14 +226,26 @@ impl SpeciesEntry {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ForestParams {
-    /// Number of trees (0..=100000).
-    pub count: u32,
+    /// Number of trees (0..=100000), spread evenly. Exactly one of `count` and `density`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub count: Option<u32>,
+    /// Trees per hectare inside a stand (where the stand noise allows full density); the
+    /// number of trees follows from it. Exactly one of `count` and `density`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub density: Option<f32>,
     /// Placement seed.
     pub seed: u64,
-    /// Minimum distance between two trunks (m).
+    /// Minimum distance between two trunks (m); with `density`, the spacing at full
+    /// density, widened (up to twice) where the local density is lower.
     pub min_spacing: f32,
-    /// One weight per species (relative, >= 0).
+    /// One weight per species (relative, >= 0); with `mix_high`, the weights on the
+    /// lowest ground.
     pub mix: Vec<f32>,
+    /// Optional: one weight per species on the highest ground; between, the weights
+    /// follow the height (in patches, not in bands), e.g. firs on the heights and
+    /// broadleaves in the valleys.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mix_high: Option<Vec<f32>>,
     /// Smallest tree scale.
     pub scale_min: f32,
     /// Largest tree scale.
@@ -243,20 +255,70 @@ pub struct ForestParams {
     /// Per-tree foliage tint variation (0..=1). Optional, default 0.15.
     #[serde(default = "default_tint_variation")]
     pub tint_variation: f32,
+    /// `[forest.stands]` (optional, with `density` only): stands, clearings, edges and
+    /// meadows from a seeded noise field.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stands: Option<StandParams>,
 }
 
 impl Default for ForestParams {
     fn default() -> Self {
         ForestParams {
-            count: 1000,
+            count: Some(1000),
+            density: None,
             seed: 1,
             min_spacing: 6.0,
             mix: vec![0.6, 0.4],
+            mix_high: None,
             scale_min: 0.8,
             scale_max: 1.2,
             random_yaw: true,
             tint_variation: default_tint_variation(),
+            stands: None,
         }
+    }
+}
+
+/// Largest density (trees per hectare): a trunk every 1.4 m.
+pub const MAX_DENSITY: f32 = 5000.0;
+
+/// `[forest.stands]`: where the forest stands. A seeded noise field over the terrain is cut
+/// at the level that leaves `cover` of the land in stands; the rest is clearings. Density
+/// rises from 0 at a stand's border to full `edge` metres inside. Valley floors (the
+/// lowest `meadows` of the relief) are meadows: no trees.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct StandParams {
+    /// Fraction of the land in stands (0..=1, default 0.7).
+    pub cover: f32,
+    /// Wavelength of the stand noise (m, default 250): the size of stands and clearings.
+    pub size: f32,
+    /// Width of a stand's edge (m, default 20), over which density rises to full.
+    pub edge: f32,
+    /// Valley floors below this fraction of the relief are meadows (0..1, default 0.1).
+    pub meadows: f32,
+}
+
+impl Default for StandParams {
+    fn default() -> Self {
+        StandParams {
+            cover: 0.7,
+            size: 250.0,
+            edge: 20.0,
+            meadows: 0.1,
+        }
+    }
+}
+
+impl StandParams {
+    /// Checks every field; the error names the field relative to `[forest.stands]`.
+    pub fn check(&self) -> Result<(), FieldError> {
+        check::range("cover", self.cover, 0.0, 1.0)?;
+        check::positive("size", self.size)?;
+        check::range("size", self.size, 1.0, 100_000.0)?;
+        check::range("edge", self.edge, 0.0, 10_000.0)?;
+        check::range("meadows", self.meadows, 0.0, 1.0)?;
+        Ok(())
     }
 }
 
@@ -264,9 +326,39 @@ impl ForestParams {
     /// Checks every field for a scene of `species_count` species; the error names the
     /// field relative to `[forest]`.
     pub fn check(&self, species_count: usize) -> Result<(), FieldError> {
-        check::range_u32("count", self.count, 0, MAX_TREES)?;
-        if self.count > 0 && species_count == 0 {
-            return Err(FieldError::new("count", "there are no species to plant"));
+        match (self.count, self.density) {
+            (Some(_), Some(_)) => {
+                return Err(FieldError::new(
+                    "density",
+                    "give either `count` or `density`, not both",
+                ));
+            }
+            (None, None) => {
+                return Err(FieldError::new(
+                    "count",
+                    "missing required key (or give `density` in trees per hectare)",
+                ));
+            }
+            (Some(count), None) => {
+                check::range_u32("count", count, 0, MAX_TREES)?;
+                if self.stands.is_some() {
+                    return Err(FieldError::new(
+                        "stands",
+                        "[forest.stands] needs `density` (trees per hectare) instead of `count`",
+                    ));
+                }
+            }
+            (None, Some(d)) => check::range("density", d, 0.0, MAX_DENSITY)?,
+        }
+        if self.may_plant() && species_count == 0 {
+            return Err(FieldError::new(
+                if self.count.is_some() {
+                    "count"
+                } else {
+                    "density"
+                },
+                "there are no species to plant",
+            ));
         }
         check::positive("min_spacing", self.min_spacing)?;
         check::range("min_spacing", self.min_spacing, 0.0, 10_000.0)?;
@@ -283,8 +375,32 @@ impl ForestParams {
         for (i, w) in self.mix.iter().enumerate() {
             check::range(&format!("mix[{i}]"), *w, 0.0, 1e6)?;
         }
-        if self.count > 0 && self.mix.iter().sum::<f32>() <= 0.0 {
+        if self.may_plant() && self.mix.iter().sum::<f32>() <= 0.0 {
             return Err(FieldError::new("mix", "at least one weight must be > 0"));
+        }
+        if let Some(high) = &self.mix_high {
+            if high.len() != species_count {
+                return Err(FieldError::new(
+                    "mix_high",
+                    format!(
+                        "needs one weight per species ({species_count} species), found {} weight{}",
+                        high.len(),
+                        if high.len() == 1 { "" } else { "s" }
+                    ),
+                ));
+            }
+            for (i, w) in high.iter().enumerate() {
+                check::range(&format!("mix_high[{i}]"), *w, 0.0, 1e6)?;
+            }
+            if self.may_plant() && high.iter().sum::<f32>() <= 0.0 {
+                return Err(FieldError::new(
+                    "mix_high",
+                    "at least one weight must be > 0",
+                ));
+            }
+        }
+        if let Some(st) = &self.stands {
+            st.check().map_err(|e| e.prefixed("stands"))?;
         }
         check::positive("scale_min", self.scale_min)?;
         check::range("scale_min", self.scale_min, 0.0, 100.0)?;
@@ -299,5 +415,10 @@ impl ForestParams {
         }
         check::range("tint_variation", self.tint_variation, 0.0, 1.0)?;
         Ok(())
+    }
+
+    /// Whether this placement may plant any tree (a count or density above 0).
+    pub fn may_plant(&self) -> bool {
+        self.count.is_some_and(|c| c > 0) || self.density.is_some_and(|d| d > 0.0)
     }
 }

@@ -113,7 +113,7 @@ fn value_noise(seed: u64, p: Vec2) -> f32 {
 
 /// Fractal sum of `octaves` gradient-noise layers, each twice the frequency and `gain`
 /// times the amplitude of the previous, rotated to hide the lattice.
-fn fbm(seed: u64, p: Vec2, octaves: u32, gain: f32) -> f32 {
+pub(crate) fn fbm(seed: u64, p: Vec2, octaves: u32, gain: f32) -> f32 {
     let rot = glam::Mat2::from_angle(0.6435); // a 3-4-5 triangle's angle
     let mut q = p;
     let mut amp = 1.0;

@@ -107,7 +107,7 @@ mod tests {
 
     fn forest(count: u32) -> ForestParams {
         ForestParams {
-            count,
+            count: Some(count),
             seed: 3,
             min_spacing: 5.0,
             mix: vec![0.5, 0.5],

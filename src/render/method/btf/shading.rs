@@ -373,7 +373,7 @@ mod tests {
     fn lone_world() -> World {
         let mut scene =
             crate::scene::Scene::parse(crate::scene::SMALL_TEST_SCENE_TOML, "small.toml").unwrap();
-        scene.forest.count = 1;
+        scene.forest.count = Some(1);
         scene.build_world().unwrap()
     }
 
