@@ -7,6 +7,7 @@ pub mod app;
 pub mod bake;
 pub mod bench;
 pub mod error;
+pub mod forest_map;
 pub mod format;
 pub mod imageio;
 pub mod lod;

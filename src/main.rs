@@ -98,11 +98,19 @@ enum Command {
     /// threshold, fade band, planes) along a flight and pick the cheapest meeting
     /// --max-error (mean FLIP) and --max-flicker; --write stores it as the scene's [render].
     Tune(TuneArgs),
-    /// Describe a scene: species, triangles per level, trees, terrain.
+    /// Describe a scene: species, triangles per level, trees, terrain, bake estimate;
+    /// --map draws where the trees stand, seen from above.
     Info {
         scene: Option<PathBuf>,
         #[arg(long)]
         json: bool,
+        /// Write a map of the scene from above (terrain, stands, clearings, meadows, every
+        /// tree's crown in its species' colour) as a PNG.
+        #[arg(long, value_name = "MAP.png")]
+        map: Option<PathBuf>,
+        /// The map's side in pixels (16..8192).
+        #[arg(long, default_value_t = 1024, value_name = "PX")]
+        map_size: u32,
     },
 }
 
@@ -421,6 +429,13 @@ fn load_scene(path: Option<&Path>) -> canopy::Result<Scene> {
 }
 
 fn main() -> ExitCode {
+    // Output piped into a program that stops reading (`canopy info | head -1`) ends the
+    // process quietly, as for any command-line tool, instead of a panic in println!.
+    #[cfg(unix)]
+    // SAFETY: restores the default disposition of SIGPIPE before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     let cli = Cli::parse();
     let result = match cli.command {
@@ -459,7 +474,12 @@ fn main() -> ExitCode {
             diff,
             classes,
         }) => compare(&a, &b, json, diff.as_deref(), classes.as_deref()),
-        Some(Command::Info { scene, json }) => info(scene.as_deref(), json),
+        Some(Command::Info {
+            scene,
+            json,
+            map,
+            map_size,
+        }) => info(scene.as_deref(), json, map.as_deref(), map_size),
         Some(Command::Bench(args)) => bench(args),
         Some(Command::Tune(args)) => tune(args),
     };
@@ -835,10 +855,22 @@ fn estimate_line(e: &canopy::bake::estimate::Estimate) -> String {
     )
 }
 
-fn info(scene: Option<&Path>, json: bool) -> anyhow::Result<()> {
+fn info(scene: Option<&Path>, json: bool, map: Option<&Path>, map_size: u32) -> anyhow::Result<()> {
+    if !(16..=canopy::forest_map::MAX_MAP_SIZE).contains(&map_size) {
+        return Err(canopy::Error::BadInput(format!(
+            "--map-size must be between 16 and {}, found {map_size}",
+            canopy::forest_map::MAX_MAP_SIZE
+        ))
+        .into());
+    }
     let scene = load_scene(scene)?;
     let t0 = Instant::now();
     let world = scene.build_world().map_err(canopy::Error::from)?;
+    if let Some(path) = map {
+        let img = canopy::forest_map::draw(&world, &scene.forest, map_size);
+        canopy::imageio::save_png(path, &img)?;
+        eprintln!("map written to {}", path.display());
+    }
     let r = WorldSummary::new(&world, t0.elapsed().as_secs_f64() * 1e3);
     let settings = canopy::bake::cache::settings_of(&scene);
     // A bake the format cannot hold is reported here, not refused: `info` only describes.

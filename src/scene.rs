@@ -37,7 +37,7 @@ pub const EXAMPLE_SCENES: &[(&str, &str, &str)] = &[
     ),
     (
         "forest",
-        "a forest at 600 trees per hectare: stands, clearings, meadows, about 34,000 trees (a long bake)",
+        "a forest at 600 trees per hectare: stands, clearings, meadows, about 36,000 trees (a long bake)",
         FOREST_SCENE_TOML,
     ),
 ];
