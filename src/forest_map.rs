@@ -16,8 +16,8 @@ pub const MAX_MAP_SIZE: u32 = 8192;
 const SPECIES_COLOURS: [[u8; 3]; 6] = [
     [24, 70, 40],   // dark blue-green: the first species (a conifer in the examples)
     [120, 170, 50], // light yellow-green: the second (a broadleaf)
+    [60, 120, 120], // teal: the third (a pine)
     [200, 120, 40],
-    [150, 60, 150],
     [40, 120, 180],
     [200, 200, 60],
 ];

@@ -8,12 +8,14 @@ use super::FieldError;
 use super::check;
 
 /// The names accepted by [`preset`].
-pub const PRESET_NAMES: &[&str] = &["fir", "broadleaf"];
+pub const PRESET_NAMES: &[&str] = &["fir", "broadleaf", "pine"];
 
 /// The fir preset as TOML (the file documents every field).
 pub const FIR_TOML: &str = include_str!("../../assets/species/fir.toml");
 /// The broadleaf preset as TOML.
 pub const BROADLEAF_TOML: &str = include_str!("../../assets/species/broadleaf.toml");
+/// The pine preset as TOML (the second conifer: long bare trunk, needles in clumps).
+pub const PINE_TOML: &str = include_str!("../../assets/species/pine.toml");
 
 /// Largest number of leaves or needles one tree may have (all levels multiplied out).
 pub const MAX_FOLIAGE_PER_TREE: u64 = 2_000_000;
@@ -179,6 +181,7 @@ pub fn preset(name: &str) -> Option<SpeciesParams> {
     let text = match name {
         "fir" => FIR_TOML,
         "broadleaf" => BROADLEAF_TOML,
+        "pine" => PINE_TOML,
         _ => return None,
     };
     // The embedded presets are checked by tests; a failure here cannot come from user input.
@@ -284,6 +287,37 @@ mod tests {
             preset("broadleaf").map(|p| p.foliage),
             Some(FoliageKind::Leaves)
         );
+    }
+
+    #[test]
+    fn the_pine_is_a_second_conifer_with_a_bare_trunk_and_clumped_needles() {
+        use crate::model::TreeModel;
+        let model = |name: &str| {
+            let p = preset(name).unwrap_or_else(|| panic!("preset {name}"));
+            let h = p.height;
+            match TreeModel::generate(&p, 1) {
+                Ok(m) => (m, h),
+                Err(e) => panic!("{e}"),
+            }
+        };
+        let (pine, h) = model("pine");
+        let (fir, fir_h) = model("fir");
+        assert_eq!(pine.foliage, FoliageKind::Needles);
+        // The lowest twig of the pine is above half its height; the fir's far below.
+        let lowest = |m: &TreeModel| {
+            m.twigs_in_tree_frame()
+                .iter()
+                .map(|t| t.w_axis.y)
+                .fold(f32::INFINITY, f32::min)
+        };
+        assert!(lowest(&pine) > 0.5 * h, "pine {}", lowest(&pine));
+        assert!(lowest(&fir) < 0.3 * fir_h, "fir {}", lowest(&fir));
+        // Twigs only on the outer half of each limb: clumps at the limb ends.
+        let p = preset("pine").unwrap_or_default();
+        assert!(p.twig_start >= 0.4 && preset("fir").is_some_and(|f| f.twig_start < 0.2));
+        // Near the thesis' fir in triangles (about 120,000).
+        let tris = pine.triangle_counts().tree;
+        assert!((60_000..=130_000).contains(&tris), "{tris}");
     }
 
     #[test]
