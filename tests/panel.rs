@@ -182,7 +182,7 @@ fn the_frame_time_plot_shows_cpu_and_gpu_lines_and_the_bench_button_opens_the_wi
     let mut harness = tall().build_ui_state(
         move |ui, s: &mut State| {
             let a = controls(ui, &mut s.frame, &with_gpu, None);
-            if a.open_bench || a.open_file {
+            if a.open_bench || a.open_file || a.open_example.is_some() {
                 s.actions = a;
             }
         },
@@ -200,6 +200,14 @@ fn the_frame_time_plot_shows_cpu_and_gpu_lines_and_the_bench_button_opens_the_wi
     harness.get_by_label("Open…").click();
     harness.run();
     assert!(harness.state().actions.open_file);
+    // The scene menu lists the embedded examples; picking one asks to open it.
+    assert_eq!(harness.state().actions.open_example, None);
+    harness.get_by_label("Example scenes").click();
+    harness.run();
+    harness.get_by_label("default");
+    harness.get_by_label("forest").click();
+    harness.run();
+    assert_eq!(harness.state().actions.open_example, Some("forest"));
 
     let mut cpu_only = PanelStats::default();
     cpu_only.history.push(16.0, None);
