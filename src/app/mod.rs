@@ -481,12 +481,14 @@ impl App {
         let Some(r) = &mut self.running else { return };
         match Renderer::new(&r.ctx, &world) {
             Ok(renderer) => {
-                let method = self.frame.method;
+                let (method, render_scale) = (self.frame.method, self.frame.render_scale);
                 r.renderer = renderer;
                 self.scene = scene;
                 self.world = world;
                 self.frame = FrameDesc::from_scene(&self.scene);
+                // The method and the render scale are the viewer's, not the scene's.
                 self.frame.method = method;
+                self.frame.render_scale = render_scale;
                 // A bake still running for the old scene is left to finish unseen.
                 self.bake_job = None;
                 self.bake_failed = false;
