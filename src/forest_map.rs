@@ -7,7 +7,7 @@ use glam::Vec3;
 use image::{Rgba, RgbaImage};
 
 use crate::model::stands::{Cover, StandMap, height_range, normalise};
-use crate::model::{ForestParams, World};
+use crate::model::{ForestParams, SpeciesEntry, World};
 
 /// Largest map side in pixels.
 pub const MAX_MAP_SIZE: u32 = 8192;
@@ -22,10 +22,22 @@ const SPECIES_COLOURS: [[u8; 3]; 6] = [
     [200, 200, 60],
 ];
 
-/// Draws the map of `world` placed by `forest`, `size` pixels a side (north up, east
-/// right).
-pub fn draw(world: &World, forest: &ForestParams, size: u32) -> RgbaImage {
+/// Draws the map of `world`, built from the scene's `species` entries and placed by
+/// `forest`, `size` pixels a side (north up, east right). The variants of a species share
+/// its colour.
+pub fn draw(
+    world: &World,
+    species: &[SpeciesEntry],
+    forest: &ForestParams,
+    size: u32,
+) -> RgbaImage {
     let size = size.clamp(16, MAX_MAP_SIZE);
+    // The species entry of each prototype (the variants of an entry follow each other).
+    let entry_of: Vec<usize> = species
+        .iter()
+        .enumerate()
+        .flat_map(|(i, e)| std::iter::repeat_n(i, e.variants.max(1) as usize))
+        .collect();
     let t = &world.terrain;
     let half = 0.5 * t.size;
     let px = t.size / size as f32;
@@ -68,7 +80,8 @@ pub fn draw(world: &World, forest: &ForestParams, size: u32) -> RgbaImage {
         let r = (r_m / px).max(0.7);
         let cx = (tree.position.x + half) / px;
         let cy = (half - tree.position.z) / px;
-        let col = SPECIES_COLOURS[tree.species as usize % SPECIES_COLOURS.len()];
+        let entry = entry_of.get(tree.species as usize).copied().unwrap_or(0);
+        let col = SPECIES_COLOURS[entry % SPECIES_COLOURS.len()];
         let (x0, x1) = (
             (cx - r).floor().max(0.0),
             (cx + r).ceil().min(size as f32 - 1.0),
@@ -118,6 +131,7 @@ mod tests {
             preset: Some("fir".into()),
             params: None,
             seed: 1,
+            variants: 1,
         }];
         let forest = ForestParams {
             count: None,
@@ -135,7 +149,7 @@ mod tests {
             Ok(w) => w,
             Err(e) => panic!("{e}"),
         };
-        let img = draw(&world, &forest, 200);
+        let img = draw(&world, &species, &forest, 200);
         assert_eq!(img.dimensions(), (200, 200));
         // Every trunk's pixel is crown-coloured (dark green, blue above red).
         let mut crowns = 0;

@@ -867,7 +867,7 @@ fn info(scene: Option<&Path>, json: bool, map: Option<&Path>, map_size: u32) -> 
     let t0 = Instant::now();
     let world = scene.build_world().map_err(canopy::Error::from)?;
     if let Some(path) = map {
-        let img = canopy::forest_map::draw(&world, &scene.forest, map_size);
+        let img = canopy::forest_map::draw(&world, &scene.species, &scene.forest, map_size);
         canopy::imageio::save_png(path, &img)?;
         eprintln!("map written to {}", path.display());
     }

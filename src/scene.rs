@@ -320,6 +320,22 @@ impl Scene {
                 "at least one [[species]] entry is needed",
             ));
         }
+        for (i, s) in self.species.iter().enumerate() {
+            check::range_u32(
+                &format!("species[{i}].variants"),
+                s.variants,
+                1,
+                crate::model::params::MAX_VARIANTS,
+            )?;
+        }
+        let prototypes: usize = self.species.iter().map(|s| s.variants as usize).sum();
+        if prototypes > MAX_SPECIES {
+            return Err(FieldError::new(
+                "species",
+                format!("at most {MAX_SPECIES} species prototypes (variants included) are allowed"),
+            )
+            .with_found(prototypes));
+        }
         if self.species.len() > MAX_SPECIES {
             return Err(FieldError::new(
                 "species",
@@ -903,6 +919,45 @@ fov_deg = 55.0
             &["one weight per species"],
         );
         expect_error("count = 30", "density = nan", "forest.density", &["finite"]);
+    }
+
+    #[test]
+    fn variants_parse_and_are_bounded() {
+        let (text, _) = edit("seed = 2", "seed = 2\nvariants = 3");
+        let s = match Scene::parse(&text, "scene.toml") {
+            Ok(s) => s,
+            Err(e) => panic!("{e}"),
+        };
+        assert_eq!((s.species[0].variants, s.species[1].variants), (1, 3));
+        let w = match s.build_world() {
+            Ok(w) => w,
+            Err(e) => panic!("{e}"),
+        };
+        assert_eq!(w.species.len(), 4);
+        expect_error(
+            "seed = 2",
+            "seed = 2\nvariants = 9",
+            "species[1].variants",
+            &["between 1 and 8"],
+        );
+        expect_error(
+            "seed = 2",
+            "seed = 2\nvariants = 0",
+            "species[1].variants",
+            &["between 1 and 8"],
+        );
+        // A scene of one variant each keeps its bake key.
+        let base = Scene::parse(BASE, "scene.toml").unwrap_or_else(|e| panic!("{e}"));
+        let mut one = base.clone();
+        one.species[1].variants = 1;
+        assert_eq!(
+            crate::bake::cache::scene_hash(&base),
+            crate::bake::cache::scene_hash(&one)
+        );
+        assert_ne!(
+            crate::bake::cache::scene_hash(&base),
+            crate::bake::cache::scene_hash(&s)
+        );
     }
 
     #[test]

@@ -437,3 +437,42 @@ fn billboard_draws_trees_where_geometry_has_them() {
         "the billboards cover {floor_px} pixels, geometry's trees {truth_px}"
     );
 }
+
+/// `variants = 2`: two prototypes of one species, each baked as its own image sets, and
+/// the trees of the species spread over both.
+#[test]
+fn variants_are_baked_as_their_own_image_sets() {
+    let ctx = gpu();
+    let mut scene = Scene::load(&data("lone_tree.toml")).expect("lone_tree.toml parses");
+    scene.species[0].variants = 2;
+    scene.forest.count = Some(12);
+    let world = scene.build_world().expect("world");
+    assert_eq!(world.species.len(), 2);
+    assert_eq!(world.species[0].name, "fir 1");
+    assert_eq!(world.species[1].name, "fir 2");
+    let used = world.forest.species_histogram(2);
+    assert!(used.iter().all(|n| *n > 0), "{used:?}");
+    let settings = bake::cache::settings_of(&scene);
+    let baked = bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).expect("bake");
+    let trees: Vec<_> = baked
+        .btf
+        .iter()
+        .filter(|s| s.level == Level::Tree)
+        .collect();
+    assert_eq!(trees.len(), 2);
+    assert_eq!((trees[0].species, trees[1].species), (0, 1));
+    assert_eq!(trees[0].direct.len(), trees[1].direct.len());
+    // The images differ: mean absolute difference of the bytes (measured: 2.77 per byte).
+    let diff = trees[0]
+        .direct
+        .iter()
+        .zip(&trees[1].direct)
+        .map(|(a, b)| f64::from(a.abs_diff(*b)))
+        .sum::<f64>()
+        / trees[0].direct.len() as f64;
+    eprintln!("variant images differ by {diff:.2} per byte");
+    assert!(
+        diff > 1.0,
+        "variant images differ by only {diff:.3} per byte"
+    );
+}

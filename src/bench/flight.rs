@@ -1060,6 +1060,7 @@ lod_scale = 3.0
                 preset: Some("fir".into()),
                 params: None,
                 seed: 1,
+                variants: 1,
             }],
             &ForestParams {
                 count: Some(30),

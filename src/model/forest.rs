@@ -154,6 +154,27 @@ impl Forest {
         terrain: &Terrain,
         species_count: usize,
     ) -> Result<Forest, ModelError> {
+        Forest::place_variants(p, terrain, &vec![1; species_count])
+    }
+
+    /// [`Forest::place`] for species of `variants[i]` prototypes each: a tree draws its
+    /// species by `mix`, then one of its variants uniformly; its `species` is the index of
+    /// that prototype, counting every species' variants in order. A species of one variant
+    /// draws nothing more, so such scenes place as before.
+    pub fn place_variants(
+        p: &ForestParams,
+        terrain: &Terrain,
+        variants: &[u32],
+    ) -> Result<Forest, ModelError> {
+        let species_count = variants.len();
+        let first: Vec<u32> = variants
+            .iter()
+            .scan(0u32, |acc, v| {
+                let at = *acc;
+                *acc += (*v).max(1);
+                Some(at)
+            })
+            .collect();
         p.check(species_count)
             .map_err(|e| ModelError::invalid("forest", e))?;
         super::check::positive("size", terrain.size)
@@ -250,7 +271,10 @@ impl Forest {
                         *w = a + (b - a) * t;
                     }
                 }
-                let species = pick_species(&weights, rng.f32());
+                let entry = pick_species(&weights, rng.f32()) as usize;
+                let k = variants.get(entry).copied().unwrap_or(1).max(1);
+                let variant = if k > 1 { rng.below(k) } else { 0 };
+                let species = first.get(entry).copied().unwrap_or(0) + variant;
                 let yaw_draw = rng.f32() * std::f32::consts::TAU;
                 let yaw = if p.random_yaw { yaw_draw } else { 0.0 };
                 let scale = p.scale_min + (p.scale_max - p.scale_min) * rng.f32();

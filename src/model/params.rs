@@ -204,9 +204,46 @@ pub struct SpeciesEntry {
     pub params: Option<SpeciesParams>,
     /// Seed of the species generator.
     pub seed: u64,
+    /// Prototypes of this species (1..=8, default 1), so that neighbours differ: variant 1
+    /// is the species as given; each further one has its own seed and its height, crown
+    /// radius, branch and twig counts and branch angle varied (by up to about 12 %). Each
+    /// is baked as its own BTF and VCM set; a tree of the species takes one at random.
+    #[serde(default = "one_variant", skip_serializing_if = "is_one_variant")]
+    pub variants: u32,
+}
+
+/// Largest number of variants of one species.
+pub const MAX_VARIANTS: u32 = 8;
+
+fn one_variant() -> u32 {
+    1
+}
+
+fn is_one_variant(v: &u32) -> bool {
+    *v == 1
 }
 
 impl SpeciesEntry {
+    /// The parameters and seed of variant `v` (0 = the species as given).
+    pub fn variant(&self, v: u32) -> Result<(SpeciesParams, u64), ModelError> {
+        let base = self.try_params()?;
+        if v == 0 {
+            return Ok((base, self.seed));
+        }
+        let seed = super::rng::mix64(self.seed ^ u64::from(v).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let mut rng = super::rng::Rng::derive(seed, 7);
+        let mut p = base;
+        let vary = |x: f32, by: f32, rng: &mut super::rng::Rng| x * (1.0 + by * rng.signed());
+        p.height = vary(p.height, 0.12, &mut rng);
+        p.crown_radius = vary(p.crown_radius, 0.12, &mut rng);
+        p.branch_count = (vary(p.branch_count as f32, 0.15, &mut rng).round() as u32).max(1);
+        p.twigs_per_branch = vary(p.twigs_per_branch as f32, 0.1, &mut rng).round() as u32;
+        let tilt = 5.0 * rng.signed();
+        p.branch_angle_low = (p.branch_angle_low + tilt).clamp(1.0, 179.0);
+        p.branch_angle_high = (p.branch_angle_high + tilt).clamp(1.0, 179.0);
+        Ok((p, seed))
+    }
+
     /// The species parameters: the inline `params`, or the preset's.
     pub fn try_params(&self) -> Result<SpeciesParams, ModelError> {
         match (&self.preset, &self.params) {

@@ -30,24 +30,34 @@ impl World {
         species: &[SpeciesEntry],
         forest: &ForestParams,
     ) -> Result<World, ModelError> {
-        let entries = species
-            .iter()
-            .map(|e| Ok((e.name.as_str(), e.try_params()?, e.seed)))
-            .collect::<Result<Vec<_>, ModelError>>()?;
+        // One prototype per variant of each entry, in entry order.
+        let mut entries = Vec::new();
+        for e in species {
+            for v in 0..e.variants.max(1) {
+                let (params, seed) = e.variant(v)?;
+                let name = if e.variants > 1 {
+                    format!("{} {}", e.name, v + 1)
+                } else {
+                    e.name.clone()
+                };
+                entries.push((e.name.as_str(), name, params, seed));
+            }
+        }
+        let variants: Vec<u32> = species.iter().map(|e| e.variants.max(1)).collect();
         let (terrain, species) = rayon::join(
             || Terrain::generate(terrain),
             || {
                 entries
                     .par_iter()
-                    .map(|(name, params, seed)| {
+                    .map(|(entry, name, params, seed)| {
                         let mut model =
                             TreeModel::generate(params, *seed).map_err(|e| match e {
                                 ModelError::InvalidParameter { error, .. } => {
-                                    ModelError::invalid(format!("species `{name}`"), error)
+                                    ModelError::invalid(format!("species `{entry}`"), error)
                                 }
                                 other => other,
                             })?;
-                        model.name = (*name).to_owned();
+                        model.name = name.clone();
                         Ok(model)
                     })
                     .collect::<Result<Vec<_>, ModelError>>()
@@ -55,7 +65,7 @@ impl World {
         );
         let terrain = terrain?;
         let species = species?;
-        let forest = Forest::place(forest, &terrain, species.len())?;
+        let forest = Forest::place_variants(forest, &terrain, &variants)?;
         Ok(World {
             terrain,
             species,
@@ -102,6 +112,7 @@ mod tests {
             preset: Some(preset.into()),
             params: None,
             seed,
+            variants: 1,
         }
     }
 
@@ -146,5 +157,57 @@ mod tests {
             .map(|e| e.to_string())
             .unwrap_or_default();
         assert!(e.contains("exactly one of"), "{e}");
+    }
+
+    #[test]
+    fn variants_differ_and_repeat_by_seed() {
+        let mut fir = entry("fir", "fir", 7);
+        fir.variants = 3;
+        let build = |e: &SpeciesEntry| match World::build(
+            &terrain(),
+            std::slice::from_ref(e),
+            &ForestParams {
+                mix: vec![1.0],
+                ..forest(60)
+            },
+        ) {
+            Ok(w) => w,
+            Err(err) => panic!("{err}"),
+        };
+        let a = build(&fir);
+        assert_eq!(a.species.len(), 3);
+        let names: Vec<&str> = a.species.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["fir 1", "fir 2", "fir 3"]);
+        // Variant 1 is the species as given.
+        let plain = build(&entry("fir", "fir", 7));
+        assert_eq!(
+            a.species[0].flatten().vertices,
+            plain.species[0].flatten().vertices
+        );
+        // The others differ in shape, and the trees use all three.
+        let heights: Vec<f32> = a.species.iter().map(|s| s.tree_bounds.max.y).collect();
+        let tris: Vec<u64> = a.species.iter().map(|s| s.triangle_counts().tree).collect();
+        for i in 1..3 {
+            assert!(
+                (heights[i] - heights[0]).abs() > 0.05 || tris[i] != tris[0],
+                "variant {i}: {heights:?} {tris:?}"
+            );
+        }
+        assert!(heights[1] != heights[2] || tris[1] != tris[2]);
+        let used = a.forest.species_histogram(3);
+        assert!(used.iter().all(|n| *n > 5), "{used:?}");
+        // The same seed gives the same variants and placement; another seed others.
+        let b = build(&fir);
+        assert_eq!(a.forest.instances, b.forest.instances);
+        assert_eq!(
+            heights,
+            b.species
+                .iter()
+                .map(|s| s.tree_bounds.max.y)
+                .collect::<Vec<_>>()
+        );
+        fir.seed = 8;
+        let c = build(&fir);
+        assert_ne!(heights[1], c.species[1].tree_bounds.max.y);
     }
 }
