@@ -280,3 +280,55 @@ fn the_bench_window_shows_a_folders_table_or_what_is_missing() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The species gallery asks for a picture of the chosen prototype once, shows its stats,
+/// and asks again when another prototype is picked.
+#[test]
+fn the_species_gallery_asks_for_each_choice_once_and_shows_its_stats() {
+    use canopy::app::gallery::{Gallery, PrototypeInfo};
+    let scene = Scene::default_scene();
+    let world = scene.build_world().expect("default world");
+    let protos = PrototypeInfo::of_world(&world, &canopy::bake::cache::settings_of(&scene));
+    assert_eq!(protos.len(), 2);
+    assert_eq!(protos[0].trees + protos[1].trees, 1000);
+    assert!(
+        protos[0].baked_bytes > 1_000_000,
+        "{}",
+        protos[0].baked_bytes
+    );
+    struct G {
+        gallery: Gallery,
+        asked: Vec<(usize, f32)>,
+    }
+    let mut gallery = Gallery::default();
+    gallery.open = true;
+    let shown = protos.clone();
+    let mut harness = tall().build_ui_state(
+        move |ui, s: &mut G| {
+            if let Some(want) = s.gallery.show(ui.ctx(), &shown) {
+                s.asked.push(want);
+                let img = image::RgbaImage::new(8, 8);
+                s.gallery.set_picture(ui.ctx(), want, &img);
+            }
+        },
+        G {
+            gallery,
+            asked: Vec::new(),
+        },
+    );
+    harness.run();
+    harness.get_by_label("Species gallery");
+    let t = protos[0].triangles;
+    harness.get_by_label(&format!("{} / {} / {}", t[0], t[1], t[2]));
+    harness.get_by_label(&protos[0].trees.to_string());
+    // One request for the first prototype at the default distance, however many frames.
+    assert_eq!(harness.state().asked, vec![(0, 50.0)]);
+    // Picking the second prototype asks for it.
+    harness.get_by_label("prototype").click();
+    harness.run();
+    harness.get_by_label(&protos[1].name).click();
+    harness.run();
+    assert_eq!(harness.state().asked, vec![(0, 50.0), (1, 50.0)]);
+    let t = protos[1].triangles;
+    harness.get_by_label(&format!("{} / {} / {}", t[0], t[1], t[2]));
+}

@@ -4,6 +4,7 @@
 
 pub mod bench_view;
 pub mod fly;
+pub mod gallery;
 pub mod heap;
 pub mod history;
 pub mod panel;
@@ -116,6 +117,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         fatal: None,
         sun_slider_held: false,
         bench: BenchWindow::default(),
+        gallery: gallery::Gallery::default(),
         watch: scene_path.map(reload::Watch::new),
         rebake: None,
         soak: script.map(|script| SoakRun {
@@ -293,6 +295,8 @@ struct App {
     sun_slider_held: bool,
     /// The "Bench results" window.
     bench: BenchWindow,
+    /// The species gallery window.
+    gallery: gallery::Gallery,
     /// The scene file, watched for edits (none for the embedded default forest).
     watch: Option<reload::Watch>,
     rebake: Option<Rebake>,
@@ -498,6 +502,7 @@ impl App {
                 self.watch = watch;
                 self.rebake = None;
                 self.stats.trees_total = self.world.forest.instances.len();
+                self.gallery.reset();
                 self.message = Some((format!("opened {label}"), false));
             }
             Err(e) => self.message = Some((format!("cannot open {label}: {e}"), true)),
@@ -656,6 +661,7 @@ impl App {
                 self.bake_job = None;
                 self.bake_failed = false;
                 self.stats.trees_total = self.world.forest.instances.len();
+                self.gallery.reset();
                 log::info!("the edited scene is baked and on show");
                 self.message = Some(("the edited scene is baked and on show".into(), false));
             }
@@ -937,6 +943,17 @@ impl App {
         let message = self.message.as_ref();
         let bench = &mut self.bench;
         let mut bench_actions = Default::default();
+        let gallery = &mut self.gallery;
+        let mut gallery_wants = None;
+        // The list is small (one entry per prototype) and only built while the window is open.
+        let protos = if gallery.open {
+            gallery::PrototypeInfo::of_world(
+                &self.world,
+                &crate::bake::cache::settings_of(&self.scene),
+            )
+        } else {
+            Vec::new()
+        };
         let mut out = r.egui_state.egui_ctx().run_ui(raw, |ui| {
             egui::Panel::right("controls")
                 .default_size(280.0)
@@ -946,6 +963,7 @@ impl App {
                     });
                 });
             bench_actions = bench.show(ui.ctx());
+            gallery_wants = gallery.show(ui.ctx(), &protos);
         });
         r.egui_state
             .handle_platform_output(&r.window, out.platform_output);
@@ -1009,6 +1027,23 @@ impl App {
 
         if actions.open_bench {
             self.bench.open(r.egui_state.egui_ctx());
+        }
+        if actions.open_gallery {
+            self.gallery.open = true;
+        }
+        if let Some(choice) = gallery_wants {
+            // Drawn once per choice (a fraction of a second on a software renderer).
+            match self.world.species.get(choice.0) {
+                Some(tree) => {
+                    match gallery::render_prototype(&r.ctx, tree, &self.frame, choice.1) {
+                        Ok(img) => self
+                            .gallery
+                            .set_picture(r.egui_state.egui_ctx(), choice, &img),
+                        Err(e) => self.gallery.set_error(choice, e.to_string()),
+                    }
+                }
+                None => self.gallery.set_error(choice, "no such prototype".into()),
+            }
         }
         if bench_actions.browse {
             let mut dialog = rfd::FileDialog::new().set_title("Bench results folder");

@@ -53,6 +53,8 @@ pub struct PanelActions {
     pub open_bench: bool,
     /// Pick a scene or a bake to open.
     pub open_file: bool,
+    /// Open the species gallery window.
+    pub open_gallery: bool,
     /// Open the embedded example scene of this name (the scene menu).
     pub open_example: Option<&'static str>,
 }
@@ -281,6 +283,15 @@ pub fn controls(
             actions.open_bench = true;
         }
     });
+    if ui
+        .button("Species gallery…")
+        .on_hover_text(
+            "each prototype alone, from a distance you choose, with its triangles and bake size",
+        )
+        .clicked()
+    {
+        actions.open_gallery = true;
+    }
     if let Some((text, is_error)) = message {
         if *is_error {
             ui.colored_label(egui::Color32::from_rgb(230, 80, 70), text);

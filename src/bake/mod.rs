@@ -18,9 +18,7 @@ use glam::{Mat4, Vec3};
 use crate::format::{BakeSettings, Baked, BtfImageSet};
 use crate::model::Level;
 use crate::model::World;
-use crate::model::forest::{Forest, TreeInstance};
 use crate::model::mesh::{Aabb, Mesh};
-use crate::model::terrain::Terrain;
 use crate::model::tree::TreeModel;
 use crate::render::sky_visibility::SKY_DIRECTIONS;
 use crate::render::{
@@ -62,19 +60,7 @@ pub fn bounding_sphere(b: &Aabb) -> (Vec3, f32) {
 
 /// A world holding just `object`, once, at the origin.
 fn studio_world(object: TreeModel) -> World {
-    World {
-        terrain: Terrain::flat(1.0, 2),
-        species: vec![object],
-        forest: Forest {
-            instances: vec![TreeInstance {
-                species: 0,
-                position: Vec3::ZERO,
-                yaw: 0.0,
-                scale: 1.0,
-                tint: Vec3::ONE,
-            }],
-        },
-    }
+    World::lone(object, 1.0)
 }
 
 /// What a bake step reports to a progress bar.

@@ -73,6 +73,24 @@ impl World {
         })
     }
 
+    /// A world holding `tree` once, at the origin, unturned, on flat ground `ground` metres
+    /// a side: the bake's studio, and the viewer's species gallery.
+    pub fn lone(tree: TreeModel, ground: f32) -> World {
+        World {
+            terrain: Terrain::flat(ground, 2),
+            species: vec![tree],
+            forest: Forest {
+                instances: vec![crate::model::TreeInstance {
+                    species: 0,
+                    position: glam::Vec3::ZERO,
+                    yaw: 0.0,
+                    scale: 1.0,
+                    tint: glam::Vec3::ONE,
+                }],
+            },
+        }
+    }
+
     /// Triangles of the whole scene drawn as full geometry (terrain and every tree).
     pub fn total_triangles(&self) -> u64 {
         let trees: u64 = self
