@@ -896,7 +896,7 @@ fn info(scene: Option<&Path>, json: bool, map: Option<&Path>, map_size: u32) -> 
         );
         for s in &r.species {
             println!(
-                "  {:<10} {} trees; triangles: twig {}, main branch {}, tree {}; {} main branches, {} twigs, {} leaves/needles, {:.1} m tall",
+                "  {:<10} {} trees; triangles: twig {}, main branch {}, tree {}; {} main branches, {} twigs, {} leaves/needles, {:.1} m tall, crown {:.0} % covered from the side",
                 s.name,
                 s.trees,
                 s.triangles.twig,
@@ -905,7 +905,8 @@ fn info(scene: Option<&Path>, json: bool, map: Option<&Path>, map_size: u32) -> 
                 s.main_branches,
                 s.twigs,
                 s.leaves,
-                s.height_m
+                s.height_m,
+                100.0 * s.crown_coverage
             );
         }
         match &estimate {

@@ -18,6 +18,7 @@ fn lone_broadleaf() -> Scene {
     let mut scene = Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses");
     scene.species[0].name = "broadleaf".into();
     scene.species[0].preset = Some("broadleaf".into());
+    scene.species[0].params = None;
     scene
 }
 

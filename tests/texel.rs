@@ -21,8 +21,13 @@ use common::*;
 fn lone_tree(species: &str) -> Scene {
     let mut scene = Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses");
     scene.bake.texel_resolution = 64;
+    if scene.species[0].name != species {
+        // The fixture's own tree is the fir as its bounds were measured; another species
+        // is the preset.
+        scene.species[0].preset = Some(species.into());
+        scene.species[0].params = None;
+    }
     scene.species[0].name = species.into();
-    scene.species[0].preset = Some(species.into());
     scene
 }
 

@@ -5,6 +5,7 @@
 
 use glam::Vec3;
 use image::RgbaImage;
+use rayon::prelude::*;
 
 use crate::Result;
 use crate::model::{TreeModel, World};
@@ -27,6 +28,9 @@ pub struct PrototypeInfo {
     /// Bytes its bake holds: BTF images of its three levels and the cube maps of its
     /// main branches and twigs.
     pub baked_bytes: u64,
+    /// Side-view crown coverage (share of the crown's silhouette hull covered, mean of four
+    /// azimuths; [`crate::model::silhouette`]).
+    pub crown_coverage: f32,
 }
 
 impl PrototypeInfo {
@@ -41,7 +45,7 @@ impl PrototypeInfo {
         let vcm = crate::format::vcm_record_bytes(settings.vcm_resolution);
         world
             .species
-            .iter()
+            .par_iter()
             .zip(counts)
             .map(|(t, trees)| {
                 let c = t.triangle_counts();
@@ -52,6 +56,7 @@ impl PrototypeInfo {
                     triangles: [c.twig, c.branch, c.tree],
                     trees,
                     baked_bytes: btf + objects * vcm,
+                    crown_coverage: crate::model::silhouette::crown_coverage(t).mean,
                 }
             })
             .collect()
@@ -168,6 +173,9 @@ impl Gallery {
                         ui.end_row();
                         ui.label("baked (BTF + VCMs)");
                         ui.label(format!("{:.1} MB", p.baked_bytes as f64 / 1e6));
+                        ui.end_row();
+                        ui.label("crown covered from the side");
+                        ui.label(format!("{:.0} %", 100.0 * p.crown_coverage));
                         ui.end_row();
                     });
             });

@@ -10,6 +10,7 @@ pub mod level;
 pub mod mesh;
 pub mod params;
 pub mod rng;
+pub mod silhouette;
 pub mod species;
 pub mod stands;
 pub mod summary;

@@ -196,7 +196,7 @@ impl TerrainParams {
 pub struct SpeciesEntry {
     /// Name shown in the UI and messages (unique in the scene).
     pub name: String,
-    /// A built-in preset (`fir` or `broadleaf`); exactly one of `preset` and `params`.
+    /// A built-in preset (`fir`, `broadleaf` or `pine`); exactly one of `preset` and `params`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub preset: Option<String>,
     /// Full species parameters (`[species.params]`); exactly one of `preset` and `params`.

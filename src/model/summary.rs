@@ -1,9 +1,11 @@
 //! A world in numbers, as `canopy info` prints it: the trees, the terrain and, per species,
 //! the triangles of each level and the parts of one tree.
 
+use rayon::prelude::*;
 use serde::Serialize;
 
 use super::World;
+use super::silhouette::crown_coverage;
 
 /// What a world holds.
 #[derive(Clone, Debug, Serialize)]
@@ -39,6 +41,9 @@ pub struct SpeciesSummary {
     pub leaves: u64,
     /// Height of the prototype's bounding box.
     pub height_m: f32,
+    /// Side-view crown coverage: the share of the crown's silhouette hull its triangles
+    /// cover, the mean of four azimuths ([`super::silhouette`]).
+    pub crown_coverage: f32,
 }
 
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -53,7 +58,7 @@ impl WorldSummary {
     pub fn new(world: &World, build_ms: f64) -> Self {
         let species = world
             .species
-            .iter()
+            .par_iter()
             .map(|t| {
                 let tri = t.triangle_counts();
                 let parts = t.counts();
@@ -80,6 +85,7 @@ impl WorldSummary {
                     twigs: parts.twigs,
                     leaves: parts.foliage,
                     height_m: t.tree_bounds.max.y - t.tree_bounds.min.y,
+                    crown_coverage: crown_coverage(t).mean,
                 }
             })
             .collect();
