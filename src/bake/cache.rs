@@ -119,6 +119,17 @@ mod tests {
     use super::*;
 
     #[test]
+    fn one_variant_keeps_the_bake_key_and_more_change_it() {
+        let base = Scene::default_scene();
+        let mut one = base.clone();
+        one.species[1].variants = 1;
+        assert_eq!(scene_hash(&base), scene_hash(&one));
+        let mut three = base.clone();
+        three.species[1].variants = 3;
+        assert_ne!(scene_hash(&base), scene_hash(&three));
+    }
+
+    #[test]
     fn the_key_follows_what_is_baked_and_ignores_the_rest() {
         let a = Scene::default_scene();
         let mut b = a.clone();
