@@ -761,8 +761,8 @@ fn bake(
         );
         for s in &r.sets {
             println!(
-                "  {:<10} {:<12} {} bytes, radius {:.2} m, texel {:.3} m",
-                s.species, s.level, s.bytes, s.radius_m, s.texel_m
+                "  {:<12} {:<12} {} bytes, radius {:.2} m, texel {:.3} m, {:.1} s",
+                s.species, s.level, s.bytes, s.radius_m, s.texel_m, s.seconds
             );
         }
         if r.texels.is_empty() {
@@ -775,8 +775,15 @@ fn bake(
         }
         for t in &r.texels {
             println!(
-                "  {:<10} {}x{}x{} voxels of {:.3} m, {} volumes, {} bytes",
-                t.species, t.dims[0], t.dims[1], t.dims[2], t.voxel_m, t.volumes, t.bytes
+                "  {:<12} {}x{}x{} voxels of {:.3} m, {} volumes, {} bytes, {:.1} s",
+                t.species,
+                t.dims[0],
+                t.dims[1],
+                t.dims[2],
+                t.voxel_m,
+                t.volumes,
+                t.bytes,
+                t.seconds
             );
         }
         println!("wrote {} ({} bytes)", r.out, r.file_bytes);
@@ -894,6 +901,12 @@ fn info(scene: Option<&Path>, json: bool, map: Option<&Path>, map_size: u32) -> 
             "{} trees on a {} m terrain ({}x{} heights), built in {:.0} ms",
             r.trees, r.terrain.size_m, r.terrain.resolution, r.terrain.resolution, r.build_ms
         );
+        if let Some(c) = r.terrain.far_forest_cover {
+            println!(
+                "  past the square, the forest goes on to the horizon as a canopy surface (crowns cover up to {:.0} % of its stands)",
+                100.0 * c
+            );
+        }
         for s in &r.species {
             println!(
                 "  {:<10} {} trees; triangles: twig {}, main branch {}, tree {}; {} main branches, {} twigs, {} leaves/needles, {:.1} m tall, crown {:.0} % covered from the side",

@@ -134,9 +134,7 @@ fn ridge_world() -> World {
             far: None,
         },
         species,
-        forest: Forest {
-            instances: Vec::new(),
-        },
+        forest: Forest::default(),
     }
 }
 

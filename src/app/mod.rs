@@ -712,8 +712,7 @@ impl App {
         if run.warm_at.is_none() && (run.next_action >= cycles || run.script.actions.is_empty()) {
             run.warm_at = Some(t);
         }
-        let due = run.samples.len() as f64 * run.script.sample_seconds;
-        if t >= due {
+        if t >= soak::next_due(&run.samples, run.script.sample_seconds) {
             run.samples.push(sample(t, &mut run.resident));
         }
         let judged = soak::judgeable(&run.samples, run.script.sample_seconds, run.warm_at);

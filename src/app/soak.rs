@@ -42,6 +42,13 @@ pub fn baseline_after(sample_seconds: f64, warm_at: Option<f64>) -> f64 {
     warm_at.map_or(f64::INFINITY, |w| w.max(sample_seconds))
 }
 
+/// When the next sample is due: an interval after the last one (not at the next multiple
+/// of the interval, which after one long frame would take a burst of samples, each
+/// over a sliver of an interval).
+pub fn next_due(samples: &[Sample], sample_seconds: f64) -> f64 {
+    samples.last().map_or(0.0, |s| s.seconds + sample_seconds)
+}
+
 /// The first sample whose whole interval lies after `after` (the one before it was taken
 /// then or later): its resident floor holds nothing of the warm-up.
 fn baseline(samples: &[Sample], after: f64) -> Option<&Sample> {
@@ -305,6 +312,31 @@ mod tests {
             let e = Script::parse(text, "s.toml").unwrap_err().to_string();
             assert!(e.contains("s.toml") && e.contains(want), "{text}: {e}");
         }
+    }
+
+    #[test]
+    fn a_long_frame_does_not_make_a_burst_of_samples() {
+        let at = |t: f64| Sample {
+            seconds: t,
+            resident_bytes: 1,
+            resident_peak_bytes: 1,
+            gpu_bytes: 1,
+            heap_used_bytes: 0,
+            heap_free_bytes: 0,
+        };
+        assert_eq!(next_due(&[], 60.0), 0.0);
+        // A frame of 150 s ends at 155 s: one sample then, the next a minute later, not
+        // again at 180 s.
+        let mut samples = vec![at(0.0), at(60.0)];
+        let mut t = 0.0;
+        for frame in [5.0, 150.0, 1.0, 1.0, 30.0, 40.0] {
+            t += frame;
+            if t >= 60.0 && t >= next_due(&samples, 60.0) {
+                samples.push(at(t));
+            }
+        }
+        let times: Vec<f64> = samples.iter().map(|s| s.seconds).collect();
+        assert_eq!(times, vec![0.0, 60.0, 155.0, 227.0]);
     }
 
     #[test]

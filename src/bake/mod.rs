@@ -86,13 +86,53 @@ pub fn step_count(settings: &BakeSettings, world: &World) -> u64 {
 }
 
 /// How long a bake and each of its parts took.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct BakeTimes {
     /// The whole bake.
     pub seconds: f64,
     pub btf_seconds: f64,
     pub vcm_seconds: f64,
     pub texel_seconds: f64,
+    /// Seconds per stage, named as the progress names them (`fir 1 tree`, `fir 1 VCMs`,
+    /// `tree VCMs`, `fir 1 texel volume`), in the order they ran.
+    pub stages: Vec<(String, f64)>,
+}
+
+impl BakeTimes {
+    /// Seconds of the stage named `what` (0 if it did not run).
+    pub fn stage(&self, what: &str) -> f64 {
+        self.stages
+            .iter()
+            .filter(|(w, _)| w == what)
+            .map(|(_, s)| s)
+            .sum()
+    }
+}
+
+/// Times each stage from the progress calls: the time since the previous call goes to the
+/// step the call reports, and so to its stage.
+struct StageClock {
+    last: std::time::Instant,
+    stages: Vec<(String, f64)>,
+}
+
+impl StageClock {
+    fn new() -> Self {
+        StageClock {
+            last: std::time::Instant::now(),
+            stages: Vec::new(),
+        }
+    }
+
+    fn step(&mut self, what: &str) {
+        let now = std::time::Instant::now();
+        let dt = (now - self.last).as_secs_f64();
+        self.last = now;
+        match self.stages.last_mut() {
+            Some((w, s)) if w == what => *s += dt,
+            _ => self.stages.push((what.to_owned(), dt)),
+        }
+    }
 }
 
 /// The whole bake of `world`: the BTF image sets, then the visibility cube maps.
@@ -108,7 +148,9 @@ pub fn bake(
     estimate::check(settings, world)?;
     let total = step_count(settings, world);
     let t0 = std::time::Instant::now();
+    let mut clock = StageClock::new();
     let mut baked = bake_btf(ctx, world, settings, scene_hash, &mut |p| {
+        clock.step(&p.what);
         progress(&Progress { total, ..p.clone() })
     })?;
     let btf_seconds = t0.elapsed().as_secs_f64();
@@ -119,6 +161,7 @@ pub fn bake(
         &baked.btf,
         settings.vcm_resolution,
         &mut |done, what| {
+            clock.step(what);
             progress(&Progress {
                 done: images + done,
                 total,
@@ -137,6 +180,7 @@ pub fn bake(
         settings.supersample,
         texel_params,
         &mut |done, what| {
+            clock.step(what);
             progress(&Progress {
                 done: before_texels + done,
                 total,
@@ -149,6 +193,7 @@ pub fn bake(
         btf_seconds,
         vcm_seconds,
         texel_seconds: t2.elapsed().as_secs_f64(),
+        stages: clock.stages,
     };
     Ok((baked, times))
 }

@@ -48,6 +48,8 @@ pub struct TexelReport {
     /// Volumes: one per light and one lit by the sky.
     pub volumes: u32,
     pub bytes: usize,
+    /// Seconds its volumes took to bake.
+    pub seconds: f64,
 }
 
 /// One BTF image set of a [`BakeReport`].
@@ -61,6 +63,8 @@ pub struct SetReport {
     pub radius_m: f32,
     /// Its largest texel.
     pub texel_m: f32,
+    /// Seconds its images took to bake.
+    pub seconds: f64,
 }
 
 impl BakeReport {
@@ -70,16 +74,20 @@ impl BakeReport {
         let sets = baked
             .btf
             .iter()
-            .map(|s| SetReport {
-                species: world
+            .map(|s| {
+                let species = world
                     .species
                     .get(s.species as usize)
                     .map(|t| t.name.clone())
-                    .unwrap_or_default(),
-                level: s.level.name(),
-                bytes: s.direct.len() + s.ambient.len(),
-                radius_m: s.radius,
-                texel_m: s.texel_size,
+                    .unwrap_or_default();
+                SetReport {
+                    seconds: times.stage(&format!("{species} {}", s.level.name())),
+                    species,
+                    level: s.level.name(),
+                    bytes: s.direct.len() + s.ambient.len(),
+                    radius_m: s.radius,
+                    texel_m: s.texel_size,
+                }
             })
             .collect();
         let name = |s: u32| {
@@ -98,6 +106,7 @@ impl BakeReport {
                 voxel_m: t.voxel,
                 volumes: t.lights + 1,
                 bytes: t.voxels.len(),
+                seconds: times.stage(&format!("{} texel volume", name(t.species))),
             })
             .collect();
         Self {

@@ -14,7 +14,8 @@ use crate::scene::Scene;
 use crate::{Error, Result};
 
 /// Bumped whenever the reference renderer changes what it draws: old truths are re-rendered.
-pub const TRUTH_REVISION: u32 = 2;
+/// (3: the presets grew denser foliage and the horizon ring carries the far forest.)
+pub const TRUTH_REVISION: u32 = 3;
 
 /// Everything that decides the pixels of one reference frame.
 #[derive(Clone, Copy, Debug)]

@@ -14,7 +14,7 @@ use glam::{Mat4, Vec2, Vec3};
 use super::ModelError;
 use super::params::{ForestParams, MAX_TREES};
 use super::rng::{Rng, mix64};
-use super::stands::{StandMap, height_range, normalise};
+use super::stands::{StandField, StandMap, height_range, normalise};
 use super::terrain::{Terrain, fbm};
 
 /// Largest number of grid cells per side of the placement acceleration grid.
@@ -60,6 +60,9 @@ impl TreeInstance {
 pub struct Forest {
     /// The trees, in placement order.
     pub instances: Vec<TreeInstance>,
+    /// Where the stands lie, when placed by `[forest.stands]`: the far forest cover
+    /// continues them past the square.
+    pub stands: Option<StandField>,
 }
 
 /// Uniform grid over the placement square; each cell is at least `min_spacing` wide, so any
@@ -301,7 +304,10 @@ impl Forest {
                 }
             })
             .collect();
-        Ok(Forest { instances })
+        Ok(Forest {
+            instances,
+            stands: stands.as_ref().map(StandMap::field),
+        })
     }
 
     /// Number of trees of each species (`species_count` entries).

@@ -5,6 +5,7 @@
 //! validates its input first (counts and resolutions are checked against sane maxima before
 //! anything is allocated) and reports problems as [`ModelError`].
 
+pub mod far_cover;
 pub mod forest;
 pub mod level;
 pub mod mesh;

@@ -48,6 +48,57 @@ pub struct StandMap {
     edge: f32,
     /// Distance of each cell's centre from the nearest cell that is not a stand (m).
     inside: Vec<f32>,
+    /// The noise and its cut, to continue the stands past the square.
+    field: StandField,
+}
+
+/// The stand noise and the level it was cut at: where the stands lie, evaluable anywhere
+/// (past the terrain's square too, for the far forest cover of
+/// [`crate::model::far_cover`]). Inside the square it agrees with [`StandMap::cover_at`]
+/// up to the map's 2 m cells.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StandField {
+    noise_seed: u64,
+    /// Wavelength of the noise (m).
+    size: f32,
+    /// Noise level at and above which the land is a stand.
+    cut: f32,
+    /// Valley floors below this fraction of the relief are meadows.
+    meadows: f32,
+    /// The terrain square's height range, for the meadows.
+    lo: f32,
+    hi: f32,
+}
+
+impl StandField {
+    /// The stand noise at `(x, z)`.
+    fn noise(&self, x: f32, z: f32) -> f32 {
+        fbm(
+            self.noise_seed,
+            Vec2::new(x, z) / self.size,
+            STAND_OCTAVES,
+            0.5,
+        )
+    }
+
+    /// How much of the land around `(x, z)` (ground height `ground`) is in stands, 0..=1,
+    /// seen at a footprint of `footprint` metres: 0 or 1 where the footprint is small
+    /// against the stands, a soft edge as it grows, and the field's `share` of stands
+    /// once it spans several of them (so that far, coarse cells average rather than alias).
+    pub fn stand_weight(&self, x: f32, z: f32, ground: f32, footprint: f32, share: f32) -> f32 {
+        if self.meadows > 0.0 && normalise(ground, self.lo, self.hi) < self.meadows {
+            return 0.0;
+        }
+        if !self.cut.is_finite() {
+            return if self.cut < 0.0 { 1.0 } else { 0.0 };
+        }
+        let r = (footprint / self.size).max(0.0);
+        // The noise's amplitude is about 0.5: a soft edge a fraction of it wide.
+        let soft = (0.6 * r).min(0.5).max(1e-3);
+        let sharp = smoothstep(self.cut - soft, self.cut + soft, self.noise(x, z));
+        let blur = smoothstep(0.25, 1.0, r);
+        sharp + (share - sharp) * blur
+    }
 }
 
 /// The lowest and highest height of the terrain's grid.
@@ -98,6 +149,7 @@ impl StandMap {
                     STAND_OCTAVES,
                     0.5,
                 ));
+                // (StandField::noise evaluates the same sum.)
                 meadow.push(
                     p.meadows > 0.0 && normalise(terrain.height_at(x, z), lo, hi) < p.meadows,
                 );
@@ -135,6 +187,14 @@ impl StandMap {
                 }
             })
             .collect();
+        let field = StandField {
+            noise_seed,
+            size: p.size,
+            cut,
+            meadows: p.meadows,
+            lo,
+            hi,
+        };
         let inside = chamfer_inside(&cover, cells, cell);
         let factor = inside
             .iter()
@@ -152,7 +212,13 @@ impl StandMap {
             cover,
             edge: p.edge,
             inside,
+            field,
         }
+    }
+
+    /// The noise and its cut, to continue the stands past the square.
+    pub fn field(&self) -> StandField {
+        self.field
     }
 
     fn index(&self, x: f32, z: f32) -> Option<usize> {

@@ -25,6 +25,10 @@ pub struct TerrainSummary {
     pub size_m: f32,
     /// Heights per side.
     pub resolution: u32,
+    /// Past the square, on the horizon ring (`[terrain] horizon`): the crown cover of the
+    /// canopy surface that stands for the forest there, in its densest height band (0..1);
+    /// `None` without a ring or without trees.
+    pub far_forest_cover: Option<f32>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -94,6 +98,7 @@ impl WorldSummary {
             terrain: TerrainSummary {
                 size_m: world.terrain.size,
                 resolution: world.terrain.resolution,
+                far_forest_cover: world.terrain.far_cover().map(|c| c.max_cover()),
             },
             species,
             build_ms,

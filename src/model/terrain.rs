@@ -6,6 +6,7 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::ModelError;
+use super::far_cover::{Canopy, FarCover};
 use super::mesh::{Aabb, Mesh, Vertex};
 use super::params::{TERRAIN_RESOLUTION, TerrainParams};
 use super::rng::{hash2, mix64, unit_f32};
@@ -21,7 +22,8 @@ pub struct Terrain {
     /// `resolution * resolution` heights (m), row-major: z rows (from -size/2), x columns
     /// (from -size/2).
     pub heights: Vec<f32>,
-    /// The same hills continued to the horizon (`[terrain] horizon`), for the mesh only.
+    /// The same hills continued to the horizon (`[terrain] horizon`), for the mesh only,
+    /// with the forest continued on them as a canopy surface once the forest is placed.
     pub far: Option<FarField>,
 }
 
@@ -43,6 +45,14 @@ pub struct FarField {
     /// The square's normalisation: height = (noise - lo) * scale.
     lo: f32,
     scale: f32,
+    /// The forest continued past the square (set by [`Terrain::set_far_cover`]).
+    cover: Option<FarCover>,
+}
+
+/// How wide the horizon ring's cells are at `(x, z)` (m): its squares of half side `h` have
+/// [`HORIZON_SIDE_SEGMENTS`] segments a side.
+fn ring_cell(x: f32, z: f32) -> f32 {
+    2.0 * x.abs().max(z.abs()) / HORIZON_SIDE_SEGMENTS as f32
 }
 
 impl FarField {
@@ -58,9 +68,28 @@ impl FarField {
         (n - self.lo) * self.scale
     }
 
-    fn normal(&self, x: f32, z: f32, d: f32) -> Vec3 {
-        let hx = (self.height(x + d, z) - self.height(x - d, z)) / (2.0 * d);
-        let hz = (self.height(x, z + d) - self.height(x, z - d)) / (2.0 * d);
+    /// The forest's canopy at `(x, z)` over ground `ground`, if the forest continues here.
+    pub fn canopy(&self, x: f32, z: f32, ground: f32) -> Option<Canopy> {
+        self.cover.map(|c| c.at(x, z, ground, ring_cell(x, z)))
+    }
+
+    /// The drawn surface at `(x, z)`: the hills, raised by the forest's canopy.
+    pub fn surface(&self, x: f32, z: f32) -> f32 {
+        let ground = self.height(x, z);
+        ground + self.canopy(x, z, ground).map_or(0.0, |c| c.raise)
+    }
+
+    /// The normal of the drawn surface (`canopy`: raised by the forest) or of the hills.
+    fn normal(&self, x: f32, z: f32, d: f32, canopy: bool) -> Vec3 {
+        let h = |x: f32, z: f32| {
+            if canopy {
+                self.surface(x, z)
+            } else {
+                self.height(x, z)
+            }
+        };
+        let hx = (h(x + d, z) - h(x - d, z)) / (2.0 * d);
+        let hz = (h(x, z + d) - h(x, z - d)) / (2.0 * d);
         Vec3::new(-hx, 1.0, -hz).try_normalize().unwrap_or(Vec3::Y)
     }
 }
@@ -176,6 +205,7 @@ impl Terrain {
             roughness: p.roughness,
             lo,
             scale: if span > 1e-9 { p.relief / span } else { 0.0 },
+            cover: None,
         });
         Ok(Terrain {
             size: p.size,
@@ -213,8 +243,21 @@ impl Terrain {
             .unwrap_or(0.0)
     }
 
+    /// Continues the forest past the square on the horizon ring (no effect without one).
+    pub fn set_far_cover(&mut self, cover: Option<FarCover>) {
+        if let Some(far) = &mut self.far {
+            far.cover = cover;
+        }
+    }
+
+    /// The horizon ring's forest cover, if it has one.
+    pub fn far_cover(&self) -> Option<&FarCover> {
+        self.far.as_ref().and_then(|f| f.cover.as_ref())
+    }
+
     /// Height at world `(x, z)`, bilinear between grid vertices; outside the square the
-    /// horizon's hills where there are some, else clamped to the edge.
+    /// horizon's drawn surface (hills and the far forest's canopy) where there is one, else
+    /// clamped to the edge.
     pub fn height_at(&self, x: f32, z: f32) -> f32 {
         let half = 0.5 * self.size;
         if let Some(far) = &self.far
@@ -222,7 +265,7 @@ impl Terrain {
             && x.is_finite()
             && z.is_finite()
         {
-            return far.height(x, z);
+            return far.surface(x, z);
         }
         let n = (self.resolution.max(2) - 1) as f32;
         let gx = ((x / self.size + 0.5) * n).clamp(0.0, n);
@@ -401,14 +444,17 @@ impl Terrain {
             let d = 2.0 * h / m as f32;
             for k in 0..per_ring {
                 let p = perimeter(k as f32 / per_ring as f32, h);
-                let y = far.height(p.x, p.y);
-                let nrm = far.normal(p.x, p.y, d);
-                mesh.vertices.push(Vertex::new(
-                    Vec3::new(p.x, y, p.y),
-                    nrm,
-                    colour(p, y, nrm),
-                    0.0,
-                ));
+                let ground = far.height(p.x, p.y);
+                let canopy = far.canopy(p.x, p.y, ground);
+                let y = ground + canopy.map_or(0.0, |c| c.raise);
+                let nrm = far.normal(p.x, p.y, d, true);
+                // The ground's colours follow the hills' slopes, not the canopy's edges.
+                let mut c = colour(p, ground, far.normal(p.x, p.y, d, false));
+                if let Some(canopy) = canopy {
+                    c = c.lerp(canopy.colour, canopy.cover.clamp(0.0, 1.0));
+                }
+                mesh.vertices
+                    .push(Vertex::new(Vec3::new(p.x, y, p.y), nrm, c, 0.0));
             }
             first
         };

@@ -4,6 +4,7 @@
 use rayon::prelude::*;
 
 use super::ModelError;
+use super::far_cover::FarCover;
 use super::forest::Forest;
 use super::params::{ForestParams, SpeciesEntry, TerrainParams};
 use super::terrain::Terrain;
@@ -63,9 +64,12 @@ impl World {
                     .collect::<Result<Vec<_>, ModelError>>()
             },
         );
-        let terrain = terrain?;
+        let mut terrain = terrain?;
         let species = species?;
         let forest = Forest::place_variants(forest, &terrain, &variants)?;
+        if terrain.far.is_some() {
+            terrain.set_far_cover(FarCover::measure(&terrain, &species, &forest));
+        }
         Ok(World {
             terrain,
             species,
@@ -87,6 +91,7 @@ impl World {
                     scale: 1.0,
                     tint: glam::Vec3::ONE,
                 }],
+                stands: None,
             },
         }
     }
