@@ -27,6 +27,9 @@ pub const DEFAULT_SCENE_TOML: &str = include_str!("../assets/default.toml");
 /// The embedded example forest at real density (`assets/scenes/forest.toml`).
 pub const FOREST_SCENE_TOML: &str = include_str!("../assets/scenes/forest.toml");
 
+/// One stand of the example forest, 250 m a side (`assets/scenes/stand.toml`).
+pub const STAND_SCENE_TOML: &str = include_str!("../assets/scenes/stand.toml");
+
 /// The example scenes embedded in the binary (the viewer's scene menu): name, a line on
 /// what it is, and the scene file's text.
 pub const EXAMPLE_SCENES: &[(&str, &str, &str)] = &[
@@ -39,6 +42,11 @@ pub const EXAMPLE_SCENES: &[(&str, &str, &str)] = &[
         "forest",
         "a forest at 600 trees per hectare: stands, clearings, meadows, about 36,000 trees (a long bake)",
         FOREST_SCENE_TOML,
+    ),
+    (
+        "stand",
+        "one stand of that forest, 250 m a side at the same density: about 1,800 trees (a bake of minutes)",
+        STAND_SCENE_TOML,
     ),
 ];
 
