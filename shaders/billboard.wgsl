@@ -137,6 +137,31 @@ fn view_texcoords(v: u32, p: vec3<f32>, dpx: vec3<f32>, dpy: vec3<f32>) -> ViewT
     return t;
 }
 
+// Image `index` of the BTF atlas (`BTF_ATLAS_SIDE`² images to a texture layer, row by row,
+// each with its own mip chain; the constant is prepended by src/render/shaders.rs) at image
+// coordinates `uv` with gradients `gx`, `gy`. `uv` is kept half a texel inside the image's
+// square at the coarser of the two levels the gradients pick, as ClampToEdge did for one
+// image per layer, so that no neighbour bleeds in.
+fn btf_sample(index: u32, uv: vec2<f32>, gx: vec2<f32>, gy: vec2<f32>) -> vec4<f32> {
+    let per_layer = BTF_ATLAS_SIDE * BTF_ATLAS_SIDE;
+    let slot = index % per_layer;
+    let cell = vec2<f32>(f32(slot % BTF_ATLAS_SIDE), f32(slot / BTF_ATLAS_SIDE));
+    let res = f32(textureDimensions(btf_images).x) / f32(BTF_ATLAS_SIDE);
+    let footprint = max(max(length(gx), length(gy)) * res, 1.0);
+    let lod = min(ceil(log2(footprint)), log2(res));
+    let half = 0.5 * exp2(lod) / res;
+    let inside = clamp(uv, vec2<f32>(half), vec2<f32>(1.0 - half));
+    let scale = 1.0 / f32(BTF_ATLAS_SIDE);
+    return textureSampleGrad(
+        btf_images,
+        btf_sampler,
+        (cell + inside) * scale,
+        i32(index / per_layer),
+        gx * scale,
+        gy * scale,
+    );
+}
+
 // Where the ray from `eye` through `p` (object frame, radii) meets the plane of view sample
 // `v` (through the centre, facing that view), in the same frame; w: 1 when the hit lies in
 // front of the eye and on the plane's square, else 0.

@@ -45,7 +45,7 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
         let v = b.view_index[k];
         let t = view_texcoords(v, pts[k].xyz, dxs[k], dys[k]);
         let f = vcm_factors(b, pts[k].xyz);
-        let amb = textureSampleGrad(btf_images, btf_sampler, t.uv, i32(base + b.view_count * lights + v), t.gx, t.gy);
+        let amb = btf_sample(base + b.view_count * lights + v, t.uv, t.gx, t.gy);
         var c = amb.rgb * frame.sky_ambient * f.y;
         var direct = vec3<f32>(0.0);
         for (var j = 0; j < 3; j++) {
@@ -54,7 +54,7 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
                 continue;
             }
             let layer = base + v * lights + b.light_index[j];
-            let d = textureSampleGrad(btf_images, btf_sampler, t.uv, i32(layer), t.gx, t.gy);
+            let d = btf_sample(layer, t.uv, t.gx, t.gy);
             direct += wl * d.rgb;
         }
         c += direct * frame.sun_color * f.x;

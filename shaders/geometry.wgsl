@@ -65,12 +65,15 @@ fn cascade_for(view_depth: f32) -> u32 {
 }
 
 // Where `world` falls in the ground shadow maps: texture coordinates (already scaled to
-// the part in use) and depth; uv < 0 when outside.
+// the part in use) and depth; uv < 0 when outside, or past the square they were drawn
+// from (the horizon ring is drawn, not shadowed: read there, the square's maps cast
+// streaks of shadow across it).
 fn ground_coords(world: vec3<f32>) -> vec3<f32> {
     let lp = frame.ground_light_view_proj * vec4<f32>(world, 1.0);
     let ndc = lp.xyz / lp.w;
     let uv = ndc_to_uv(ndc.xy);
-    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
+    let past = frame.ground_half > 0.0 && max(abs(world.x), abs(world.z)) > frame.ground_half;
+    if past || any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
         return vec3<f32>(-1.0, -1.0, ndc.z);
     }
     // Keep the filter footprint inside the part of the textures in use.

@@ -23,7 +23,7 @@ fn fs_opacity(in: BillboardOut) -> @location(0) vec4<f32> {
         }
         let v = b.view_index[k];
         let t = view_texcoords(v, in.p, dpx, dpy);
-        alpha += wv * textureSampleGrad(btf_images, btf_sampler, t.uv, i32(b.layer_base + b.view_count * b.light_count + v), t.gx, t.gy).a;
+        alpha += wv * btf_sample(b.layer_base + b.view_count * b.light_count + v, t.uv, t.gx, t.gy).a;
     }
     return vec4<f32>(0.0, 0.0, 0.0, alpha * b.opacity);
 }

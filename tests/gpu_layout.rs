@@ -85,7 +85,7 @@ fn frame_uniforms_match_frame_wgsl() {
         cascade_splits,
         cascade_texel_uv,
         cascade_texel_world,
-        _pad4,
+        ground_half,
         ground_light_view_proj,
         ground_alpha_on,
         terrain_depth_on,

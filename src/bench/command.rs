@@ -305,7 +305,9 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
         let choices = bake_candidates();
         let max_layers = u64::from(ctx.device.limits().max_texture_array_layers);
         for (k, b) in choices.iter().enumerate() {
-            let layers = world.species.len() as u64 * 3 * u64::from(b.views * b.lights + b.views);
+            let layers = crate::render::method::btf::atlas_layers(
+                world.species.len() as u64 * 3 * u64::from(b.views * b.lights + b.views),
+            );
             if layers > max_layers {
                 log::warn!(
                     "tune: skipping the bake of {} views x {} lights: {layers} texture layers, this GPU allows {max_layers}",

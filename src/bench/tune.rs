@@ -26,9 +26,8 @@ pub const WEIGHT_THRESHOLDS: [f32; 4] = [0.0, 0.1, 0.2, 0.3];
 pub const LOD_FADES: [f32; 2] = [0.0, 0.2];
 pub const PLANES: [PlaneMode; 2] = [PlaneMode::Single, PlaneMode::Crossed];
 
-/// The bake settings `tune --bake` tries: views x lights x resolution. (66 views need
-/// 66 x 7 = 462 texture layers per image set, more than the 2048 most GPUs allow for the
-/// 6 sets of two species.)
+/// The bake settings `tune --bake` tries: views x lights x resolution. (66 views: 66 x 7 =
+/// 462 images per image set, nearly 4 times an 18-view bake's time, for every bake tried.)
 pub const BAKE_VIEWS: [u32; 2] = [6, 18];
 pub const BAKE_LIGHTS: [u32; 2] = [6, 18];
 pub const BAKE_RESOLUTIONS: [u32; 2] = [32, 64];

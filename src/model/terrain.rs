@@ -79,17 +79,10 @@ impl FarField {
         ground + self.canopy(x, z, ground).map_or(0.0, |c| c.raise)
     }
 
-    /// The normal of the drawn surface (`canopy`: raised by the forest) or of the hills.
-    fn normal(&self, x: f32, z: f32, d: f32, canopy: bool) -> Vec3 {
-        let h = |x: f32, z: f32| {
-            if canopy {
-                self.surface(x, z)
-            } else {
-                self.height(x, z)
-            }
-        };
-        let hx = (h(x + d, z) - h(x - d, z)) / (2.0 * d);
-        let hz = (h(x, z + d) - h(x, z - d)) / (2.0 * d);
+    /// The hills' normal (central differences `d` apart).
+    fn normal(&self, x: f32, z: f32, d: f32) -> Vec3 {
+        let hx = (self.height(x + d, z) - self.height(x - d, z)) / (2.0 * d);
+        let hz = (self.height(x, z + d) - self.height(x, z - d)) / (2.0 * d);
         Vec3::new(-hx, 1.0, -hz).try_normalize().unwrap_or(Vec3::Y)
     }
 }
@@ -447,9 +440,10 @@ impl Terrain {
                 let ground = far.height(p.x, p.y);
                 let canopy = far.canopy(p.x, p.y, ground);
                 let y = ground + canopy.map_or(0.0, |c| c.raise);
-                let nrm = far.normal(p.x, p.y, d, true);
-                // The ground's colours follow the hills' slopes, not the canopy's edges.
-                let mut c = colour(p, ground, far.normal(p.x, p.y, d, false));
+                // Lit and coloured by the hills' slopes, not by the canopy's edges: a stand's
+                // border rises over one ring cell, and lit as a slope it reads as a cliff.
+                let nrm = far.normal(p.x, p.y, d);
+                let mut c = colour(p, ground, nrm);
                 if let Some(canopy) = canopy {
                     c = c.lerp(canopy.colour, canopy.cover.clamp(0.0, 1.0));
                 }

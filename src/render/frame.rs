@@ -324,7 +324,9 @@ pub struct FrameUniforms {
     pub cascade_texel_uv: f32,
     /// World size of one texel in each cascade.
     pub cascade_texel_world: [f32; 3],
-    pub _pad4: f32,
+    /// Half the side of the square the ground maps cover (m): past it (the horizon ring)
+    /// nothing is shaded by them. 0 until they are built.
+    pub ground_half: f32,
     /// The sun's view of the whole scene, for the ground shadow maps.
     pub ground_light_view_proj: [[f32; 4]; 4],
     /// 1 when the ground alpha shadow map applies.
@@ -374,7 +376,7 @@ impl FrameUniforms {
             cascade_splits: cascades.splits,
             cascade_texel_uv: 1.0 / frame.shadows.map_size.max(1) as f32,
             cascade_texel_world: cascades.texel_world,
-            _pad4: 0.0,
+            ground_half: 0.0,
             ground_light_view_proj: Mat4::IDENTITY.to_cols_array_2d(),
             ground_alpha_on: 0,
             terrain_depth_on: 0,

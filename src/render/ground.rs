@@ -118,6 +118,8 @@ pub struct GroundMaps {
     light_view_proj: glam::Mat4,
     /// World size (m) of one texel of the maps as last built.
     texel_world: f32,
+    /// Half the side of the square they cover (the scene's bounds), as last built.
+    half: f32,
     /// What the maps hold now (None: nothing yet).
     built: Option<GroundKey>,
     /// Timestamps around the pass, the GPU side of a sun move.
@@ -152,6 +154,7 @@ impl GroundMaps {
             terrain_pipeline,
             light_view_proj: glam::Mat4::IDENTITY,
             texel_world: 0.0,
+            half: 0.0,
             built: None,
             timer: GpuTimer::new(ctx),
         })
@@ -213,6 +216,7 @@ impl GroundMaps {
         uniforms.ground_alpha_on = 1;
         uniforms.terrain_depth_on = u32::from(terrain_depth);
         uniforms.ground_texel_world = self.texel_world;
+        uniforms.ground_half = self.half;
         uniforms.ground_uv_scale = size as f32 / capacity.max(1) as f32;
         if terrain_depth {
             uniforms.shadows_on = 1;
@@ -238,6 +242,9 @@ impl GroundMaps {
         );
         self.light_view_proj = light.matrices[0];
         self.texel_world = light.texel_world[0];
+        self.half = [b_box.min.x, b_box.max.x, b_box.min.z, b_box.max.z]
+            .iter()
+            .fold(0.0f32, |m, v| m.max(v.abs()));
         let light_uniforms = uniforms.for_light(self.light_view_proj);
         ctx.queue
             .write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&light_uniforms));

@@ -25,9 +25,11 @@ fn with_frame(pass: &str) -> String {
     format!("{FRAME}\n{pass}")
 }
 
-/// A pass that draws billboards: frame uniforms, the billboard record, the pass's file.
+/// A pass that draws billboards: frame uniforms, the BTF atlas's layout, the billboard
+/// record, the pass's file.
 fn with_billboards(pass: &str) -> String {
-    format!("{FRAME}\n{BILLBOARD}\n{pass}")
+    let atlas = crate::render::method::btf::ATLAS_SIDE;
+    format!("{FRAME}\nconst BTF_ATLAS_SIDE: u32 = {atlas}u;\n{BILLBOARD}\n{pass}")
 }
 
 /// Every shader module the render core builds, by name, for validation and for pipelines.

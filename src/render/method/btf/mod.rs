@@ -54,20 +54,30 @@ impl BtfAssets {
     pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
         let scene = BtfScene::new(baked, world)?;
         let res = scene.resolution();
-        let layers = scene.layer_count();
+        let images = scene.layer_count();
+        let layers = atlas_layers(images);
         let max_layers = u64::from(ctx.device.limits().max_texture_array_layers);
         if layers > max_layers {
             return Err(Error::BadInput(format!(
-                "the BTF needs {layers} texture layers but this GPU allows {max_layers}; bake with fewer views or lights"
+                "the BTF needs {images} images ({layers} texture layers of {} each) but this GPU allows {max_layers} layers; bake with fewer views or lights, or fewer species variants",
+                ATLAS_SIDE * ATLAS_SIDE
             )));
         }
+        let side = res * ATLAS_SIDE;
+        if side > ctx.device.limits().max_texture_dimension_2d {
+            return Err(Error::BadInput(format!(
+                "the BTF atlas needs {side}² texture layers but this GPU allows {}; bake at a lower resolution",
+                ctx.device.limits().max_texture_dimension_2d
+            )));
+        }
+        // Each image has its own mip chain down to one texel, inside its square.
         let mips = res.max(1).ilog2() + 1;
         let texture = ctx.checked("allocating the BTF texture array", || {
             ctx.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("btf images"),
                 size: wgpu::Extent3d {
-                    width: res,
-                    height: res,
+                    width: side,
+                    height: side,
                     depth_or_array_layers: layers.max(1) as u32,
                 },
                 mip_level_count: mips,
@@ -86,7 +96,7 @@ impl BtfAssets {
                 .chunks_exact(image_bytes)
                 .chain(set.ambient.chunks_exact(image_bytes));
             for (i, img) in images.enumerate() {
-                bytes += upload_layer(ctx, &texture, base + i as u32, res, img, mips);
+                bytes += upload_image(ctx, &texture, base + i as u32, res, img, mips);
             }
         }
         let texture_view = texture.create_view(&wgpu::TextureViewDescriptor {
@@ -429,16 +439,32 @@ fn make_bind_group(
     })
 }
 
-/// Uploads one image and its mip chain (box-filtered in linear light) to `layer`.
-/// Returns the bytes uploaded.
-fn upload_layer(
+/// Images per side of one texture layer: the images are packed [`ATLAS_SIDE`]² to a layer
+/// (image `i` in layer `i / ATLAS_SIDE²`, square `i % ATLAS_SIDE²` row by row), so that a
+/// scene of many prototypes fits the 2048 layers most GPUs allow (three species of three
+/// variants at 18 views x 7 lights are 3,402 images). `shaders/billboard.wgsl`'s
+/// `btf_sample` reads them, keeping half a texel inside the square at the level sampled.
+pub const ATLAS_SIDE: u32 = 4;
+
+/// Texture layers holding `images` images.
+pub fn atlas_layers(images: u64) -> u64 {
+    images.div_ceil(u64::from(ATLAS_SIDE * ATLAS_SIDE))
+}
+
+/// Uploads image `index` and its mip chain (box-filtered in linear light) into its square
+/// of the atlas. Returns the bytes uploaded.
+fn upload_image(
     ctx: &GpuContext,
     texture: &wgpu::Texture,
-    layer: u32,
+    index: u32,
     res: u32,
     rgba: &[u8],
     mips: u32,
 ) -> u64 {
+    let per_layer = ATLAS_SIDE * ATLAS_SIDE;
+    let layer = index / per_layer;
+    let slot = index % per_layer;
+    let (cx, cy) = (slot % ATLAS_SIDE, slot / ATLAS_SIDE);
     let Some(mut img) = image::RgbaImage::from_raw(res, res, rgba.to_vec()) else {
         return 0;
     };
@@ -450,8 +476,8 @@ fn upload_layer(
                 texture,
                 mip_level: level,
                 origin: wgpu::Origin3d {
-                    x: 0,
-                    y: 0,
+                    x: cx * w,
+                    y: cy * h,
                     z: layer,
                 },
                 aspect: wgpu::TextureAspect::All,
@@ -548,4 +574,23 @@ fn billboard_pipeline(
             depth,
         },
     )
+}
+
+#[cfg(test)]
+mod atlas_tests {
+    use super::*;
+
+    #[test]
+    fn three_species_of_three_variants_fit_the_usual_layer_limit() {
+        // 9 prototypes x 3 levels x 18 views x (6 lights + sky): 3,402 images, over the
+        // 2,048 layers most GPUs allow for one image per layer.
+        let images = 9 * 3 * 18 * 7;
+        assert_eq!(images, 3402);
+        assert_eq!(atlas_layers(images), 213);
+        // 8 variants of 3 species at the default sampling: 9,072 images.
+        assert_eq!(atlas_layers(24 * 3 * 18 * 7), 567);
+        assert_eq!(atlas_layers(0), 0);
+        assert_eq!(atlas_layers(16), 1);
+        assert_eq!(atlas_layers(17), 2);
+    }
 }

@@ -209,8 +209,17 @@ impl TexelScene {
             .map(round);
         let per_species = lights + 1;
         let count = volumes.len() as u32 * per_species;
-        // Volumes along w, then further columns along u.
-        let per_column = (max_dim / slot.z.max(1)).max(1);
+        // Volumes along w, then further columns along u; a species' volumes never straddle
+        // two columns (the shader steps between them along w), so a column holds whole
+        // species (three species of three variants need 3 columns of 2048).
+        let species_per_column = max_dim / (slot.z.max(1) * per_species);
+        if species_per_column == 0 {
+            return Err(Error::BadInput(format!(
+                "the {per_species} texel volumes of one species need {} voxels along one side but this GPU allows {max_dim}; bake with a lower texel_resolution or fewer lights",
+                slot.z * per_species
+            )));
+        }
+        let per_column = species_per_column * per_species;
         let columns = count.div_ceil(per_column);
         let atlas = UVec3::new(slot.x * columns, slot.y, slot.z * count.min(per_column));
         if atlas.max_element() > max_dim {
@@ -1156,4 +1165,69 @@ fn texel_pipeline(
             depth,
         },
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::format::BakeSettings;
+    use crate::model::{TreeModel, preset};
+
+    /// Nine prototypes (three species of three variants) with 6 lights: 63 volumes of up
+    /// to 64 voxels, more than one 2048-voxel column holds. Each species' volumes stay in
+    /// one column, every slot is distinct and inside the texture.
+    #[test]
+    fn many_prototypes_pack_into_columns_of_whole_species() {
+        let tree = TreeModel::generate(&preset("broadleaf").unwrap(), 1).unwrap();
+        let mut world = World::lone(tree.clone(), 10.0);
+        world.species = vec![tree; 9];
+        let lights = 6;
+        let dims = [58, 64, 58];
+        let texels = (0..9)
+            .map(|s| TexelVolume {
+                species: s,
+                lights,
+                dims,
+                box_min: [0.0; 3],
+                voxel: 0.2,
+                voxels: Vec::new(),
+            })
+            .collect();
+        let baked = Baked {
+            scene_hash: 0,
+            settings: BakeSettings {
+                views: 18,
+                lights,
+                resolution: 64,
+                supersample: 4,
+                vcm_resolution: 32,
+                texel_resolution: 64,
+            },
+            btf: Vec::new(),
+            vcm: Vec::new(),
+            texels,
+        };
+        let scene = TexelScene::new(&baked, &world, 2048).unwrap();
+        let atlas = scene.atlas_size();
+        assert!(atlas.max_element() <= 2048, "{atlas}");
+        let mut seen = std::collections::HashSet::new();
+        for s in 0..9 {
+            let starts = &scene.slots[s];
+            assert_eq!(starts.len(), 7);
+            assert!(starts.iter().all(|p| p.x == starts[0].x), "{starts:?}");
+            for p in starts {
+                assert!(seen.insert(*p), "slot {p} used twice");
+                assert!(
+                    (*p + UVec3::from(dims)).cmple(atlas).all(),
+                    "{p} outside {atlas}"
+                );
+            }
+        }
+        // One species' volumes cannot fit at all: a clear error.
+        let e = TexelScene::new(&baked, &world, 256)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("texel_resolution"), "{e}");
+    }
 }
