@@ -12,11 +12,12 @@ use crate::{Error, Result};
 
 /// Seconds per BTF image at 256² pixels rendered (resolution x supersample), per VCM
 /// object, and per texel voxelisation pass of 64 voxels along the longest side. Measured
-/// on lavapipe (llvmpipe, 2 cores) with the default forest (756 images of 64² at 4x4, 1082
-/// VCM objects, 84 passes: 22, 5.9 and 7.3 s of a 35 s bake); a GPU bakes faster.
-const SECONDS_PER_IMAGE: f64 = 0.029;
+/// on lavapipe (llvmpipe, 2 cores) with the default forest of today's presets (the fir of
+/// 123,800 triangles; 756 images of 64² at 4x4, 1122 VCM objects, 84 passes: 33.9, 5.5
+/// and 14.2 s of a 54 s bake); a GPU bakes faster.
+const SECONDS_PER_IMAGE: f64 = 0.045;
 const SECONDS_PER_VCM_OBJECT: f64 = 0.0055;
-const SECONDS_PER_TEXEL_PASS: f64 = 0.087;
+const SECONDS_PER_TEXEL_PASS: f64 = 0.17;
 /// A tree's own cube maps cost a base and a share per neighbour drawn into them (every
 /// tree within [`vcm::TREE_RANGE`]): 5.5 ms a tree with the default forest's 183
 /// neighbours, 118 ms with the example forest's 7,118 (600 trees per hectare; 8.5 trees a
