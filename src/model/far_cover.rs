@@ -100,7 +100,7 @@ fn foliage_albedo(tree: &TreeModel) -> Vec3 {
 impl FarCover {
     /// Measures the forest placed on `terrain`; `None` when it has no trees.
     pub fn measure(terrain: &Terrain, species: &[TreeModel], forest: &Forest) -> Option<FarCover> {
-        if forest.instances.is_empty() || !(terrain.size > 0.0) {
+        if forest.instances.is_empty() || terrain.size.is_nan() || terrain.size <= 0.0 {
             return None;
         }
         let (lo, hi) = height_range(terrain);
@@ -241,7 +241,7 @@ mod tests {
             seed: 5,
             min_spacing: 2.5,
             mix: vec![1.0],
-            stands: stands.then(|| StandParams {
+            stands: stands.then_some(StandParams {
                 cover: 0.6,
                 size: 120.0,
                 edge: 5.0,

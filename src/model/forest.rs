@@ -262,7 +262,7 @@ impl Forest {
 
         // Attributes come from their own stream, so positions do not depend on them.
         let mut rng = Rng::derive(p.seed, 1);
-        let patch_seed = mix64(p.seed ^ 0x5041_5443_4845_53); // "PATCHES"
+        let patch_seed = mix64(p.seed ^ 0x0050_4154_4348_4553); // "PATCHES"
         let range = height_range(terrain);
         let mut weights = p.mix.clone();
         let instances = points

@@ -94,7 +94,7 @@ impl StandField {
         }
         let r = (footprint / self.size).max(0.0);
         // The noise's amplitude is about 0.5: a soft edge a fraction of it wide.
-        let soft = (0.6 * r).min(0.5).max(1e-3);
+        let soft = (0.6 * r).clamp(1e-3, 0.5);
         let sharp = smoothstep(self.cut - soft, self.cut + soft, self.noise(x, z));
         let blur = smoothstep(0.25, 1.0, r);
         sharp + (share - sharp) * blur
