@@ -52,21 +52,33 @@ pub fn scaled_size(width: u32, height: u32, scale: f32) -> (u32, u32) {
     (f(width), f(height))
 }
 
-/// The automatic mode's next scale after a frame of `frame_ms`: 10 % smaller when the
-/// frame took more than 10 % over the target, 5 % larger when it took under 70 % of it
-/// (the gap keeps it from hunting), within MIN_SCALE..=1.
+/// The scales the automatic mode steps between, largest first. A ladder rather than a
+/// continuous factor: every change re-creates the 3D view's targets, and a factor that
+/// drifts with the machine's load makes a new size each time (the allocator keeps blocks
+/// of the old ones: a one-hour soak beside other work grew by steps of 30-40 MB).
+pub const AUTO_SCALES: [f32; 10] = [1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.42, 0.35, 0.3, MIN_SCALE];
+
+/// The automatic mode's next scale after a frame of `frame_ms`: one rung of
+/// [`AUTO_SCALES`] down when the frame took more than 10 % over the target, one up when it
+/// took under 70 % of it (the gap keeps it from hunting); a scale between rungs (set by the
+/// slider) goes to the nearest rung first.
 pub fn next_scale(scale: f32, frame_ms: f32, target_ms: f32) -> f32 {
     if !(frame_ms.is_finite() && frame_ms > 0.0 && target_ms > 0.0) {
         return scale;
     }
+    let rung = AUTO_SCALES
+        .iter()
+        .enumerate()
+        .min_by(|a, b| (a.1 - scale).abs().total_cmp(&(b.1 - scale).abs()))
+        .map_or(0, |(i, _)| i);
     let next = if frame_ms > 1.1 * target_ms {
-        scale * 0.9
+        (rung + 1).min(AUTO_SCALES.len() - 1)
     } else if frame_ms < 0.7 * target_ms {
-        scale * 1.05
+        rung.saturating_sub(1)
     } else {
-        scale
+        rung
     };
-    next.clamp(MIN_SCALE, 1.0)
+    AUTO_SCALES[next]
 }
 
 /// The offscreen texture the scaled 3D view is drawn into, and the pass that stretches it
@@ -273,18 +285,39 @@ mod tests {
         for _ in 0..5 {
             s = next_scale(s, 200.0, 50.0);
         }
-        assert!((s - 0.9f32.powi(5)).abs() < 1e-5, "{s}");
+        assert_eq!(s, 0.5);
         for _ in 0..100 {
             s = next_scale(s, 200.0, 50.0);
         }
         assert_eq!(s, MIN_SCALE);
         // Within the band it holds; fast frames raise it back to 1.
         assert_eq!(next_scale(0.6, 45.0, 50.0), 0.6);
+        // A slider's scale between rungs joins the ladder.
+        assert_eq!(next_scale(0.63, 45.0, 50.0), 0.6);
+        assert_eq!(next_scale(0.63, 200.0, 50.0), 0.5);
         for _ in 0..100 {
             s = next_scale(s, 10.0, 50.0);
         }
         assert_eq!(s, 1.0);
         assert_eq!(next_scale(0.5, f32::NAN, 50.0), 0.5);
         assert!(RenderScale::for_adapter(true).auto && !RenderScale::for_adapter(false).auto);
+    }
+
+    #[test]
+    fn a_load_that_comes_and_goes_makes_few_sizes() {
+        // Frame times swinging with the machine's load, 10,000 frames: the automatic mode
+        // visits at most the ladder's sizes, so the view's targets come in at most 10
+        // sizes per window size, however long it runs.
+        let mut s = 1.0;
+        let mut sizes = std::collections::HashSet::new();
+        let mut x = 12345u32;
+        for _ in 0..10_000 {
+            x = x.wrapping_mul(1_103_515_245).wrapping_add(12345);
+            let ms = 20.0 + (x >> 16) as f32 % 200.0;
+            s = next_scale(s, ms, 100.0);
+            sizes.insert(scaled_size(1280, 720, s));
+        }
+        assert!(sizes.len() <= AUTO_SCALES.len(), "{} sizes", sizes.len());
+        assert!(sizes.len() >= 3, "it moved: {sizes:?}");
     }
 }
