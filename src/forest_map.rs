@@ -126,13 +126,7 @@ mod tests {
             relief: 10.0,
             ..TerrainParams::default()
         };
-        let species = [SpeciesEntry {
-            name: "fir".into(),
-            preset: Some("fir".into()),
-            params: None,
-            seed: 1,
-            variants: 1,
-        }];
+        let species = [SpeciesEntry::from_preset("fir", "fir", 1)];
         let forest = ForestParams {
             count: None,
             density: Some(100.0),

@@ -1055,13 +1055,7 @@ lod_scale = 3.0
                 relief: 5.0,
                 ..TerrainParams::default()
             },
-            &[SpeciesEntry {
-                name: "fir".into(),
-                preset: Some("fir".into()),
-                params: None,
-                seed: 1,
-                variants: 1,
-            }],
+            &[SpeciesEntry::from_preset("fir", "fir", 1)],
             &ForestParams {
                 count: Some(30),
                 min_spacing: 6.0,

@@ -228,13 +228,7 @@ mod tests {
             horizon: true,
             ..TerrainParams::default()
         };
-        let species = vec![SpeciesEntry {
-            name: "fir".into(),
-            preset: Some("fir".into()),
-            params: None,
-            seed: 1,
-            variants: 1,
-        }];
+        let species = vec![SpeciesEntry::from_preset("fir", "fir", 1)];
         let forest = ForestParams {
             count,
             density,

@@ -224,6 +224,17 @@ fn is_one_variant(v: &u32) -> bool {
 }
 
 impl SpeciesEntry {
+    /// An entry of one variant of the built-in preset `preset`.
+    pub fn from_preset(name: &str, preset: &str, seed: u64) -> SpeciesEntry {
+        SpeciesEntry {
+            name: name.into(),
+            preset: Some(preset.into()),
+            params: None,
+            seed,
+            variants: 1,
+        }
+    }
+
     /// The parameters and seed of variant `v` (0 = the species as given).
     pub fn variant(&self, v: u32) -> Result<(SpeciesParams, u64), ModelError> {
         let base = self.try_params()?;

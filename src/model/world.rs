@@ -130,13 +130,7 @@ mod tests {
     }
 
     fn entry(name: &str, preset: &str, seed: u64) -> SpeciesEntry {
-        SpeciesEntry {
-            name: name.into(),
-            preset: Some(preset.into()),
-            params: None,
-            seed,
-            variants: 1,
-        }
+        SpeciesEntry::from_preset(name, preset, seed)
     }
 
     fn forest(count: u32) -> ForestParams {
