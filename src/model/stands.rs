@@ -73,12 +73,7 @@ pub struct StandField {
 impl StandField {
     /// The stand noise at `(x, z)`.
     fn noise(&self, x: f32, z: f32) -> f32 {
-        fbm(
-            self.noise_seed,
-            Vec2::new(x, z) / self.size,
-            STAND_OCTAVES,
-            0.5,
-        )
+        stand_noise(self.noise_seed, self.size, x, z)
     }
 
     /// How much of the land around `(x, z)` (ground height `ground`) is in stands, 0..=1,
@@ -120,6 +115,12 @@ pub fn normalise(h: f32, lo: f32, hi: f32) -> f32 {
     }
 }
 
+/// The stand noise of wavelength `size` at `(x, z)`: the map's cells and the field past
+/// the square read the same sum.
+fn stand_noise(seed: u64, size: f32, x: f32, z: f32) -> f32 {
+    fbm(seed, Vec2::new(x, z) / size, STAND_OCTAVES, 0.5)
+}
+
 fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
     if e1 <= e0 {
         return if x >= e0 { 1.0 } else { 0.0 };
@@ -143,13 +144,7 @@ impl StandMap {
         for j in 0..cells {
             for i in 0..cells {
                 let (x, z) = (centre(i), centre(j));
-                noise.push(fbm(
-                    noise_seed,
-                    Vec2::new(x, z) / p.size,
-                    STAND_OCTAVES,
-                    0.5,
-                ));
-                // (StandField::noise evaluates the same sum.)
+                noise.push(stand_noise(noise_seed, p.size, x, z));
                 meadow.push(
                     p.meadows > 0.0 && normalise(terrain.height_at(x, z), lo, hi) < p.meadows,
                 );
