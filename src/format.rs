@@ -54,10 +54,12 @@
 //!   56+D   A   ambient         RGBA8 premultiplied, one image per view
 //!
 //! VCM SET RECORD (kind 2; 56 bytes + opacity data)
-//!    0     4   species         u32
-//!    4     4   owner           u32, the object within its level: the tree instance; the
-//!                              main branch of the species' tree; the twig of its reference
-//!                              main branch, numbered on past them through the trunk's twigs
+//!    0     4   species         u32; 0xFFFFFFFF (VCM_CELL_SPECIES, level tree) marks the cube
+//!                              maps of a forest cell (`crate::vcm::cells`)
+//!    4     4   owner           u32, the object within its level: the tree instance (or the
+//!                              forest cell); the main branch of the species' tree; the
+//!                              twig of its reference main branch, numbered on past them
+//!                              through the trunk's twigs
 //!    8     1   level           u8, 0 = twig, 1 = branch, 2 = tree
 //!    9     3   reserved        must be 0
 //!   12     4   resolution      u32, 8..=128
@@ -115,6 +117,9 @@ use crate::model::Level;
 
 /// The first 8 bytes of every `.canopy` file.
 pub const MAGIC: [u8; 8] = *b"CANOPY\r\n";
+/// The `species` of a VCM set that holds a forest cell's cube maps (level tree, owner the
+/// cell's index in `crate::vcm::cells::ForestCells`), not one tree's.
+pub const VCM_CELL_SPECIES: u32 = u32::MAX;
 /// The format version this code writes and the only one it reads.
 pub const VERSION: u32 = 3;
 /// Most sections a file may have.

@@ -756,8 +756,20 @@ fn bake(
             r.seconds
         );
         println!(
-            "  btf {:.1} s; {} visibility cube map sets (8 corners x 6 faces x {}² each), {} bytes, {:.1} s",
+            "  btf {:.1} s; {} visibility cube map sets (8 corners x 6 faces x {}² each for twigs and main branches), {} bytes, {:.1} s",
             r.btf_seconds, r.vcm_sets, r.vcm_resolution, r.vcm_bytes, r.vcm_seconds
+        );
+        println!(
+            "  of which tree level: {} {} at {}² a face, {} bytes, {:.1} s",
+            r.tree_vcm_sets,
+            if r.tree_vcm_cells {
+                "forest cells"
+            } else {
+                "trees"
+            },
+            r.tree_vcm_resolution,
+            r.tree_vcm_bytes,
+            r.tree_vcm_seconds
         );
         for s in &r.sets {
             println!(
@@ -862,6 +874,27 @@ fn estimate_line(e: &canopy::bake::estimate::Estimate) -> String {
     )
 }
 
+/// How the trees' own visibility cube maps are laid out and what they weigh.
+fn tree_vcm_line(e: &canopy::bake::estimate::Estimate, world: &canopy::model::World) -> String {
+    let per_1000 = if world.forest.instances.is_empty() {
+        0.0
+    } else {
+        e.tree_vcm_bytes as f64 / world.forest.instances.len() as f64 * 1000.0 / 1e6
+    };
+    let layout = match world.tree_vcm {
+        canopy::model::TreeVcm::PerTree => format!("{} trees' own cube maps", e.tree_vcm_objects),
+        canopy::model::TreeVcm::Cells => format!(
+            "{} forest cells of {:.1} m",
+            e.tree_vcm_objects,
+            canopy::vcm::cells::ForestCells::side_for(world)
+        ),
+    };
+    format!(
+        "tree-level visibility cube maps: {layout}, {:.1} MB ({per_1000:.2} MB per 1,000 trees)",
+        e.tree_vcm_bytes as f64 / 1e6
+    )
+}
+
 fn info(scene: Option<&Path>, json: bool, map: Option<&Path>, map_size: u32) -> anyhow::Result<()> {
     if !(16..=canopy::forest_map::MAX_MAP_SIZE).contains(&map_size) {
         return Err(canopy::Error::BadInput(format!(
@@ -923,7 +956,10 @@ fn info(scene: Option<&Path>, json: bool, map: Option<&Path>, map_size: u32) -> 
             );
         }
         match &estimate {
-            Ok(e) => println!("{}", estimate_line(e)),
+            Ok(e) => {
+                println!("{}", estimate_line(e));
+                println!("  {}", tree_vcm_line(e, &world));
+            }
             Err(e) => println!("bake refused: {e}"),
         }
     }

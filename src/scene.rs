@@ -316,7 +316,9 @@ impl Scene {
     /// Builds the world of this scene: its terrain, species prototypes and forest
     /// (see [`World::build`]). Deterministic for the scene.
     pub fn build_world(&self) -> Result<World, ModelError> {
-        World::build(&self.terrain, &self.species, &self.forest)
+        let mut world = World::build(&self.terrain, &self.species, &self.forest)?;
+        world.tree_vcm = self.bake.tree_vcm;
+        Ok(world)
     }
 
     /// Checks every value (after deserialisation); the error names the full dotted key.

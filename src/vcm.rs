@@ -21,6 +21,13 @@ use glam::Vec3;
 
 use crate::model::mesh::Aabb;
 
+pub mod billboard;
+pub mod cells;
+
+/// Tree-level cube maps sit at least this far (m) above the terrain, so a box corner that
+/// dips into a slope still sees the sky the tree's foot sees.
+pub const GROUND_CLEARANCE: f32 = 0.05;
+
 /// Faces of a cube map.
 pub const FACES: usize = 6;
 /// Cube maps per object, one at each corner of its bounding box (points outside it take the
@@ -290,27 +297,37 @@ impl CubeRaster {
                         // Already stored as fully opaque; nothing behind can change that.
                         continue;
                     }
-                    let d = self.dirs[k];
-                    let denom = d.dot(n);
-                    if denom == 0.0 {
+                    let Some((s, tt, t)) = hit(self.dirs[k], q, n, q_n, r, u, rr, uu) else {
                         continue;
-                    }
-                    let t = q_n / denom;
-                    if t <= 0.0 {
-                        continue;
-                    }
-                    let p = d * t - q;
-                    let s = p.dot(r) / rr;
-                    let tt = p.dot(u) / uu;
-                    if s.abs() > 1.0 || tt.abs() > 1.0 {
-                        continue;
-                    }
+                    };
                     let footprint = texel_angle * t / side;
                     let a = quad.opacity(s, tt, footprint).clamp(0.0, 1.0);
                     self.transmittance[k] *= 1.0 - a;
                 }
             }
         }
+    }
+
+    /// True when every texel a sphere of `radius` at `center` could cover, seen from
+    /// `origin`, is already stored as fully opaque: drawing anything inside it would change
+    /// nothing, so the caller may skip building it. Cheap next to a draw.
+    pub fn covered(&self, origin: Vec3, center: Vec3, radius: f32) -> bool {
+        let q = center - origin;
+        if !(q.is_finite() && radius.is_finite()) || q.length() <= radius {
+            return false;
+        }
+        let res = self.res as usize;
+        (0..FACES).all(|face| {
+            let Some((i0, i1, j0, j1)) = face_range(face, q, radius, self.res) else {
+                return true;
+            };
+            let base = face * res * res;
+            (j0..=j1).all(|j| {
+                self.transmittance[base + j * res + i0..=base + j * res + i1]
+                    .iter()
+                    .all(|&t| t < SATURATED)
+            })
+        })
     }
 
     /// Makes every texel the terrain hides fully opaque.
@@ -354,12 +371,74 @@ impl CubeRaster {
     }
 }
 
+/// Where the ray from the eye along unit `d` meets the plane of a quad (`q` its centre
+/// relative to the eye, `n` = right × up, `q_n` = q · n): its quad coordinates (s, t) and
+/// distance, or None when it misses the quad or meets its plane behind the eye.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+fn hit(
+    d: Vec3,
+    q: Vec3,
+    n: Vec3,
+    q_n: f32,
+    r: Vec3,
+    u: Vec3,
+    rr: f32,
+    uu: f32,
+) -> Option<(f32, f32, f32)> {
+    let denom = d.dot(n);
+    if denom == 0.0 {
+        return None;
+    }
+    let t = q_n / denom;
+    if t <= 0.0 {
+        return None;
+    }
+    let p = d * t - q;
+    let s = p.dot(r) / rr;
+    let tt = p.dot(u) / uu;
+    if s.abs() > 1.0 || tt.abs() > 1.0 {
+        return None;
+    }
+    Some((s, tt, t))
+}
+
+/// The opacity a quad puts on one ray from `origin` along `dir`, filtered as a cube of
+/// `res`² texels per face would filter it ([`CubeRaster::draw`] for a single texel).
+pub fn ray_opacity(origin: Vec3, dir: Vec3, quad: &impl Occluder, res: u32) -> f32 {
+    let (c, r, u) = (quad.center(), quad.right(), quad.up());
+    let (rr, uu) = (r.length_squared(), u.length_squared());
+    let n = r.cross(u);
+    let d = dir.normalize_or_zero();
+    if !(rr > 0.0 && uu > 0.0 && n.length_squared() > 0.0 && c.is_finite()) || d == Vec3::ZERO {
+        return 0.0;
+    }
+    let q = c - origin;
+    let q_n = q.dot(n);
+    if q_n.abs() <= 1e-12 * n.length() {
+        return 0.0;
+    }
+    let Some((s, tt, t)) = hit(d, q, n, q_n, r, u, rr, uu) else {
+        return 0.0;
+    };
+    let side = rr.sqrt().max(uu.sqrt());
+    let footprint = 2.0 / res.max(1) as f32 * t / side;
+    quad.opacity(s, tt, footprint).clamp(0.0, 1.0)
+}
+
 /// The texel rectangle (columns i0..=i1, rows j0..=j1) of face `face` that a sphere of
 /// `radius` at `q` (relative to the eye) can cover, or None if it misses the face.
 fn face_range(face: usize, q: Vec3, radius: f32, res: u32) -> Option<(usize, usize, usize, usize)> {
     let (a, sign, b, c) = face_axes(face);
     let depth = sign * q[a];
     if depth + radius <= 0.0 {
+        return None;
+    }
+    // Every direction of the face has depth >= |its b and c components|: a sphere wholly
+    // beyond one of the 4 side planes of the face's pyramid misses it.
+    let side = radius * std::f32::consts::SQRT_2;
+    if depth - q[b] < -side || depth + q[b] < -side || depth - q[c] < -side || depth + q[c] < -side
+    {
         return None;
     }
     let last = res as usize - 1;
@@ -521,6 +600,33 @@ mod tests {
         // Beside the wall, the far quads alone.
         let beside = near_first.opacity_at(Vec3::new(-0.78, 0.1, 1.0));
         assert!(beside > 0.0 && beside < 1.0, "{beside}");
+    }
+
+    #[test]
+    fn a_single_ray_reads_what_the_cube_draws_and_covered_skips_only_what_is_hidden() {
+        let q = PlainQuad {
+            center: Vec3::new(0.0, 0.0, 3.0),
+            right: Vec3::X,
+            up: Vec3::Y,
+            alpha: 0.4,
+        };
+        assert!((ray_opacity(Vec3::ZERO, Vec3::Z, &q, RES) - 0.4).abs() < 1e-6);
+        assert_eq!(ray_opacity(Vec3::ZERO, -Vec3::Z, &q, RES), 0.0);
+        assert_eq!(
+            ray_opacity(Vec3::ZERO, Vec3::new(0.5, 0.0, 1.0), &q, RES),
+            0.0
+        );
+        assert_eq!(ray_opacity(Vec3::ZERO, Vec3::ZERO, &q, RES), 0.0);
+        // An opaque wall in front: a small sphere behind it is covered, one beside it not.
+        let mut r = CubeRaster::new(RES);
+        r.draw(
+            Vec3::ZERO,
+            &wall(Vec3::new(0.0, 0.0, 2.0), Vec3::X * 2.0, Vec3::Y * 2.0),
+        );
+        assert!(r.covered(Vec3::ZERO, Vec3::new(0.0, 0.0, 10.0), 1.0));
+        assert!(!r.covered(Vec3::ZERO, Vec3::new(0.0, 0.0, 10.0), 9.0));
+        assert!(!r.covered(Vec3::ZERO, Vec3::new(10.0, 0.0, 0.0), 1.0));
+        assert!(!r.covered(Vec3::ZERO, Vec3::ZERO, 1.0), "around the eye");
     }
 
     #[test]

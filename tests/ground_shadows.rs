@@ -135,6 +135,7 @@ fn ridge_world() -> World {
         },
         species,
         forest: Forest::default(),
+        tree_vcm: Default::default(),
     }
 }
 

@@ -8,7 +8,7 @@ use crate::format::{BakeSettings, Baked};
 use crate::scene::Scene;
 
 /// Bumped whenever the generator or the bake changes what it makes: old caches are rebaked.
-pub const BAKE_REVISION: u32 = 5;
+pub const BAKE_REVISION: u32 = 6;
 
 /// The bake settings a scene asks for.
 pub fn settings_of(scene: &Scene) -> BakeSettings {
@@ -63,6 +63,8 @@ pub fn scene_hash(scene: &Scene) -> u64 {
     ] {
         h = fnv1a(&v.to_le_bytes(), h);
     }
+    // How the trees' own cube maps are laid out.
+    h = fnv1a(format!("{:?}", scene.bake.tree_vcm).as_bytes(), h);
     // How the texels are made, when not the default (so that default scenes keep their
     // caches).
     if scene.texel != crate::scene::TexelParams::default() {

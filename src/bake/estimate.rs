@@ -24,6 +24,10 @@ const SECONDS_PER_TEXEL_PASS: f64 = 0.17;
 /// second on 2 cores). A per-object constant, as before, was 20 times short there.
 const SECONDS_PER_TREE_VCM: f64 = 0.0025;
 const SECONDS_PER_TREE_VCM_NEIGHBOUR: f64 = 1.62e-5;
+/// A forest cell's cube maps (16² a face, farther trees skipped where the nearer ones have
+/// made everything behind them opaque).
+const SECONDS_PER_CELL_VCM: f64 = 0.0025;
+const SECONDS_PER_CELL_VCM_NEIGHBOUR: f64 = 1.62e-5;
 
 /// Mean number of other trees within reach of a tree's visibility cube maps (what its
 /// bake draws into them), from at most [`NEIGHBOUR_SAMPLES`] trees spread over the list.
@@ -53,10 +57,19 @@ pub fn mean_neighbours(world: &World) -> f64 {
     sum as f64 / n as f64
 }
 
-/// Seconds of the trees' own cube maps (see [`SECONDS_PER_TREE_VCM_NEIGHBOUR`]).
-fn tree_vcm_seconds(world: &World) -> f64 {
-    world.forest.instances.len() as f64
-        * (SECONDS_PER_TREE_VCM + SECONDS_PER_TREE_VCM_NEIGHBOUR * mean_neighbours(world))
+/// Seconds of the tree-level cube maps of `objects` trees or forest cells (see
+/// [`SECONDS_PER_TREE_VCM_NEIGHBOUR`] and [`SECONDS_PER_CELL_VCM`]).
+fn tree_vcm_seconds(world: &World, objects: u64) -> f64 {
+    match world.tree_vcm {
+        crate::model::TreeVcm::PerTree => {
+            objects as f64
+                * (SECONDS_PER_TREE_VCM + SECONDS_PER_TREE_VCM_NEIGHBOUR * mean_neighbours(world))
+        }
+        crate::model::TreeVcm::Cells => {
+            objects as f64
+                * (SECONDS_PER_CELL_VCM + SECONDS_PER_CELL_VCM_NEIGHBOUR * mean_neighbours(world))
+        }
+    }
 }
 
 /// Trees sampled by [`mean_neighbours`].
@@ -74,6 +87,10 @@ pub struct Estimate {
     pub file_bytes: u64,
     pub btf_bytes: u64,
     pub vcm_bytes: u64,
+    /// The tree-level share of `vcm_bytes` (per-tree cube maps or forest cells), and how
+    /// many trees or cells hold it.
+    pub tree_vcm_bytes: u64,
+    pub tree_vcm_objects: u64,
     pub texel_bytes: u64,
     /// The viewer showing it: the bake in memory, its textures (with mipmaps) and the VCM
     /// shading's copy, on top of what the viewer holds anyway.
@@ -96,8 +113,14 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
     let species = world.species.len();
     let btf_record = format::btf_record_bytes(settings.views, settings.lights, settings.resolution);
     let btf = vec![btf_record; species * 3];
-    let vcm =
-        vec![format::vcm_record_bytes(settings.vcm_resolution); vcm::object_count(world) as usize];
+    let mut vcm = vec![
+        format::vcm_record_bytes(settings.vcm_resolution);
+        vcm::species_object_count(world) as usize
+    ];
+    let tree_objects = vcm::tree_object_count(world);
+    let tree_record =
+        format::vcm_record_bytes(vcm::tree_resolution(world, settings.vcm_resolution));
+    vcm.extend(std::iter::repeat_n(tree_record, tree_objects as usize));
     let texels: Vec<u64> = world
         .species
         .iter()
@@ -121,13 +144,15 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
     let texel_passes = texel::step_count(world, settings.texel_resolution, settings.lights) as f64;
     let texel_scale = (f64::from(settings.texel_resolution) / 64.0).powi(2);
     let seconds = image_count(settings, species) as f64 * SECONDS_PER_IMAGE * pixels.max(0.1)
-        + tree_vcm_seconds(world)
-        + vcm.len().saturating_sub(world.forest.instances.len()) as f64 * SECONDS_PER_VCM_OBJECT
+        + tree_vcm_seconds(world, tree_objects)
+        + vcm::species_object_count(world) as f64 * SECONDS_PER_VCM_OBJECT
         + texel_passes * SECONDS_PER_TEXEL_PASS * texel_scale;
     Ok(Estimate {
         file_bytes,
         btf_bytes,
         vcm_bytes,
+        tree_vcm_bytes: tree_record * tree_objects,
+        tree_vcm_objects: tree_objects,
         texel_bytes,
         memory_bytes,
         seconds,
@@ -206,8 +231,16 @@ mod tests {
         let e = estimate(&settings(), &w).unwrap();
         assert!(e.file_bytes > e.btf_bytes + e.vcm_bytes + e.texel_bytes);
         assert!(e.file_bytes < e.btf_bytes + e.vcm_bytes + e.texel_bytes + 1_000_000);
-        // 1000 trees' VCMs dominate: 8 corners x 6 faces x 32² each.
-        assert!(e.vcm_bytes >= 1000 * 49_152);
+        // Forest cells: 8 corners x 6 faces x 16² each, one cell for a tree or a few.
+        assert!(e.tree_vcm_objects > 0 && e.tree_vcm_objects <= 1000);
+        assert_eq!(e.tree_vcm_bytes, e.tree_vcm_objects * (56 + 12_288));
+        assert!(e.vcm_bytes > e.tree_vcm_bytes);
+        // One set per tree: 8 corners x 6 faces x 32² each.
+        let mut per_tree = w.clone();
+        per_tree.tree_vcm = crate::model::TreeVcm::PerTree;
+        let p = estimate(&settings(), &per_tree).unwrap();
+        assert_eq!(p.tree_vcm_objects, 1000);
+        assert!(p.tree_vcm_bytes >= 1000 * 49_152);
         assert!(e.memory_bytes > VIEWER_BASE_BYTES + e.file_bytes);
         assert!(e.seconds > 10.0 && e.seconds < 120.0, "{}", e.seconds);
         assert!(available_memory().is_some_and(|m| m > 0));
@@ -217,7 +250,8 @@ mod tests {
     fn a_dense_forest_costs_more_per_tree() {
         // The same trees, packed 6 times closer: each tree's cube maps see more of the
         // others, and the estimate follows the neighbours, not the count alone.
-        let sparse = world();
+        let mut sparse = world();
+        sparse.tree_vcm = crate::model::TreeVcm::PerTree;
         let mut dense = sparse.clone();
         for t in &mut dense.forest.instances {
             t.position.x /= 6.0;
@@ -229,6 +263,44 @@ mod tests {
         let ta = estimate(&settings(), &sparse).unwrap().seconds;
         let tb = estimate(&settings(), &dense).unwrap().seconds;
         assert!(tb > ta + 5.0, "{ta} -> {tb}");
+    }
+
+    /// Issue 13 item 1's goals: at most 8 MB of tree-level cube maps per 1,000 trees at
+    /// the example stand's density (600 a hectare), and at most 150 MB for 100,000 trees on
+    /// a square kilometre.
+    #[test]
+    fn forest_cells_meet_the_memory_goals_where_per_tree_cube_maps_do_not() {
+        let stand = crate::scene::Scene::parse(
+            include_str!("../../assets/scenes/stand.toml"),
+            "stand.toml",
+        )
+        .unwrap();
+        let w = stand.build_world().unwrap();
+        let s = crate::bake::cache::settings_of(&stand);
+        let e = estimate(&s, &w).unwrap();
+        let per_1000 = e.tree_vcm_bytes as f64 / w.forest.instances.len() as f64 * 1000.0;
+        assert!(per_1000 <= 8e6, "{per_1000} bytes per 1,000 trees");
+        let mut pt = w.clone();
+        pt.tree_vcm = crate::model::TreeVcm::PerTree;
+        let p = estimate(&s, &pt).unwrap();
+        assert!(p.tree_vcm_bytes as f64 / w.forest.instances.len() as f64 * 1000.0 > 8e6);
+
+        let mut forest = crate::scene::Scene::parse(
+            include_str!("../../assets/scenes/forest.toml"),
+            "forest.toml",
+        )
+        .unwrap();
+        forest.forest.density = Some(1640.0);
+        forest.forest.min_spacing = 1.6;
+        let w = forest.build_world().unwrap();
+        let n = w.forest.instances.len();
+        assert!((99_000..=100_000).contains(&n), "{n} trees");
+        let e = estimate(&crate::bake::cache::settings_of(&forest), &w).unwrap();
+        assert!(
+            e.tree_vcm_bytes <= 150_000_000,
+            "{} bytes",
+            e.tree_vcm_bytes
+        );
     }
 
     #[test]

@@ -19,6 +19,13 @@ pub struct BakeReport {
     /// Visibility cube map sets (one per object).
     pub vcm_sets: usize,
     pub vcm_resolution: u32,
+    /// The tree-level share: forest cells (or trees) with cube maps, their face resolution,
+    /// bytes and seconds.
+    pub tree_vcm_sets: usize,
+    pub tree_vcm_cells: bool,
+    pub tree_vcm_resolution: u32,
+    pub tree_vcm_bytes: u64,
+    pub tree_vcm_seconds: f64,
     pub seconds: f64,
     pub btf_seconds: f64,
     pub vcm_seconds: f64,
@@ -109,7 +116,24 @@ impl BakeReport {
                 seconds: times.stage(&format!("{} texel volume", name(t.species))),
             })
             .collect();
+        let tree_sets: Vec<&crate::format::VcmSet> = baked
+            .vcm
+            .iter()
+            .filter(|v| v.level == crate::model::Level::Tree)
+            .collect();
+        let tree_vcm_cells = tree_sets
+            .iter()
+            .any(|v| v.species == crate::format::VCM_CELL_SPECIES);
         Self {
+            tree_vcm_sets: tree_sets.len(),
+            tree_vcm_cells,
+            tree_vcm_resolution: tree_sets.first().map_or(0, |v| v.resolution),
+            tree_vcm_bytes: tree_sets.iter().map(|v| v.opacity.len() as u64).sum(),
+            tree_vcm_seconds: times.stage(if tree_vcm_cells {
+                "forest cell VCMs"
+            } else {
+                "tree VCMs"
+            }),
             out: path.display().to_string(),
             file_bytes: std::fs::metadata(path).map(|m| m.len()).unwrap_or(0),
             btf_bytes: baked.btf_bytes(),

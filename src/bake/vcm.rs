@@ -4,7 +4,9 @@
 //!   trunk's own leader twigs against each other);
 //! - a main branch against the sibling main branches of the reference tree (species data);
 //! - a tree instance against the other trees within [`TREE_RANGE`] and the terrain (scene
-//!   data, one per instance).
+//!   data, one per instance), or, with `[bake] tree_vcm = "cells"` (the default), a forest
+//!   cell against the trees outside it and the terrain (one per cell with trees; see
+//!   [`crate::vcm::cells`]).
 //!
 //! The occluders are drawn as the `btf` method draws them: each one a billboard facing the
 //! cube's centre, its opacity the blend of the 3 nearest views' sky-lit images' alpha
@@ -16,14 +18,15 @@
 //! the directions above the horizontal only: the terrain hides the lower half everywhere,
 //! and the BTF's sky-lit images already take no light from below.
 
-use glam::{Mat3, Mat4, Vec2, Vec3};
+use glam::{Mat4, Vec2, Vec3};
 use rayon::prelude::*;
 
-use crate::format::{BtfImageSet, VcmSet};
+use crate::format::{BtfImageSet, VCM_CELL_SPECIES, VcmSet};
 use crate::model::mesh::Aabb;
-use crate::model::{Level, PerLevel, World};
-use crate::sphere::{Blend, DirectionSet, billboard_axes};
-use crate::vcm::{CORNERS, CubeRaster, Horizon, Occluder, corner};
+use crate::model::{Level, PerLevel, TreeVcm, World};
+use crate::vcm::billboard::{AlphaSet, Billboard};
+use crate::vcm::cells::{ForestCells, cell_resolution};
+use crate::vcm::{CORNERS, CubeRaster, GROUND_CLEARANCE, Horizon, corner};
 use crate::{Error, Result};
 
 /// Trees whose bounding sphere lies farther than this (m) from a tree's corner are not drawn
@@ -33,194 +36,61 @@ pub const TREE_RANGE: f32 = 250.0;
 /// Azimuth samples of the terrain horizon around each corner (4 faces x 32 texels).
 const HORIZON_AZIMUTHS: usize = 128;
 
-/// Corners are kept this far (m) above the terrain, so a box corner that dips into a slope
-/// still sees the sky the tree's foot sees.
-const GROUND_CLEARANCE: f32 = 0.05;
-
 /// Instances per parallel batch between progress reports.
 const BATCH: usize = 64;
 
-/// One level's sky-lit images as occluders: each view's alpha with its mip chain.
-struct AlphaSet {
-    views: DirectionSet,
-    view_axes: Vec<(Vec3, Vec3)>,
-    /// [view][mip] alpha, res_mip² values.
-    mips: Vec<Vec<Vec<f32>>>,
-    res: u32,
-    center: Vec3,
-    radius: f32,
-}
-
-impl AlphaSet {
-    fn new(set: &BtfImageSet) -> Result<Self> {
-        let views = DirectionSet::with_count(set.views as usize)
-            .map_err(|e| Error::BadInput(format!("BTF set: {e}")))?;
-        let res = set.resolution.max(1);
-        let n = (res * res) as usize;
-        if set.ambient.len() != set.views as usize * n * 4 {
-            return Err(Error::BadInput(format!(
-                "BTF set of species {} level {:?}: sky images hold {} bytes, expected {}",
-                set.species,
-                set.level,
-                set.ambient.len(),
-                set.views as usize * n * 4
-            )));
-        }
-        let mips = set
-            .ambient
-            .chunks_exact(n * 4)
-            .map(|img| {
-                let mut level: Vec<f32> = img
-                    .chunks_exact(4)
-                    .map(|p| f32::from(p[3]) / 255.0)
-                    .collect();
-                let mut side = res as usize;
-                let mut chain = Vec::new();
-                loop {
-                    let next = if side > 1 {
-                        Some(halve(&level, side))
-                    } else {
-                        None
-                    };
-                    chain.push(level);
-                    match next {
-                        Some(l) => {
-                            level = l;
-                            side /= 2;
-                        }
-                        None => break,
-                    }
-                }
-                chain
-            })
-            .collect();
-        let view_axes = views
-            .directions()
-            .iter()
-            .map(|&v| billboard_axes(v))
-            .collect();
-        Ok(Self {
-            views,
-            view_axes,
-            mips,
-            res,
-            center: Vec3::from(set.center),
-            radius: set.radius,
-        })
-    }
-
-    /// Alpha of view `v` at `uv` (0..1 over the image), filtered over `texels` texels.
-    fn alpha(&self, v: usize, uv: Vec2, texels: f32) -> f32 {
-        let chain = &self.mips[v];
-        let level = if texels > 1.0 {
-            (texels.log2().round() as usize).min(chain.len() - 1)
-        } else {
-            0
-        };
-        let side = (self.res as usize >> level).max(1);
-        let img = &chain[level];
-        let s = side as f32;
-        let fx = (uv.x * s - 0.5).clamp(0.0, s - 1.0);
-        let fy = (uv.y * s - 0.5).clamp(0.0, s - 1.0);
-        let (x0, y0) = (fx as usize, fy as usize);
-        let (x1, y1) = ((x0 + 1).min(side - 1), (y0 + 1).min(side - 1));
-        let (a, b) = (fx - x0 as f32, fy - y0 as f32);
-        let at = |x: usize, y: usize| img[y * side + x];
-        let top = at(x0, y0) + (at(x1, y0) - at(x0, y0)) * a;
-        let bottom = at(x0, y1) + (at(x1, y1) - at(x0, y1)) * a;
-        top + (bottom - top) * b
-    }
-}
-
-/// A 2x2 box filter of a `side`² image.
-fn halve(img: &[f32], side: usize) -> Vec<f32> {
-    let h = (side / 2).max(1);
-    let mut out = vec![0.0; h * h];
-    for y in 0..h {
-        for x in 0..h {
-            let at = |xx: usize, yy: usize| img[yy.min(side - 1) * side + xx.min(side - 1)];
-            out[y * h + x] = 0.25
-                * (at(2 * x, 2 * y)
-                    + at(2 * x + 1, 2 * y)
-                    + at(2 * x, 2 * y + 1)
-                    + at(2 * x + 1, 2 * y + 1));
-        }
-    }
-    out
-}
-
-/// One object's billboard as the cube's centre sees it.
-struct Billboard<'a> {
-    set: &'a AlphaSet,
-    blend: Blend,
-    center: Vec3,
-    right: Vec3,
-    up: Vec3,
-    obj_right: Vec3,
-    obj_up: Vec3,
-}
-
-impl<'a> Billboard<'a> {
-    /// The billboard of `set` placed by `m` (object to cube frame), facing `eye`; None for a
-    /// degenerate transform.
-    fn facing(set: &'a AlphaSet, m: Mat4, eye: Vec3) -> Option<Self> {
-        let scale = m.x_axis.truncate().length();
-        if !(scale > 0.0 && scale.is_finite()) {
-            return None;
-        }
-        let rot = Mat3::from_mat4(m) * (1.0 / scale);
-        let center = m.transform_point3(set.center);
-        let radius = set.radius * scale;
-        let v_obj = rot.transpose() * (eye - center).normalize_or(Vec3::Y);
-        let (r, u) = billboard_axes(v_obj);
-        Some(Self {
-            set,
-            blend: set.views.blend(v_obj),
-            center,
-            right: rot * r * radius,
-            up: rot * u * radius,
-            obj_right: r,
-            obj_up: u,
-        })
-    }
-}
-
-impl Occluder for Billboard<'_> {
-    fn center(&self) -> Vec3 {
-        self.center
-    }
-    fn right(&self) -> Vec3 {
-        self.right
-    }
-    fn up(&self) -> Vec3 {
-        self.up
-    }
-    fn opacity(&self, s: f32, t: f32, footprint: f32) -> f32 {
-        let p = s * self.obj_right + t * self.obj_up;
-        let texels = footprint * 0.5 * self.set.res as f32;
-        let mut a = 0.0;
-        for k in 0..3 {
-            let w = self.blend.weight[k];
-            if w <= 0.0 {
-                continue;
-            }
-            let v = self.blend.index[k] as usize;
-            let (r, u) = self.set.view_axes[v];
-            let uv = Vec2::new(p.dot(r), -p.dot(u)) * 0.5 + 0.5;
-            a += w * self.set.alpha(v, uv, texels);
-        }
-        a
-    }
-}
-
-/// Objects of one level per parallel job: how many cubes the whole bake makes, for progress.
+/// Objects whose 8 cube maps the bake makes (species objects, then trees or forest cells),
+/// for progress and the estimate.
 pub fn object_count(world: &World) -> u64 {
-    let species: u64 = world
+    species_object_count(world) + tree_object_count(world)
+}
+
+/// Twigs and main branches of every species.
+pub fn species_object_count(world: &World) -> u64 {
+    world
         .species
         .iter()
         .map(|t| (t.tree_branches.len() + t.branch_twigs.len() + t.tree_twigs.len()) as u64)
-        .sum();
-    species + world.forest.instances.len() as u64
+        .sum()
+}
+
+/// Tree-level objects: tree instances, or forest cells with trees.
+pub fn tree_object_count(world: &World) -> u64 {
+    match world.tree_vcm {
+        TreeVcm::PerTree => world.forest.instances.len() as u64,
+        TreeVcm::Cells => ForestCells::new(world).len() as u64,
+    }
+}
+
+/// Face resolution of the tree-level cube maps of a bake at `vcm_resolution`.
+pub fn tree_resolution(world: &World, vcm_resolution: u32) -> u32 {
+    match world.tree_vcm {
+        TreeVcm::PerTree => vcm_resolution,
+        TreeVcm::Cells => cell_resolution(vcm_resolution),
+    }
+}
+
+/// One occluder placed in the cube's frame: its image set, its placement, and the sphere
+/// around its billboard (for skipping it where everything behind is already opaque).
+#[derive(Clone, Copy)]
+struct Placed<'a> {
+    set: &'a AlphaSet,
+    m: Mat4,
+    center: Vec3,
+    reach: f32,
+}
+
+impl<'a> Placed<'a> {
+    fn new(set: &'a AlphaSet, m: Mat4) -> Self {
+        let scale = m.x_axis.truncate().length();
+        Self {
+            set,
+            m,
+            center: m.transform_point3(set.center),
+            // The billboard's corners lie √2 radii from its centre.
+            reach: set.radius * scale * std::f32::consts::SQRT_2 * 1.001,
+        }
+    }
 }
 
 /// The cube maps at the 8 corners of the box `bounds` placed by `m`, with `occluders` (each
@@ -229,7 +99,7 @@ fn bake_corners(
     raster: &mut CubeRaster,
     bounds: &Aabb,
     m: Mat4,
-    occluders: &[(&AlphaSet, Mat4)],
+    occluders: &[Placed<'_>],
     terrain: Option<&crate::model::Terrain>,
 ) -> (Vec<u8>, [f32; CORNERS]) {
     let res = raster.resolution() as usize;
@@ -251,8 +121,11 @@ fn bake_corners(
             );
             raster.draw_terrain(&horizon);
         }
-        for (set, om) in occluders {
-            if let Some(b) = Billboard::facing(set, *om, eye) {
+        for o in occluders {
+            if raster.covered(eye, o.center, o.reach) {
+                continue;
+            }
+            if let Some(b) = Billboard::facing(o.set, o.m, eye) {
                 raster.draw(eye, &b);
             }
         }
@@ -320,11 +193,11 @@ pub fn bake_vcm(
                 .map_init(
                     || CubeRaster::new(res),
                     |raster, (i, m)| {
-                        let occluders: Vec<(&AlphaSet, Mat4)> = parts
+                        let occluders: Vec<Placed> = parts
                             .iter()
                             .enumerate()
                             .filter(|&(k, _)| k != i)
-                            .map(|(_, o)| (set, *o))
+                            .map(|(_, o)| Placed::new(set, *o))
                             .collect();
                         let (opacity, mean_opacity) =
                             bake_corners(raster, bounds, *m, &occluders, None);
@@ -345,10 +218,20 @@ pub fn bake_vcm(
         }
     }
 
-    // Scene data: each tree instance against its neighbours and the terrain.
-    let instances = &world.forest.instances;
-    let grid = Grid::new(instances.iter().map(|t| t.position), TREE_RANGE / 4.0);
-    let placed: Vec<(Mat4, f32)> = instances
+    // Scene data: each tree instance (or forest cell) against the trees around it and the
+    // terrain.
+    match world.tree_vcm {
+        TreeVcm::PerTree => bake_trees(world, &alpha, res, done, progress, &mut out)?,
+        TreeVcm::Cells => bake_cells(world, &alpha, res, done, progress, &mut out)?,
+    }
+    Ok(out)
+}
+
+/// Each tree's world placement and the radius of its billboard.
+fn placements(world: &World, alpha: &[PerLevel<AlphaSet>]) -> Vec<(Mat4, f32)> {
+    world
+        .forest
+        .instances
         .iter()
         .map(|t| {
             let r = alpha
@@ -356,7 +239,58 @@ pub fn bake_vcm(
                 .map_or(0.0, |a| a.tree.radius * t.scale);
             (t.transform(), r)
         })
+        .collect()
+}
+
+/// The trees (indices) within `range` of `p` that `keep` accepts, nearest first: in a dense
+/// stand they make the texels towards the horizon opaque, and the farther trees drawn there
+/// are then skipped ([`CubeRaster::covered`]).
+fn neighbours<'a>(
+    world: &World,
+    alpha: &'a [PerLevel<AlphaSet>],
+    grid: &Grid,
+    placed: &[(Mat4, f32)],
+    p: Vec3,
+    range: f32,
+    near: &mut Vec<u32>,
+    keep: impl Fn(usize) -> bool,
+) -> Vec<Placed<'a>> {
+    let instances = &world.forest.instances;
+    near.clear();
+    grid.near(p, range, near);
+    let mut by_distance: Vec<(f32, u32)> = near
+        .iter()
+        .filter(|&&j| keep(j as usize))
+        .filter_map(|&j| {
+            let o = &instances[j as usize];
+            let d = o.position.distance(p);
+            (d <= range).then_some((d, j))
+        })
         .collect();
+    by_distance.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    by_distance
+        .iter()
+        .filter_map(|&(_, j)| {
+            let o = &instances[j as usize];
+            alpha
+                .get(o.species as usize)
+                .map(|a| Placed::new(&a.tree, placed[j as usize].0))
+        })
+        .collect()
+}
+
+/// One set per tree instance, against the other trees within [`TREE_RANGE`] of it.
+fn bake_trees(
+    world: &World,
+    alpha: &[PerLevel<AlphaSet>],
+    res: u32,
+    mut done: u64,
+    progress: &mut dyn FnMut(u64, &str),
+    out: &mut Vec<VcmSet>,
+) -> Result<()> {
+    let instances = &world.forest.instances;
+    let grid = Grid::new(instances.iter().map(|t| t.position), TREE_RANGE / 4.0);
+    let placed = placements(world, alpha);
     let max_radius = placed.iter().map(|p| p.1).fold(0.0f32, f32::max);
     for (b, chunk) in instances.chunks(BATCH).enumerate() {
         let sets: Vec<VcmSet> = chunk
@@ -374,32 +308,20 @@ pub fn bake_vcm(
                         )));
                     };
                     let (m, r) = placed[i];
-                    near.clear();
-                    grid.near(inst.position, TREE_RANGE + r + max_radius, near);
-                    // Nearest first: in a dense stand they make the texels towards the
-                    // horizon opaque, and the farther trees drawn there are then skipped.
-                    near.sort_by(|&a, &b| {
-                        let d = |j: u32| {
-                            instances[j as usize]
-                                .position
-                                .distance_squared(inst.position)
-                        };
-                        d(a).total_cmp(&d(b))
-                    });
-                    let occluders: Vec<(&AlphaSet, Mat4)> = near
-                        .iter()
-                        .filter(|&&j| j as usize != i)
-                        .filter_map(|&j| {
-                            let o = &instances[j as usize];
-                            let (om, or) = placed[j as usize];
-                            let close =
-                                (o.position - inst.position).length() <= TREE_RANGE + r + or;
-                            alpha
-                                .get(o.species as usize)
-                                .filter(|_| close)
-                                .map(|a| (&a.tree, om))
-                        })
-                        .collect();
+                    let occluders = neighbours(
+                        world,
+                        alpha,
+                        &grid,
+                        &placed,
+                        inst.position,
+                        TREE_RANGE + r + max_radius,
+                        near,
+                        |j| {
+                            j != i
+                                && instances[j].position.distance(inst.position)
+                                    <= TREE_RANGE + r + placed[j].1
+                        },
+                    );
                     let (opacity, mean_opacity) = bake_corners(
                         raster,
                         &model.tree_bounds,
@@ -422,7 +344,79 @@ pub fn bake_vcm(
         out.extend(sets);
         progress(done, "tree VCMs");
     }
-    Ok(out)
+    Ok(())
+}
+
+/// One set per forest cell with trees, against the trees outside the cell within
+/// [`TREE_RANGE`] of its box, at the cells' resolution ([`cell_resolution`]).
+fn bake_cells(
+    world: &World,
+    alpha: &[PerLevel<AlphaSet>],
+    res: u32,
+    mut done: u64,
+    progress: &mut dyn FnMut(u64, &str),
+    out: &mut Vec<VcmSet>,
+) -> Result<()> {
+    let instances = &world.forest.instances;
+    if let Some((i, t)) = instances
+        .iter()
+        .enumerate()
+        .find(|(_, t)| t.species as usize >= world.species.len())
+    {
+        return Err(Error::BadInput(format!(
+            "tree {i} has species {} of {}",
+            t.species,
+            world.species.len()
+        )));
+    }
+    let res = cell_resolution(res);
+    let cells = ForestCells::new(world);
+    let grid = Grid::new(instances.iter().map(|t| t.position), TREE_RANGE / 4.0);
+    let placed = placements(world, alpha);
+    let max_radius = placed.iter().map(|p| p.1).fold(0.0f32, f32::max);
+    let order: Vec<usize> = (0..cells.len()).collect();
+    for chunk in order.chunks(BATCH) {
+        let sets: Vec<VcmSet> = chunk
+            .par_iter()
+            .map_init(
+                || (CubeRaster::new(res), Vec::new()),
+                |(raster, near), &c| {
+                    let cell = &cells.cells[c];
+                    let center = cells.center(c);
+                    let half = 0.5 * (cell.bounds.max - cell.bounds.min).length();
+                    let occluders = neighbours(
+                        world,
+                        alpha,
+                        &grid,
+                        &placed,
+                        center,
+                        TREE_RANGE + half + max_radius,
+                        near,
+                        |j| cells.of_tree[j] as usize != c,
+                    );
+                    let (opacity, mean_opacity) = bake_corners(
+                        raster,
+                        &cell.bounds,
+                        Mat4::IDENTITY,
+                        &occluders,
+                        Some(&world.terrain),
+                    );
+                    VcmSet {
+                        species: VCM_CELL_SPECIES,
+                        owner: c as u32,
+                        level: Level::Tree,
+                        resolution: res,
+                        opacity,
+                        mean_opacity,
+                    }
+                },
+            )
+            .collect();
+        done += sets.len() as u64;
+        out.extend(sets);
+        progress(done, "forest cell VCMs");
+    }
+    Ok(())
 }
 
 /// A uniform grid over the ground plane for neighbour queries.
@@ -505,13 +499,5 @@ mod tests {
                 }
             }
         }
-    }
-
-    #[test]
-    fn halving_averages_blocks() {
-        let img = [
-            0.0, 1.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.5, 0.5, 1.0, 1.0, 0.5, 0.5, 1.0, 1.0,
-        ];
-        assert_eq!(halve(&img, 4), vec![0.75, 0.25, 0.5, 1.0]);
     }
 }

@@ -22,7 +22,7 @@ pub mod world;
 pub use forest::{Forest, TreeInstance};
 pub use level::{Level, PerLevel};
 pub use mesh::{Aabb, Mesh, Vertex};
-pub use params::{BakeParams, ForestParams, SpeciesEntry, StandParams, TerrainParams};
+pub use params::{BakeParams, ForestParams, SpeciesEntry, StandParams, TerrainParams, TreeVcm};
 pub use species::{CrownShape, FoliageKind, PRESET_NAMES, SpeciesParams, TwigArrangement, preset};
 pub use terrain::Terrain;
 pub use tree::{LevelCounts, PartCounts, TreeModel};

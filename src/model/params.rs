@@ -30,6 +30,22 @@ pub struct BakeParams {
     /// Voxels along the longest side of each species' texel volume (the `texel` method):
     /// 0 bakes none, else 16..=256 (default 64).
     pub texel_resolution: u32,
+    /// How the trees' own visibility cube maps are laid out: `cells` (default), cube maps
+    /// shared by the trees of one forest cell, whose memory grows with the forest's area;
+    /// or `per-tree`, 8 cube maps for every tree (the thesis' layout, 48 KB a tree).
+    pub tree_vcm: TreeVcm,
+}
+
+/// The layout of the tree-level visibility cube maps (see `crate::vcm::cells`).
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum TreeVcm {
+    /// Cube maps at the corners of forest cells, shared by the cell's trees; the cell mates
+    /// are added per tree along the sun ray.
+    #[default]
+    Cells,
+    /// Cube maps at the 8 corners of every tree (the thesis' layout).
+    PerTree,
 }
 
 impl Default for BakeParams {
@@ -40,6 +56,7 @@ impl Default for BakeParams {
             resolution: 64,
             supersample: 4,
             texel_resolution: 64,
+            tree_vcm: TreeVcm::Cells,
         }
     }
 }

@@ -6,7 +6,7 @@ use rayon::prelude::*;
 use super::ModelError;
 use super::far_cover::FarCover;
 use super::forest::Forest;
-use super::params::{ForestParams, SpeciesEntry, TerrainParams};
+use super::params::{ForestParams, SpeciesEntry, TerrainParams, TreeVcm};
 use super::terrain::Terrain;
 use super::tree::TreeModel;
 
@@ -20,6 +20,9 @@ pub struct World {
     pub species: Vec<TreeModel>,
     /// The placed trees.
     pub forest: Forest,
+    /// How the trees' own visibility cube maps are baked and read (the scene's `[bake]
+    /// tree_vcm`).
+    pub tree_vcm: TreeVcm,
 }
 
 impl World {
@@ -74,6 +77,7 @@ impl World {
             terrain,
             species,
             forest,
+            tree_vcm: TreeVcm::default(),
         })
     }
 
@@ -93,6 +97,7 @@ impl World {
                 }],
                 stands: None,
             },
+            tree_vcm: TreeVcm::default(),
         }
     }
 

@@ -10,12 +10,20 @@
 //! billboard d(p). (The thesis interpolated all of them at the 4 billboard vertices; inside
 //! one billboard the coarser levels vary little, its own level most.) The same products of
 //! the cube maps' mean visibility (1 − mean opacity) weight the sky term.
+//!
+//! Tree-level cube maps come one set per tree, or one per forest cell
+//! ([`crate::vcm::cells`]): then a tree's 8 corner factors are the cell's cube maps read
+//! at the tree's corners (trilinearly), times the sun ray from each corner through the
+//! billboards of the trees sharing its cell.
 
 use glam::{Mat3, Mat4, Vec3};
+use rayon::prelude::*;
 
-use crate::format::Baked;
+use crate::format::{Baked, VCM_CELL_SPECIES};
 use crate::model::mesh::Aabb;
 use crate::model::{Level, PerLevel, World};
+use crate::vcm::billboard::{AlphaSet, Billboard};
+use crate::vcm::cells::{ForestCells, tree_world_box};
 use crate::vcm::{self, CORNERS, FACES};
 use crate::{Error, Result};
 
@@ -23,6 +31,75 @@ use crate::{Error, Result};
 struct ObjectVcm {
     opacity: Vec<u8>,
     sky: [f32; CORNERS],
+}
+
+/// The tree-level cube maps of a forest laid out in cells, and what a tree needs to read
+/// them: its corners in the world, and its cell mates' billboards.
+struct CellShading {
+    cells: ForestCells,
+    res: u32,
+    maps: Vec<ObjectVcm>,
+    /// Per species: the tree level's sky-lit images as occluders.
+    alpha: Vec<AlphaSet>,
+    /// Per tree: its placement, and its box's 8 corners in the world (kept above the
+    /// terrain as the bake keeps cube maps).
+    trees: Vec<(u32, Mat4, [Vec3; CORNERS])>,
+}
+
+impl CellShading {
+    /// Sun visibility at every tree's 8 corners: the cell's cube maps read trilinearly,
+    /// times the sun ray through the cell mates' billboards. A cell mate is drawn as its
+    /// billboard seen along the sun's direction (its shadow's outline; the cube bake turns
+    /// each billboard to the cube's centre, which for a tree in the sun's direction is
+    /// nearly the same view), so its 3 views' blend is found once per tree, not per ray.
+    fn direct(&self, to_sun: Vec3, out: &mut [[f32; CORNERS]]) {
+        let cell_direct: Vec<[f32; CORNERS]> = self
+            .maps
+            .par_iter()
+            .map(|m| m.direct(self.res, to_sun))
+            .collect();
+        let facing_sun: Vec<Option<Billboard>> = self
+            .trees
+            .par_iter()
+            .map(|(species, m, _)| {
+                let centre = m.transform_point3(self.alpha.get(*species as usize)?.center);
+                Billboard::facing(self.alpha.get(*species as usize)?, *m, centre - to_sun)
+            })
+            .collect();
+        out.par_iter_mut().enumerate().for_each(|(t, d)| {
+            let c = self.cells.of_tree[t] as usize;
+            let cell = &self.cells.cells[c];
+            let corners = &self.trees[t].2;
+            *d = std::array::from_fn(|k| {
+                let p = corners[k];
+                let mut v = vcm::trilinear(&cell_direct[c], vcm::box_coords(&cell.bounds, p));
+                for &o in &cell.trees {
+                    if o as usize == t {
+                        continue;
+                    }
+                    if let Some(b) = &facing_sun[o as usize] {
+                        v *= 1.0 - vcm::ray_opacity(p, to_sun, b, self.res);
+                    }
+                }
+                v
+            });
+        });
+    }
+
+    /// Sky visibility at every tree's 8 corners: the cell's, read trilinearly.
+    fn sky(&self) -> Vec<[f32; CORNERS]> {
+        self.trees
+            .iter()
+            .enumerate()
+            .map(|(t, (_, _, corners))| {
+                let c = self.cells.of_tree[t] as usize;
+                let cell = &self.cells.cells[c];
+                std::array::from_fn(|k| {
+                    vcm::trilinear(&self.maps[c].sky, vcm::box_coords(&cell.bounds, corners[k]))
+                })
+            })
+            .collect()
+    }
 }
 
 impl ObjectVcm {
@@ -88,9 +165,14 @@ pub struct VcmShading {
     /// Per species: main branches, then twigs (the reference branch's, then the trunk's).
     branches: Vec<Vec<ObjectVcm>>,
     twigs: Vec<Vec<ObjectVcm>>,
+    /// Per tree instance, when the bake made one set per tree.
     trees: Vec<ObjectVcm>,
+    /// When the bake made one set per forest cell instead.
+    cells: Option<CellShading>,
     /// Per tree instance: sun visibility at its corners, for `sun`.
     tree_direct: Vec<[f32; CORNERS]>,
+    /// Per tree instance: sky visibility at its corners.
+    tree_sky: Vec<[f32; CORNERS]>,
     sun: Option<Vec3>,
     /// Bytes of cube-map data held (in main memory, as in the thesis; never on the GPU).
     pub bytes: u64,
@@ -125,8 +207,42 @@ impl VcmShading {
             .collect();
         let mut trees: Vec<Option<ObjectVcm>> =
             (0..world.forest.instances.len()).map(|_| None).collect();
+        let cell_sets = baked
+            .vcm
+            .iter()
+            .any(|s| s.species == VCM_CELL_SPECIES && s.level == Level::Tree);
+        let cells = cell_sets.then(|| ForestCells::new(world));
+        let mut cell_maps: Vec<Option<ObjectVcm>> = (0..cells.as_ref().map_or(0, ForestCells::len))
+            .map(|_| None)
+            .collect();
+        let mut cell_res = None;
         let mut bytes = 0u64;
         for set in &baked.vcm {
+            if set.species == VCM_CELL_SPECIES && set.level == Level::Tree {
+                if *cell_res.get_or_insert(set.resolution) != set.resolution {
+                    return Err(bad(format!(
+                        "forest cells have cube maps of resolutions {} and {}",
+                        cell_res.unwrap_or_default(),
+                        set.resolution
+                    )));
+                }
+                let o = set.owner as usize;
+                let Some(slot) = cell_maps.get_mut(o) else {
+                    return Err(bad(format!(
+                        "no forest cell {o} in this scene ({} cells)",
+                        cell_maps.len()
+                    )));
+                };
+                if slot.is_some() {
+                    return Err(bad(format!("forest cell {o} has two sets")));
+                }
+                bytes += set.opacity.len() as u64;
+                *slot = Some(ObjectVcm {
+                    opacity: set.opacity.clone(),
+                    sky: set.mean_opacity.map(|m| 1.0 - m),
+                });
+                continue;
+            }
             if set.resolution != res {
                 return Err(bad(format!(
                     "a set has resolution {} but the file says {res}",
@@ -166,7 +282,56 @@ impl VcmShading {
                 .map(|o| o.ok_or_else(|| missing(what)))
                 .collect::<Result<Vec<_>>>()
         };
-        let trees = take_all(trees, "tree")?;
+        let (trees, cells) = match cells {
+            None => (take_all(trees, "tree")?, None),
+            Some(cells) => {
+                if let Some(t) = trees.iter().position(Option::is_some) {
+                    return Err(bad(format!(
+                        "tree {t} has its own cube maps and the forest cells too"
+                    )));
+                }
+                let maps = take_all(cell_maps, "forest cell")?;
+                let alpha = (0..world.species.len())
+                    .map(|s| {
+                        let set = baked
+                            .btf
+                            .iter()
+                            .find(|b| b.species as usize == s && b.level == Level::Tree)
+                            .ok_or_else(|| {
+                                bad(format!("species {s} has no tree-level BTF images"))
+                            })?;
+                        AlphaSet::new(set)
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                let tree_corners = (0..world.forest.instances.len())
+                    .map(|t| {
+                        let inst = &world.forest.instances[t];
+                        let m = inst.transform();
+                        let bounds = tree_world_box(world, t)
+                            .and(world.species.get(inst.species as usize))
+                            .ok_or_else(|| bad(format!("tree {t} has no species")))?
+                            .tree_bounds;
+                        let corners = std::array::from_fn(|k| {
+                            let mut p = m.transform_point3(vcm::corner(&bounds, k));
+                            p.y =
+                                p.y.max(world.terrain.height_at(p.x, p.z) + vcm::GROUND_CLEARANCE);
+                            p
+                        });
+                        Ok((inst.species, m, corners))
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                (
+                    Vec::new(),
+                    Some(CellShading {
+                        cells,
+                        res: cell_res.unwrap_or(res),
+                        maps,
+                        alpha,
+                        trees: tree_corners,
+                    }),
+                )
+            }
+        };
         let branches = branches
             .into_iter()
             .map(|v| take_all(v, "main branch"))
@@ -175,12 +340,19 @@ impl VcmShading {
             .into_iter()
             .map(|v| take_all(v, "twig"))
             .collect::<Result<Vec<_>>>()?;
+        let tree_count = world.forest.instances.len();
+        let tree_sky = match &cells {
+            Some(c) => c.sky(),
+            None => trees.iter().map(|t| t.sky).collect(),
+        };
         Ok(Some(Self {
             res,
-            tree_direct: vec![[1.0; CORNERS]; trees.len()],
+            tree_direct: vec![[1.0; CORNERS]; tree_count],
+            tree_sky,
             branches,
             twigs,
             trees,
+            cells,
             sun: None,
             bytes,
         }))
@@ -197,8 +369,13 @@ impl VcmShading {
             return false;
         }
         let res = self.res;
-        for (d, t) in self.tree_direct.iter_mut().zip(&self.trees) {
-            *d = t.direct(res, to_sun);
+        match &self.cells {
+            Some(cells) => cells.direct(to_sun, &mut self.tree_direct),
+            None => {
+                for (d, t) in self.tree_direct.iter_mut().zip(&self.trees) {
+                    *d = t.direct(res, to_sun);
+                }
+            }
         }
         self.sun = Some(to_sun);
         true
@@ -206,8 +383,8 @@ impl VcmShading {
 
     /// Tree instance `t`'s factors for the current sun.
     fn tree(&self, t: usize) -> Factors {
-        match (self.tree_direct.get(t), self.trees.get(t)) {
-            (Some(d), Some(o)) => (*d, o.sky),
+        match (self.tree_direct.get(t), self.tree_sky.get(t)) {
+            (Some(d), Some(sky)) => (*d, *sky),
             _ => ([1.0; CORNERS], [1.0; CORNERS]),
         }
     }
