@@ -350,7 +350,7 @@ fn dense_stand_flips_as(
     frame.btf.vcm = false;
     let without = flip(&frame);
     eprintln!(
-        "dense stand ({layout:?}), sun at {:.0}°: mean FLIP against the reference: btf + VCM {with:.4} (sun term only {sun_only:.4}), btf alone {without:.4}; tree-level VCM bytes {}",
+        "dense stand ({layout:?}), sun at {:.0}°: mean FLIP against the reference: btf + VCM {with:.4} (sun term only {sun_only:.4}), btf alone {without:.4}; VCM bytes held {}",
         elevation.unwrap_or(scene.sun.elevation),
         renderer.vcm_bytes()
     );

@@ -285,13 +285,11 @@ mod tests {
         let p = estimate(&s, &pt).unwrap();
         assert!(p.tree_vcm_bytes as f64 / w.forest.instances.len() as f64 * 1000.0 > 8e6);
 
-        let mut forest = crate::scene::Scene::parse(
-            include_str!("../../assets/scenes/forest.toml"),
-            "forest.toml",
+        let forest = crate::scene::Scene::parse(
+            include_str!("../../assets/scenes/forest_100k.toml"),
+            "forest_100k.toml",
         )
         .unwrap();
-        forest.forest.density = Some(1640.0);
-        forest.forest.min_spacing = 1.6;
         let w = forest.build_world().unwrap();
         let n = w.forest.instances.len();
         assert!((99_000..=100_000).contains(&n), "{n} trees");

@@ -14,7 +14,8 @@
 //! interpolated trilinearly at the tree's corners.
 //!
 //! The sky term (mean visibility over the upper hemisphere) is the cell's, interpolated at
-//! the tree's corners: the cell mates do not darken it (a cube per tree would be needed).
+//! the tree's corners, times the share of it the cell mates leave open, sampled in a few
+//! dozen directions when the cube maps are loaded.
 
 use std::collections::BTreeMap;
 

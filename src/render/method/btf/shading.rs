@@ -86,21 +86,95 @@ impl CellShading {
         });
     }
 
-    /// Sky visibility at every tree's 8 corners: the cell's, read trilinearly.
+    /// Sky visibility at every tree's 8 corners: the cell's mean visibility, read
+    /// trilinearly, times the share of that visible sky the cell mates leave open. The
+    /// share is sampled in [`SKY_SAMPLES`] directions over the upper hemisphere: in each,
+    /// the cell's cubes (interpolated at the corner) times the ray through the cell mates'
+    /// billboards (seen along it), against the cell's cubes alone.
     fn sky(&self) -> Vec<[f32; CORNERS]> {
-        self.trees
-            .iter()
-            .enumerate()
-            .map(|(t, (_, _, corners))| {
-                let c = self.cells.of_tree[t] as usize;
-                let cell = &self.cells.cells[c];
-                std::array::from_fn(|k| {
-                    vcm::trilinear(&self.maps[c].sky, vcm::box_coords(&cell.bounds, corners[k]))
-                })
+        let dirs: Vec<Vec3> = crate::sphere::DirectionSet::with_count(SKY_SAMPLES)
+            .map(|set| {
+                set.directions()
+                    .iter()
+                    .copied()
+                    .filter(|d| d.y > 0.1)
+                    .collect()
             })
-            .collect()
+            .unwrap_or_default();
+        let per_cell: Vec<Vec<(u32, [f32; CORNERS])>> = self
+            .cells
+            .cells
+            .par_iter()
+            .zip(&self.maps)
+            .map(|(cell, map)| {
+                // The cell's 8 cubes in every direction, and its trees' billboards along it.
+                let far: Vec<[f32; CORNERS]> =
+                    dirs.iter().map(|&d| map.direct(self.res, d)).collect();
+                let boards: Vec<Vec<Option<Billboard>>> = if cell.trees.len() > 1 {
+                    dirs.iter()
+                        .map(|&d| {
+                            cell.trees
+                                .iter()
+                                .map(|&o| {
+                                    let (species, m, _) = &self.trees[o as usize];
+                                    let a = self.alpha.get(*species as usize)?;
+                                    Billboard::facing(a, *m, m.transform_point3(a.center) - d)
+                                })
+                                .collect()
+                        })
+                        .collect()
+                } else {
+                    Vec::new()
+                };
+                cell.trees
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &t)| {
+                        let corners = &self.trees[t as usize].2;
+                        let sky = std::array::from_fn(|k| {
+                            let u = vcm::box_coords(&cell.bounds, corners[k]);
+                            let mean = vcm::trilinear(&map.sky, u);
+                            if boards.is_empty() {
+                                return mean;
+                            }
+                            let (mut open, mut left) = (0.0f32, 0.0f32);
+                            for (di, &d) in dirs.iter().enumerate() {
+                                let vf = vcm::trilinear(&far[di], u);
+                                let mut vn = 1.0;
+                                for (j, b) in boards[di].iter().enumerate() {
+                                    if j != i
+                                        && let Some(b) = b
+                                    {
+                                        vn *= 1.0 - vcm::ray_opacity(corners[k], d, b, self.res);
+                                    }
+                                }
+                                open += vf;
+                                left += vf * vn;
+                            }
+                            if open > 1e-6 {
+                                mean * left / open
+                            } else {
+                                mean
+                            }
+                        });
+                        (t, sky)
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut out = vec![[1.0; CORNERS]; self.trees.len()];
+        for (t, sky) in per_cell.into_iter().flatten() {
+            if let Some(o) = out.get_mut(t as usize) {
+                *o = sky;
+            }
+        }
+        out
     }
 }
+
+/// Directions over the whole sphere of which those above 0.1 rad or so sample the cell
+/// mates' share of the sky (28 of them).
+const SKY_SAMPLES: usize = 66;
 
 impl ObjectVcm {
     /// Sun visibility (1 − opacity) at the 8 corners for `to_sun` in the cube maps' frame.
