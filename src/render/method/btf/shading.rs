@@ -703,6 +703,42 @@ mod tests {
     }
 
     #[test]
+    fn forest_cell_sets_that_do_not_fit_the_scene_are_refused() {
+        let world = lone_world();
+        let cells = ForestCells::new(&world).len() as u32;
+        assert_eq!(cells, 1);
+        let species_sets = || -> Vec<crate::format::VcmSet> { complete(&world)[1..].to_vec() };
+        let cell = |owner: u32| crate::format::VcmSet {
+            species: VCM_CELL_SPECIES,
+            ..set(0, owner, Level::Tree)
+        };
+        let with = |extra: Vec<crate::format::VcmSet>| {
+            let mut v = species_sets();
+            v.extend(extra);
+            VcmShading::new(&baked(v), &world)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default()
+        };
+        for (v, want) in [
+            (vec![cell(0), cell(1)], "no forest cell 1"),
+            (vec![cell(0), cell(0)], "forest cell 0 has two sets"),
+            (
+                vec![
+                    cell(0),
+                    set(world.forest.instances[0].species, 0, Level::Tree),
+                ],
+                "its own cube maps and the forest cells too",
+            ),
+            // A complete set, but no tree-level BTF images to draw the cell mates with.
+            (vec![cell(0)], "no tree-level BTF images"),
+        ] {
+            let e = with(v);
+            assert!(e.contains(want) && e.contains("re-bake"), "{want}: {e}");
+        }
+    }
+
+    #[test]
     fn no_shading_is_one_everywhere() {
         assert_eq!(Shade::NONE.direct_at(Vec3::splat(0.3)), 1.0);
     }
