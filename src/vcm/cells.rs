@@ -24,8 +24,16 @@ use glam::Vec3;
 use crate::model::World;
 use crate::model::mesh::Aabb;
 
-/// A cell's side, in mean tree widths (the widest horizontal extent of a tree's box).
+/// A cell's side, in mean tree widths (the widest horizontal extent of a tree's box), where
+/// the forest is dense.
 pub const CELL_TREE_WIDTHS: f32 = 1.25;
+/// Trees a cell holds on average where the forest is sparse: cells grow (up to the range's
+/// largest side) until this many trees stand on one cell's area at the forest's typical
+/// density, so that sparse trees share their cube maps too.
+pub const CELL_SPARSE_TREES: f32 = 2.0;
+/// Trees sampled for the forest's typical density, and the neighbour that measures it.
+const DENSITY_SAMPLES: usize = 256;
+const DENSITY_NEIGHBOUR: usize = 4;
 /// The bounds of a cell's side (m).
 pub const CELL_SIDE_RANGE: (f32, f32) = (6.0, 40.0);
 
@@ -62,9 +70,41 @@ pub fn tree_world_box(world: &World, i: usize) -> Option<Aabb> {
     ))
 }
 
+/// The forest's typical density (trees per m²): the median over sampled trees of
+/// k / (π r²), r the distance to its k-th nearest neighbour ([`DENSITY_NEIGHBOUR`]); 0 for
+/// a forest of fewer trees than that.
+pub fn typical_density(world: &World) -> f32 {
+    let trees = &world.forest.instances;
+    if trees.len() <= DENSITY_NEIGHBOUR {
+        return 0.0;
+    }
+    let step = trees.len().div_ceil(DENSITY_SAMPLES).max(1);
+    let mut densities: Vec<f32> = trees
+        .iter()
+        .step_by(step)
+        .map(|t| {
+            let mut nearest = [f32::INFINITY; DENSITY_NEIGHBOUR + 1];
+            for o in trees {
+                let d =
+                    (o.position.x - t.position.x).powi(2) + (o.position.z - t.position.z).powi(2);
+                if d < nearest[DENSITY_NEIGHBOUR] {
+                    nearest[DENSITY_NEIGHBOUR] = d;
+                    nearest.sort_unstable_by(f32::total_cmp);
+                }
+            }
+            // nearest[0] is the tree itself.
+            let r2 = nearest[DENSITY_NEIGHBOUR].max(1e-6);
+            DENSITY_NEIGHBOUR as f32 / (std::f32::consts::PI * r2)
+        })
+        .collect();
+    densities.sort_unstable_by(f32::total_cmp);
+    densities[densities.len() / 2]
+}
+
 impl ForestCells {
-    /// The side of `world`'s cells: [`CELL_TREE_WIDTHS`] mean tree widths, within
-    /// [`CELL_SIDE_RANGE`].
+    /// The side of `world`'s cells: [`CELL_TREE_WIDTHS`] mean tree widths, or where the
+    /// forest is sparse the side on which [`CELL_SPARSE_TREES`] trees stand at its typical
+    /// density, within [`CELL_SIDE_RANGE`].
     pub fn side_for(world: &World) -> f32 {
         let trees = &world.forest.instances;
         let widths: f64 = trees
@@ -80,7 +120,8 @@ impl ForestCells {
         } else {
             (widths / trees.len() as f64) as f32
         };
-        let side = CELL_TREE_WIDTHS * mean;
+        let side =
+            (CELL_TREE_WIDTHS * mean).max((CELL_SPARSE_TREES / typical_density(world)).sqrt());
         if side.is_finite() {
             side.clamp(CELL_SIDE_RANGE.0, CELL_SIDE_RANGE.1)
         } else {
