@@ -621,12 +621,13 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         );
     } else {
         println!(
-            "wrote {} ({w}x{h}, {}): {:.2} ms/frame ({}, median of {}), {} trees, {} triangles, on {}",
+            "wrote {} ({w}x{h}, {}): {:.2} ms/frame ({}, median of {}), CPU prepare {:.2} ms, {} trees, {} triangles, on {}",
             args.out.display(),
             args.method.name(),
             m.frame_ms,
             m.source.name(),
             m.frames_timed,
+            m.prepare_ms,
             m.stats.trees_drawn,
             m.stats.triangles,
             ctx.adapter_name()

@@ -87,6 +87,9 @@ pub struct FrameMeasurement {
     pub source: TimeSource,
     /// Frames the median is taken over.
     pub frames_timed: usize,
+    /// Median CPU time of the timed frames' preparation (cull, LOD, billboard expansion,
+    /// sort, shading factors, uploads), ms.
+    pub prepare_ms: f64,
     /// The cost of a sun move, for the methods with sun-dependent state (`btf`).
     pub sun_update: Option<SunUpdate>,
 }
@@ -119,11 +122,13 @@ pub fn measure_frame_with(
     let (mut image, mut stats) = renderer.render_image(ctx, frame, width, height, ss)?;
     on_frame();
     let mut times = Vec::with_capacity(opts.frames as usize);
+    let mut prepare = Vec::with_capacity(opts.frames as usize);
     for _ in 0..opts.frames.max(1) {
         let t0 = std::time::Instant::now();
         let (img, s) = renderer.render_image(ctx, frame, width, height, ss)?;
         let wall = t0.elapsed().as_secs_f64() * 1e3;
         times.push(s.gpu_ms.unwrap_or(wall));
+        prepare.push(s.prepare_ms);
         image = img;
         stats = s;
         on_frame();
@@ -135,9 +140,11 @@ pub fn measure_frame_with(
         None
     };
     times.sort_by(f64::total_cmp);
+    prepare.sort_by(f64::total_cmp);
     Ok(FrameMeasurement {
         image,
         frame_ms: times[times.len() / 2],
+        prepare_ms: prepare[prepare.len() / 2],
         source: if stats.gpu_ms.is_some() {
             TimeSource::GpuTimestamps
         } else {
@@ -191,6 +198,8 @@ pub struct FrameReport {
     pub frame_ms: f64,
     pub frame_ms_source: TimeSource,
     pub frames_timed: usize,
+    /// Median CPU preparation time of the timed frames (ms).
+    pub prepare_ms: f64,
     /// The frame's counts (trees, triangles, shadow casters and triangles, draw calls).
     #[serde(flatten, serialize_with = "frame_counts")]
     pub stats: FrameStats,
@@ -290,6 +299,7 @@ impl FrameReport {
             frame_ms: m.frame_ms,
             frame_ms_source: m.source,
             frames_timed: m.frames_timed,
+            prepare_ms: m.prepare_ms,
             stats: m.stats,
             adapter: ctx.adapter_name(),
             out: None,
