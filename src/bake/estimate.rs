@@ -319,12 +319,23 @@ mod tests {
         };
         let e = estimate(&huge, &w).unwrap_err().to_string();
         assert!(e.contains("[bake] resolution, views or lights"), "{e}");
+        // The default forest's largest part is its BTF images (forest cells keep its cube
+        // maps small); one set of cube maps per tree makes those the largest part.
         let e = estimate(&settings(), &w).unwrap();
-        let small_machine = e.memory_bytes - 1;
-        let refused = check_memory(&e, 1000, small_machine)
+        let refused = check_memory(&e, 1000, e.memory_bytes - 1)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            refused.contains("[bake] resolution, views or lights"),
+            "{refused}"
+        );
+        assert!(check_memory(&e, 1000, e.memory_bytes).is_ok());
+        let mut per_tree = w.clone();
+        per_tree.tree_vcm = crate::model::TreeVcm::PerTree;
+        let e = estimate(&settings(), &per_tree).unwrap();
+        let refused = check_memory(&e, 1000, e.memory_bytes - 1)
             .unwrap_err()
             .to_string();
         assert!(refused.contains("[forest] count (1000 trees"), "{refused}");
-        assert!(check_memory(&e, 1000, e.memory_bytes).is_ok());
     }
 }

@@ -227,56 +227,70 @@ pub fn bake_vcm(
     Ok(out)
 }
 
-/// Each tree's world placement and the radius of its billboard.
-fn placements(world: &World, alpha: &[PerLevel<AlphaSet>]) -> Vec<(Mat4, f32)> {
-    world
-        .forest
-        .instances
-        .iter()
-        .map(|t| {
-            let r = alpha
-                .get(t.species as usize)
-                .map_or(0.0, |a| a.tree.radius * t.scale);
-            (t.transform(), r)
-        })
-        .collect()
+/// The forest as the tree-level bake draws it: every tree's placement and billboard
+/// radius, and a grid to find the trees near a point.
+struct Surroundings<'a> {
+    world: &'a World,
+    alpha: &'a [PerLevel<AlphaSet>],
+    grid: Grid,
+    /// Per tree: its world placement and the radius of its billboard.
+    placed: Vec<(Mat4, f32)>,
+    max_radius: f32,
 }
 
-/// The trees (indices) within `range` of `p` that `keep` accepts, nearest first: in a dense
-/// stand they make the texels towards the horizon opaque, and the farther trees drawn there
-/// are then skipped ([`CubeRaster::covered`]).
-fn neighbours<'a>(
-    world: &World,
-    alpha: &'a [PerLevel<AlphaSet>],
-    grid: &Grid,
-    placed: &[(Mat4, f32)],
-    p: Vec3,
-    range: f32,
-    near: &mut Vec<u32>,
-    keep: impl Fn(usize) -> bool,
-) -> Vec<Placed<'a>> {
-    let instances = &world.forest.instances;
-    near.clear();
-    grid.near(p, range, near);
-    let mut by_distance: Vec<(f32, u32)> = near
-        .iter()
-        .filter(|&&j| keep(j as usize))
-        .filter_map(|&j| {
-            let o = &instances[j as usize];
-            let d = o.position.distance(p);
-            (d <= range).then_some((d, j))
-        })
-        .collect();
-    by_distance.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    by_distance
-        .iter()
-        .filter_map(|&(_, j)| {
-            let o = &instances[j as usize];
-            alpha
-                .get(o.species as usize)
-                .map(|a| Placed::new(&a.tree, placed[j as usize].0))
-        })
-        .collect()
+impl<'a> Surroundings<'a> {
+    fn new(world: &'a World, alpha: &'a [PerLevel<AlphaSet>]) -> Self {
+        let instances = &world.forest.instances;
+        let placed: Vec<(Mat4, f32)> = instances
+            .iter()
+            .map(|t| {
+                let r = alpha
+                    .get(t.species as usize)
+                    .map_or(0.0, |a| a.tree.radius * t.scale);
+                (t.transform(), r)
+            })
+            .collect();
+        Self {
+            world,
+            alpha,
+            grid: Grid::new(instances.iter().map(|t| t.position), TREE_RANGE / 4.0),
+            max_radius: placed.iter().map(|p| p.1).fold(0.0f32, f32::max),
+            placed,
+        }
+    }
+
+    /// The trees (as occluders) within `range` of `p` that `keep` accepts, nearest first:
+    /// in a dense stand they make the texels towards the horizon opaque, and the farther
+    /// trees drawn there are then skipped ([`CubeRaster::covered`]).
+    fn neighbours(
+        &self,
+        p: Vec3,
+        range: f32,
+        near: &mut Vec<u32>,
+        keep: impl Fn(usize) -> bool,
+    ) -> Vec<Placed<'a>> {
+        let instances = &self.world.forest.instances;
+        near.clear();
+        self.grid.near(p, range, near);
+        let mut by_distance: Vec<(f32, u32)> = near
+            .iter()
+            .filter(|&&j| keep(j as usize))
+            .filter_map(|&j| {
+                let d = instances[j as usize].position.distance(p);
+                (d <= range).then_some((d, j))
+            })
+            .collect();
+        by_distance.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        by_distance
+            .iter()
+            .filter_map(|&(_, j)| {
+                let o = &instances[j as usize];
+                self.alpha
+                    .get(o.species as usize)
+                    .map(|a| Placed::new(&a.tree, self.placed[j as usize].0))
+            })
+            .collect()
+    }
 }
 
 /// One set per tree instance, against the other trees within [`TREE_RANGE`] of it.
@@ -289,9 +303,7 @@ fn bake_trees(
     out: &mut Vec<VcmSet>,
 ) -> Result<()> {
     let instances = &world.forest.instances;
-    let grid = Grid::new(instances.iter().map(|t| t.position), TREE_RANGE / 4.0);
-    let placed = placements(world, alpha);
-    let max_radius = placed.iter().map(|p| p.1).fold(0.0f32, f32::max);
+    let around = Surroundings::new(world, alpha);
     for (b, chunk) in instances.chunks(BATCH).enumerate() {
         let sets: Vec<VcmSet> = chunk
             .par_iter()
@@ -307,19 +319,15 @@ fn bake_trees(
                             world.species.len()
                         )));
                     };
-                    let (m, r) = placed[i];
-                    let occluders = neighbours(
-                        world,
-                        alpha,
-                        &grid,
-                        &placed,
+                    let (m, r) = around.placed[i];
+                    let occluders = around.neighbours(
                         inst.position,
-                        TREE_RANGE + r + max_radius,
+                        TREE_RANGE + r + around.max_radius,
                         near,
                         |j| {
                             j != i
                                 && instances[j].position.distance(inst.position)
-                                    <= TREE_RANGE + r + placed[j].1
+                                    <= TREE_RANGE + r + around.placed[j].1
                         },
                     );
                     let (opacity, mean_opacity) = bake_corners(
@@ -371,9 +379,7 @@ fn bake_cells(
     }
     let res = cell_resolution(res);
     let cells = ForestCells::new(world);
-    let grid = Grid::new(instances.iter().map(|t| t.position), TREE_RANGE / 4.0);
-    let placed = placements(world, alpha);
-    let max_radius = placed.iter().map(|p| p.1).fold(0.0f32, f32::max);
+    let around = Surroundings::new(world, alpha);
     let order: Vec<usize> = (0..cells.len()).collect();
     for chunk in order.chunks(BATCH) {
         let sets: Vec<VcmSet> = chunk
@@ -384,13 +390,9 @@ fn bake_cells(
                     let cell = &cells.cells[c];
                     let center = cells.center(c);
                     let half = 0.5 * (cell.bounds.max - cell.bounds.min).length();
-                    let occluders = neighbours(
-                        world,
-                        alpha,
-                        &grid,
-                        &placed,
+                    let occluders = around.neighbours(
                         center,
-                        TREE_RANGE + half + max_radius,
+                        TREE_RANGE + half + around.max_radius,
                         near,
                         |j| cells.of_tree[j] as usize != c,
                     );
