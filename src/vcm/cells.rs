@@ -122,10 +122,11 @@ impl ForestCells {
         };
         let side =
             (CELL_TREE_WIDTHS * mean).max((CELL_SPARSE_TREES / typical_density(world)).sqrt());
-        if side.is_finite() {
-            side.clamp(CELL_SIDE_RANGE.0, CELL_SIDE_RANGE.1)
-        } else {
+        // Too few trees to measure a density (infinite side): the largest cells.
+        if side.is_nan() {
             CELL_SIDE_RANGE.0
+        } else {
+            side.clamp(CELL_SIDE_RANGE.0, CELL_SIDE_RANGE.1)
         }
     }
 
@@ -239,7 +240,7 @@ mod tests {
         let side = ForestCells::side_for(&w);
         assert!((CELL_SIDE_RANGE.0..=CELL_SIDE_RANGE.1).contains(&side));
         let empty = world(0);
-        assert_eq!(ForestCells::side_for(&empty), CELL_SIDE_RANGE.0);
+        assert_eq!(ForestCells::side_for(&empty), CELL_SIDE_RANGE.1);
         assert!(ForestCells::new(&empty).is_empty());
         assert_eq!(cell_resolution(32), 16);
         assert_eq!(cell_resolution(8), 8);

@@ -738,6 +738,97 @@ mod tests {
         }
     }
 
+    /// Two trees of one species in one forest cell, 16 m apart along x, with cube maps that
+    /// see nothing and tree-level images of opaque discs: only the cell mate can shade.
+    #[test]
+    fn a_cell_mate_shades_a_tree_towards_the_sun_only() {
+        let mut world = lone_world();
+        let first = world.forest.instances[0];
+        // The second 16 m east of the first (their boxes apart), or west where east is
+        // another cell.
+        let mut east = 1.0;
+        for e in [1.0, -1.0] {
+            let second = crate::model::TreeInstance {
+                position: first.position + Vec3::new(16.0 * e, 0.0, 0.0),
+                ..first
+            };
+            world.forest.instances = vec![first, second];
+            east = e;
+            if ForestCells::new(&world).len() == 1 {
+                break;
+            }
+        }
+        assert_eq!(ForestCells::new(&world).len(), 1, "both trees in one cell");
+        let sp = first.species;
+        let b = world.species[sp as usize].tree_bounds;
+        let image = (32 * 32 * 4) as usize;
+        // Every view an opaque disc of 0.4 the image's side across (a crown's outline).
+        let mut ambient = vec![0u8; 6 * image];
+        for (i, px) in ambient.chunks_exact_mut(4).enumerate() {
+            let (x, y) = ((i % 32) as f32 - 15.5, ((i / 32) % 32) as f32 - 15.5);
+            if x * x + y * y < 12.8 * 12.8 {
+                px[3] = 255;
+            }
+        }
+        let mut v = complete(&world)[1..].to_vec();
+        v.push(crate::format::VcmSet {
+            species: VCM_CELL_SPECIES,
+            ..set(0, 0, Level::Tree)
+        });
+        let mut bake = baked(v);
+        for (s, t) in world.species.iter().enumerate() {
+            let b = t.tree_bounds;
+            bake.btf.push(crate::format::BtfImageSet {
+                species: s as u32,
+                level: Level::Tree,
+                views: 6,
+                lights: 6,
+                resolution: 32,
+                center: (0.5 * (b.min + b.max)).to_array(),
+                radius: 0.5 * (b.max - b.min).length(),
+                texel_size: 0.1,
+                direct: vec![0; 36 * image],
+                ambient: ambient.clone(),
+            });
+        }
+        let mut shading = VcmShading::new(&bake, &world).unwrap().unwrap();
+        let frames = PerLevel {
+            twig: ObjectFrame {
+                bounds: b,
+                center: Vec3::ZERO,
+            },
+            branch: ObjectFrame {
+                bounds: b,
+                center: Vec3::ZERO,
+            },
+            tree: ObjectFrame {
+                bounds: b,
+                center: Vec3::ZERO,
+            },
+        };
+        let lit = |shading: &VcmShading, t: usize| -> f32 {
+            let m = world.forest.instances[t].transform();
+            let s = shading.for_tree(t, sp as usize, &m, &frames).tree();
+            s.direct.iter().sum::<f32>() / CORNERS as f32
+        };
+        // The sun low towards the second tree: the first tree's corners look through it.
+        shading.set_sun(Vec3::new(east, 0.15, 0.0).normalize());
+        let (a, b2) = (lit(&shading, 0), lit(&shading, 1));
+        assert!(a < 0.8, "the tree behind its cell mate: {a}");
+        assert!(b2 > 0.99, "the tree in front: {b2}");
+        // The sun on the other side: the other way round.
+        shading.set_sun(Vec3::new(-east, 0.15, 0.0).normalize());
+        let (a, b2) = (lit(&shading, 0), lit(&shading, 1));
+        assert!(a > 0.99 && b2 < 0.8, "{a} {b2}");
+        // Straight above: at most the one corner of each box that reaches under the
+        // other's crown.
+        shading.set_sun(Vec3::Y);
+        assert!(lit(&shading, 0) >= 0.85 && lit(&shading, 1) >= 0.85);
+        // The sky: each hides a share of the other's.
+        let sky = |t: usize| shading.tree_sky[t].iter().sum::<f32>() / CORNERS as f32;
+        assert!(sky(0) < 0.99 && sky(1) < 0.99, "{} {}", sky(0), sky(1));
+    }
+
     #[test]
     fn no_shading_is_one_everywhere() {
         assert_eq!(Shade::NONE.direct_at(Vec3::splat(0.3)), 1.0);
