@@ -237,8 +237,8 @@ fn darkening_against_truth(ctx: &GpuContext) -> [(f32, f32); 2] {
 /// not fall below this (half crown, whole crown). Measured on lavapipe (Mesa llvmpipe) with
 /// a cube map set per tree: geometry 0.5013 and 0.6100, btf + VCM 0.0041 and 0.0127:
 /// ratios 0.008 and 0.021; the floors are half of that. With forest cells (the default):
-/// 0.0106 and 0.0226, ratios 0.021 and 0.037. With VCM shading off the ratios are 0 (the test then fails).
-/// This guards what there is; the goal, about as much as the truth, is the ignored test
+/// 0.0106 and 0.0226, ratios 0.021 and 0.037. With VCM shading off the ratios are 0 (the
+/// test then fails). This guards what there is; the goal, about as much as the truth, is the ignored test
 /// below (issue 14).
 const DARKENING_FLOOR: [f32; 2] = [0.004, 0.01];
 
