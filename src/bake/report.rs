@@ -130,9 +130,9 @@ impl BakeReport {
             tree_vcm_resolution: tree_sets.first().map_or(0, |v| v.resolution),
             tree_vcm_bytes: tree_sets.iter().map(|v| v.opacity.len() as u64).sum(),
             tree_vcm_seconds: times.stage(if tree_vcm_cells {
-                "forest cell VCMs"
+                super::vcm::CELL_STAGE
             } else {
-                "tree VCMs"
+                super::vcm::TREE_STAGE
             }),
             out: path.display().to_string(),
             file_bytes: std::fs::metadata(path).map(|m| m.len()).unwrap_or(0),

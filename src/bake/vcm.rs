@@ -36,6 +36,10 @@ pub const TREE_RANGE: f32 = 250.0;
 /// Azimuth samples of the terrain horizon around each corner (4 faces x 32 texels).
 const HORIZON_AZIMUTHS: usize = 128;
 
+/// The progress stages of the tree-level cube maps (what [`super::BakeTimes`] times).
+pub const TREE_STAGE: &str = "tree VCMs";
+pub const CELL_STAGE: &str = "forest cell VCMs";
+
 /// Instances per parallel batch between progress reports.
 const BATCH: usize = 64;
 
@@ -350,7 +354,7 @@ fn bake_trees(
             .collect::<Result<_>>()?;
         done += sets.len() as u64;
         out.extend(sets);
-        progress(done, "tree VCMs");
+        progress(done, TREE_STAGE);
     }
     Ok(())
 }
@@ -416,7 +420,7 @@ fn bake_cells(
             .collect();
         done += sets.len() as u64;
         out.extend(sets);
-        progress(done, "forest cell VCMs");
+        progress(done, CELL_STAGE);
     }
     Ok(())
 }

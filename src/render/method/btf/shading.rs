@@ -23,7 +23,7 @@ use crate::format::{Baked, VCM_CELL_SPECIES};
 use crate::model::mesh::Aabb;
 use crate::model::{Level, PerLevel, World};
 use crate::vcm::billboard::{AlphaSet, Billboard};
-use crate::vcm::cells::{ForestCells, tree_world_box};
+use crate::vcm::cells::ForestCells;
 use crate::vcm::{self, CORNERS, FACES};
 use crate::{Error, Result};
 
@@ -381,8 +381,9 @@ impl VcmShading {
                     .map(|t| {
                         let inst = &world.forest.instances[t];
                         let m = inst.transform();
-                        let bounds = tree_world_box(world, t)
-                            .and(world.species.get(inst.species as usize))
+                        let bounds = world
+                            .species
+                            .get(inst.species as usize)
                             .ok_or_else(|| bad(format!("tree {t} has no species")))?
                             .tree_bounds;
                         let corners = std::array::from_fn(|k| {
