@@ -266,6 +266,10 @@ struct RenderArgs {
     /// cube maps shade the sun light only).
     #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
     vcm_sky: bool,
+    /// btf: brighten the blend of the 3 nearest light samples to the sun's strength (their
+    /// weighted directions fall short of it by up to 1/sqrt(3) with 6 lights): on or off.
+    #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+    light_gain: bool,
     /// btf: draw the VCM sun factor alone, in grey (white = fully lit).
     #[arg(long)]
     show_shadow: bool,
@@ -549,6 +553,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         vcm: args.vcm,
         show_shadow: args.show_shadow,
         vcm_sky: args.vcm_sky,
+        light_gain: args.light_gain,
     };
     frame.texel = TexelSettings {
         mode: args.texel_mode,

@@ -44,6 +44,9 @@ pub enum SphereError {
     },
 }
 
+/// The most [`DirectionSet::light_gain`] brightens a blend of light samples.
+pub const MAX_LIGHT_GAIN: f32 = 2.0;
+
 /// Sampled directions on the unit sphere: the vertices of an octahedron subdivided `level`
 /// times (each triangle split into 4 at edge midpoints pushed onto the sphere).
 /// level 0: 6 directions / 8 triangles, 1: 18 / 32, 2: 66 / 128, 3: 258 / 512.
@@ -204,6 +207,26 @@ impl DirectionSet {
         let d = sanitize(d);
         let [t] = self.locate_lanes([d]);
         self.blend_in(t, d)
+    }
+
+    /// How much a blend of light samples must be brightened to light like `d` itself. The
+    /// blend of unit directions, sum of w_i l_i, is a chord inside the sphere: shorter than
+    /// `d` (down to 1/sqrt(3) of it between the 6 samples, 0.82 between the 18). Whatever responds
+    /// linearly to the light direction (a diffuse or translucent leaf lit on one side by
+    /// every sample) comes out of the blended images darker by that length along `d`; this
+    /// is its inverse, at least 1 and at most [`MAX_LIGHT_GAIN`] (a blend culled to one
+    /// far sample).
+    pub fn light_gain(&self, b: &Blend, d: Vec3) -> f32 {
+        let d = d.normalize_or_zero();
+        let sum: Vec3 = (0..3)
+            .filter_map(|i| Some(*self.directions.get(b.index[i] as usize)? * b.weight[i]))
+            .sum();
+        let along = sum.dot(d);
+        if along > 0.0 && along.is_finite() {
+            (1.0 / along).clamp(1.0, MAX_LIGHT_GAIN)
+        } else {
+            1.0
+        }
     }
 
     /// [`Self::blend`] for many directions: `out[i] = self.blend(dirs[i])` for every `i` below
@@ -822,6 +845,57 @@ mod tests {
                 assert_eq!(set.nearest(d), i);
             }
         }
+    }
+
+    #[test]
+    fn light_gain_restores_the_length_the_blend_loses_between_samples() {
+        let six = DirectionSet::with_count(6).unwrap();
+        // At a sample the blend is the sample itself.
+        for &d in six.directions() {
+            assert_eq!(six.light_gain(&six.blend(d), d), 1.0);
+        }
+        // At the centre of an octant the 3 samples weigh 1/3 each: their sum is 1/sqrt(3)
+        // long.
+        let centre = Vec3::new(1.0, 1.0, -1.0).normalize();
+        let b = six.blend(centre);
+        let gain = six.light_gain(&b, centre);
+        assert!((gain - 3f32.sqrt()).abs() < 1e-4, "{gain}");
+        // In general, the blend times the gain reaches the unit sphere along d, and finer
+        // sets need less of it.
+        for set in all_sets() {
+            let mut largest = 1.0f32;
+            for i in 0..500 {
+                let t = i as f32 * 0.7;
+                let d = Vec3::new(t.sin() * (1.3 * t).cos(), (0.9 * t).cos(), t.cos() + 0.2)
+                    .normalize();
+                let b = set.blend(d);
+                let gain = set.light_gain(&b, d);
+                let sum: Vec3 = (0..3)
+                    .map(|k| set.directions()[b.index[k] as usize] * b.weight[k])
+                    .sum();
+                assert!((sum.dot(d) * gain - 1.0).abs() < 1e-3, "{d}: {gain}");
+                largest = largest.max(gain);
+            }
+            assert!(
+                largest <= 3f32.sqrt() + 1e-4,
+                "{} samples: {largest}",
+                set.len()
+            );
+            if set.len() >= 18 {
+                assert!(largest < 1.25, "{} samples: {largest}", set.len());
+            }
+        }
+        // A blend culled to one far sample is brightened at most MAX_LIGHT_GAIN times.
+        let mut culled = six.blend(centre);
+        culled.cull(0.9);
+        let gain = six.light_gain(&culled, centre);
+        assert!((gain - 3f32.sqrt()).abs() < 1e-4, "{gain}");
+        let far = Vec3::new(1.0, 0.05, 0.0).normalize();
+        let one = Blend {
+            index: [2, 0, 1],
+            weight: [1.0, 0.0, 0.0],
+        };
+        assert_eq!(six.light_gain(&one, far), MAX_LIGHT_GAIN);
     }
 
     #[test]

@@ -172,6 +172,45 @@ fn btf_matches_geometry_where_the_tree_level_is_valid() {
     );
 }
 
+/// The sun from behind the camera and between light samples (the default scene's sun:
+/// azimuth 135, elevation 35, near the middle of three of the 6 samples), trees at the tree
+/// level: brightening the light blend by its gain (`DirectionSet::light_gain`) brings btf
+/// closer to the reference over the trees' pixels. Measured on lavapipe: mean FLIP 0.142
+/// with the gain, 0.181 without.
+#[test]
+fn the_light_gain_brings_btf_closer_to_the_reference_between_light_samples() {
+    let ctx = gpu();
+    let (scene, world, mut renderer) = setup(&ctx);
+    let mut frame = far_frame(&scene, 260.0);
+    frame.fog_density = 0.0;
+    frame.btf.vcm = false;
+    frame.sun.azimuth_deg = 135.0;
+    frame.sun.elevation_deg = 35.0;
+    let (w, h) = (192, 192);
+    renderer
+        .prepare_reference(
+            &ctx,
+            &world,
+            canopy::render::sky_visibility::SKY_DIRECTIONS,
+            true,
+        )
+        .unwrap();
+    let mut reference = frame;
+    reference.reference = Some(canopy::render::Reference::default());
+    let (truth, _) = renderer.render_image(&ctx, &reference, w, h, 2).unwrap();
+    frame.method = Method::Btf;
+    let (with, _) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
+    frame.btf.light_gain = false;
+    let (without, _) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
+    let mask = trees_mask(&ctx, &scene, &mut frame, &with, (w, h));
+    let (on, off) = (
+        masked_flip(&truth, &with, &mask),
+        masked_flip(&truth, &without, &mask),
+    );
+    eprintln!("btf over the trees against the reference: light gain on {on:.4}, off {off:.4}");
+    assert!(on < off, "the gain should help: {on} vs {off}");
+}
+
 #[test]
 fn weight_culling_samples_fewer_images_at_a_bounded_cost() {
     let ctx = gpu();

@@ -258,6 +258,8 @@ pub struct BtfReport {
     pub ground_shadows: bool,
     /// The sky light was weighted by the cube maps too (VCM shading on and `vcm_sky`).
     pub vcm_sky: bool,
+    /// The light blend was brightened by its gain.
+    pub light_gain: bool,
     pub btf_bytes: u64,
     pub vcm_bytes: u64,
     pub vcm_resolution: Option<u32>,
@@ -286,6 +288,7 @@ impl FrameReport {
             lod_fade: frame.btf.lod_fade,
             ground_shadows: frame.ground_shadows,
             vcm_sky: stats.vcm && frame.btf.vcm_sky,
+            light_gain: frame.btf.light_gain,
             btf_bytes: renderer.btf_bytes(),
             vcm_bytes: renderer.vcm_bytes(),
             vcm_resolution: renderer.vcm_resolution(),

@@ -541,6 +541,11 @@ impl Pusher<'_, '_> {
         vb.cull(self.settings.weight_threshold);
         let mut lb = scene.lights.blend(l_obj);
         lb.cull(self.settings.weight_threshold);
+        // The light weights carry the gain that makes the blend as bright as the sun.
+        if self.settings.light_gain {
+            let gain = scene.lights.light_gain(&lb, l_obj);
+            lb.weight = lb.weight.map(|w| w * gain);
+        }
         let lights_used = lb.weight.iter().filter(|&&w| w > 0.0).count() as u64;
         let views_used = vb.weight.iter().filter(|&&w| w > 0.0).count() as u64;
         let fetches = views_used * (lights_used + 1);
@@ -917,7 +922,14 @@ pub(crate) mod tests {
         assert_eq!(all.records.len(), culled.records.len());
         let mut dropped = 0;
         for r in &culled.records {
-            for w in [r.view_weight, r.light_weight] {
+            // The light weights carry the light gain: they sum to it, at least 1.
+            let gain: f32 = r.light_weight.iter().sum();
+            assert!(
+                (1.0 - 1e-5..=crate::sphere::MAX_LIGHT_GAIN + 1e-5).contains(&gain),
+                "light weights {:?} sum to {gain}",
+                r.light_weight
+            );
+            for w in [r.view_weight, r.light_weight.map(|x| x / gain)] {
                 let sum: f32 = w.iter().sum();
                 assert!((sum - 1.0).abs() < 1e-5, "weights {w:?} sum to {sum}");
                 let largest = w.iter().copied().fold(0.0, f32::max);

@@ -51,6 +51,10 @@ pub struct BtfSettings {
     /// Weight the sky term by the cube maps' mean visibility (off: the cube maps shade the
     /// sun term only, as if the sky were never hidden).
     pub vcm_sky: bool,
+    /// Brighten the blend of the 3 nearest light samples by its gain
+    /// (`DirectionSet::light_gain`): blended images are lit as by a light shorter than
+    /// the sun, by up to 1/sqrt(3) between 6 samples.
+    pub light_gain: bool,
 }
 
 impl Default for BtfSettings {
@@ -64,6 +68,7 @@ impl Default for BtfSettings {
             vcm: true,
             show_shadow: false,
             vcm_sky: true,
+            light_gain: true,
         }
     }
 }
