@@ -125,7 +125,7 @@ struct BenchArgs {
     #[arg(long, value_delimiter = ',', value_parser = parse_method, default_value = "geometry,btf,billboard,texel,hybrid")]
     methods: Vec<Method>,
     /// Sweep a knob: KEY=V1,V2,... (btf and hybrid: lod_scale, weight_threshold, lod_fade, planes,
-    /// vcm; texel: slice_d0, slice_d1, max_slices, texel_mode, texel_tiles, tile_distance);
+    /// vcm, light_gain; texel: slice_d0, slice_d1, max_slices, texel_mode, texel_tiles, tile_distance);
     /// repeat for a grid.
     #[arg(long, value_parser = parse_sweep)]
     sweep: Vec<canopy::bench::run::Sweep>,
@@ -266,10 +266,11 @@ struct RenderArgs {
     /// cube maps shade the sun light only).
     #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
     vcm_sky: bool,
-    /// btf: brighten the blend of the 3 nearest light samples to the sun's strength (their
-    /// weighted directions fall short of it by up to 1/sqrt(3) with 6 lights): on or off.
-    #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
-    light_gain: bool,
+    /// btf: how far to brighten the blend of the 3 nearest light samples towards the sun's
+    /// strength (their weighted directions fall short of it, to 1/sqrt(3) with 6 lights),
+    /// 0..1: 0 = the plain blend, 1 = the whole gain (default: 0.5)
+    #[arg(long, value_parser = parse_unit)]
+    light_gain: Option<f32>,
     /// btf: draw the VCM sun factor alone, in grey (white = fully lit).
     #[arg(long)]
     show_shadow: bool,
@@ -553,7 +554,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         vcm: args.vcm,
         show_shadow: args.show_shadow,
         vcm_sky: args.vcm_sky,
-        light_gain: args.light_gain,
+        light_gain: args.light_gain.unwrap_or(start.light_gain),
     };
     frame.texel = TexelSettings {
         mode: args.texel_mode,

@@ -172,7 +172,7 @@ fn lone_fir_against_the_reference(
     let plain = rgb(&r.render_image(&ctx, &frame, size, size, 2).unwrap().0);
     frame.method = canopy::render::Method::Btf;
     let btf = rgb(&r.render_image(&ctx, &frame, size, size, 1).unwrap().0);
-    frame.btf.light_gain = false;
+    frame.btf.light_gain = 0.0;
     let no_gain = rgb(&r.render_image(&ctx, &frame, size, size, 1).unwrap().0);
     let flip =
         |a: &image::RgbImage, b: &image::RgbImage| canopy::metrics::flip(a, b).unwrap().stats.mean;
@@ -248,15 +248,16 @@ fn a_lone_tree_at_a_baked_view_and_light_is_nearly_the_reference() {
 }
 
 /// Lit from the middle of three light samples (the centre of an octant of the 6), the
-/// blended images are lit as by a light direction 1/sqrt(3) long, and the light gain
-/// brightens them by sqrt(3). Seen from one of those three samples' directions, the blend
-/// holds that view's bright "hot spot" image and was about as bright as the reference
-/// without the gain: here the gain overshoots. Measured on lavapipe with today's fir:
-/// FLIP 0.0716 with the gain, 0.0637 without; luminance (of a tree darker than the sky
-/// behind it, so a ratio below 1 is brighter) 0.938 and 1.015. The test bounds that cost;
-/// tests/btf.rs shows the gain's benefit with the sun behind the camera.
+/// blended images are lit as by a light direction 1/sqrt(3) long; the whole light gain
+/// would brighten them by sqrt(3), the default strength 0.5 by 3^(1/4). Seen from one of
+/// those three samples' directions, the blend holds that view's bright "hot spot" image and
+/// is about as bright as the reference without the gain; the whole gain overshoots.
+/// Measured on lavapipe with today's fir: FLIP 0.0618 at 0.5, 0.0637 without, 0.0716 with
+/// the whole gain; luminance (of a tree darker than the sky behind it, so a ratio below 1
+/// is brighter) 0.982, 1.015 and 0.938. tests/btf.rs shows the gain's benefit with the sun
+/// behind the camera.
 #[test]
-fn a_lone_tree_lit_between_light_samples_costs_the_gain_little_where_it_overshoots() {
+fn a_lone_tree_lit_between_light_samples_stays_near_the_reference_with_the_light_gain() {
     // Today's fir preset, whose crown shades itself more than the fixture's.
     let text = std::fs::read_to_string(data("lone_tree.toml")).unwrap();
     let start = text.find("[species.params]").unwrap();
@@ -272,9 +273,9 @@ fn a_lone_tree_lit_between_light_samples_costs_the_gain_little_where_it_overshoo
             )
             .normalize()
         });
-    assert!(with < without + 0.012, "{with} vs {without}");
+    assert!(with < without + 0.004, "{with} vs {without}");
     assert!(
-        (bright_with - 1.0).abs() < 0.1 && (bright_without - 1.0).abs() < 0.1,
+        (bright_with - 1.0).abs() < 0.05 && (bright_without - 1.0).abs() < 0.05,
         "{bright_with}, {bright_without}"
     );
 }

@@ -130,7 +130,10 @@ pub fn controls(
             ui.selectable_value(&mut b.planes, PlaneMode::Crossed, "3 crossed planes");
         });
         ui.checkbox(&mut b.show_lod, "show LOD level");
-        ui.checkbox(&mut b.light_gain, "light gain between light samples");
+        ui.add(
+            egui::Slider::new(&mut b.light_gain, 0.0..=1.0)
+                .text("light gain between light samples"),
+        );
         ui.checkbox(&mut b.vcm, "VCM shading (trees shade each other)");
         ui.add_enabled_ui(b.vcm, |ui| {
             ui.checkbox(&mut b.vcm_sky, "VCM sky occlusion");

@@ -25,6 +25,8 @@ pub enum Knob {
     LodFade,
     Planes,
     Vcm,
+    /// btf: how far the light blend is brightened by its gain (0..1).
+    LightGain,
     /// texel: C1's bound (m).
     SliceD0,
     /// texel: C2's bound (pixels).
@@ -40,12 +42,13 @@ pub enum Knob {
 }
 
 impl Knob {
-    pub const ALL: [Knob; 11] = [
+    pub const ALL: [Knob; 12] = [
         Knob::LodScale,
         Knob::WeightThreshold,
         Knob::LodFade,
         Knob::Planes,
         Knob::Vcm,
+        Knob::LightGain,
         Knob::SliceD0,
         Knob::SliceD1,
         Knob::MaxSlices,
@@ -80,6 +83,7 @@ impl Knob {
             Knob::LodFade => "lod_fade",
             Knob::Planes => "planes",
             Knob::Vcm => "vcm",
+            Knob::LightGain => "light_gain",
             Knob::SliceD0 => "slice_d0",
             Knob::SliceD1 => "slice_d1",
             Knob::MaxSlices => "max_slices",
@@ -110,6 +114,7 @@ impl Knob {
                 s.planes = PlaneMode::parse(value).ok_or_else(|| bad("give single or crossed"))?
             }
             Knob::Vcm => s.vcm = on_off(value).ok_or_else(|| bad("give on or off"))?,
+            Knob::LightGain => s.light_gain = number(0.0, 1.0)?,
             Knob::TexelTiles => t.tiles = on_off(value).ok_or_else(|| bad("give on or off"))?,
             Knob::TileDistance => t.tile_distance = number(1.0, 100_000.0)?,
             Knob::SliceD0 => t.bounds.d0 = number(0.01, 100.0)?,

@@ -258,8 +258,8 @@ pub struct BtfReport {
     pub ground_shadows: bool,
     /// The sky light was weighted by the cube maps too (VCM shading on and `vcm_sky`).
     pub vcm_sky: bool,
-    /// The light blend was brightened by its gain.
-    pub light_gain: bool,
+    /// How far the light blend was brightened by its gain (0..1).
+    pub light_gain: f32,
     pub btf_bytes: u64,
     pub vcm_bytes: u64,
     pub vcm_resolution: Option<u32>,

@@ -541,9 +541,10 @@ impl Pusher<'_, '_> {
         vb.cull(self.settings.weight_threshold);
         let mut lb = scene.lights.blend(l_obj);
         lb.cull(self.settings.weight_threshold);
-        // The light weights carry the gain that makes the blend as bright as the sun.
-        if self.settings.light_gain {
-            let gain = scene.lights.light_gain(&lb, l_obj);
+        // The light weights carry the gain that brightens the blend towards the sun.
+        let strength = self.settings.light_gain.clamp(0.0, 1.0);
+        if strength > 0.0 {
+            let gain = scene.lights.light_gain(&lb, l_obj).powf(strength);
             lb.weight = lb.weight.map(|w| w * gain);
         }
         let lights_used = lb.weight.iter().filter(|&&w| w > 0.0).count() as u64;
