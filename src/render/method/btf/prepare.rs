@@ -307,82 +307,65 @@ impl BtfScene {
         max_billboards: usize,
         hybrid: bool,
     ) -> BtfFrame {
-        let mut stats = BtfStats::default();
+        use rayon::prelude::*;
+        let vcm = self.vcm.as_ref().filter(|_| settings.vcm);
+        // Every visible tree in order, species by species, cut into chunks that the
+        // threads prepare on their own; joined in order, they give what one pass would.
+        let order: Vec<(usize, u32)> = visible
+            .iter()
+            .enumerate()
+            .filter(|(sp, _)| *sp < self.species.len())
+            .flat_map(|(sp, list)| list.iter().map(move |&t| (sp, t)))
+            .collect();
+        let chunk = order
+            .len()
+            .div_ceil(4 * rayon::current_num_threads().max(1))
+            .max(PREPARE_CHUNK);
+        let parts: Vec<Prepared> = order
+            .par_chunks(chunk)
+            .map(|trees_in| {
+                let mut p = Prepared::new(self.species.len());
+                for &(sp, t) in trees_in {
+                    if let Some(data) = trees.get(t as usize) {
+                        self.prepare_tree(&mut p, sp, t, data, view, settings, vcm, hybrid);
+                    }
+                }
+                p
+            })
+            .collect();
+        let mut stats = BtfStats {
+            vcm: vcm.is_some(),
+            ..BtfStats::default()
+        };
         let mut trunk_only = vec![Vec::new(); self.species.len()];
         let mut trunk_and_limbs = vec![Vec::new(); self.species.len()];
         let mut twigs = vec![Vec::new(); self.species.len()];
-        let mut sorted: Vec<(f32, BillboardGpu)> = Vec::new();
-        let vcm = self.vcm.as_ref().filter(|_| settings.vcm);
-        stats.vcm = vcm.is_some();
-        let cam = view.camera.position;
-        for (sp, list) in visible.iter().enumerate() {
-            let Some(parts) = self.species.get(sp) else {
-                continue;
-            };
-            for &t in list {
-                let Some(data) = trees.get(t as usize) else {
-                    continue;
-                };
-                let m = Mat4::from_cols_array_2d(&data.model);
-                let scale = m.x_axis.truncate().length();
-                let z = (m.transform_point3(parts.bounds.center()) - cam).length();
-                let choice = choose_level(&parts.texels, scale, view.focal_px, z, settings);
-                // Only a tree at the twig level alone can be past it.
-                let geometry = if hybrid && choice.level == Level::Twig {
-                    geometry_fade(&parts.texels, scale, view.focal_px, z, settings)
-                } else {
-                    0.0
-                };
-                if geometry >= 1.0 {
-                    stats.geometry_trees += 1;
-                    twigs[sp].push((t, 1.0));
-                    continue;
-                }
-                stats.trees_per_level[choice.level] += 1;
-                if choice.fading_in.is_some() || geometry > 0.0 {
-                    stats.faded_trees += 1;
-                }
-                if geometry > 0.0 {
-                    twigs[sp].push((t, geometry));
-                }
-                let shading = vcm.map(|v| v.for_tree(t as usize, sp, &m, &parts.frames));
-                let mut pusher = Pusher {
-                    scene: self,
-                    view,
-                    settings,
-                    out: &mut sorted,
-                    stats: &mut stats,
-                    tint: (
-                        [data.tint[0], data.tint[1], data.tint[2]],
-                        BillboardMode::Images,
-                    ),
-                    opacity: 1.0,
-                };
-                for (level, opacity) in choice.draws() {
-                    pusher.opacity = opacity * (1.0 - geometry);
-                    if settings.show_lod {
-                        pusher.tint = (LOD_COLOURS[level], BillboardMode::Tint);
-                    } else if settings.show_shadow {
-                        pusher.tint = ([1.0; 3], BillboardMode::SunFactor);
-                    }
-                    expand(&mut pusher, parts, level, m, shading.as_ref());
-                }
-                // The finest level drawn decides which parts are geometry.
-                match choice.draws().map(|(l, _)| l).min_by_key(|l| l.index()) {
-                    _ if geometry > 0.0 => {}
-                    Some(Level::Branch) => trunk_only[sp].push(t),
-                    Some(Level::Twig) => trunk_and_limbs[sp].push(t),
-                    _ => {}
-                }
+        let total: usize = parts.iter().map(|p| p.records.len()).sum();
+        let mut records = Vec::with_capacity(total);
+        let mut depths = Vec::with_capacity(total);
+        for p in parts {
+            stats.add(&p.stats);
+            for sp in 0..self.species.len() {
+                trunk_only[sp].extend_from_slice(&p.trunk_only[sp]);
+                trunk_and_limbs[sp].extend_from_slice(&p.trunk_and_limbs[sp]);
+                twigs[sp].extend_from_slice(&p.twigs[sp]);
             }
+            records.extend(p.records);
+            depths.extend(p.depths);
         }
-        // Back to front; keep the nearest ones when there are too many: they matter most.
-        sorted.sort_by(|a, b| b.0.total_cmp(&a.0));
-        if sorted.len() > max_billboards {
-            stats.dropped = (sorted.len() - max_billboards) as u32;
-            sorted.drain(..sorted.len() - max_billboards);
+        // Back to front (ties in the order made); keep the nearest ones when there are too
+        // many: they matter most. The keys are sorted, not the 208-byte records.
+        let mut keys: Vec<(f32, u32)> = depths
+            .iter()
+            .enumerate()
+            .map(|(i, &d)| (d, i as u32))
+            .collect();
+        keys.par_sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        if keys.len() > max_billboards {
+            stats.dropped = (keys.len() - max_billboards) as u32;
+            keys.drain(..keys.len() - max_billboards);
         }
-        let records: Vec<BillboardGpu> = sorted.into_iter().map(|(_, b)| b).collect();
+        let records: Vec<BillboardGpu> = keys.iter().map(|&(_, i)| records[i as usize]).collect();
         BtfFrame {
             trunk_only,
             trunk_and_limbs,
@@ -390,6 +373,77 @@ impl BtfScene {
             billboards: records.len() as u32,
             records,
             stats,
+        }
+    }
+
+    /// One visible tree's level choice and billboards, into `out`.
+    #[allow(clippy::too_many_arguments)]
+    fn prepare_tree(
+        &self,
+        out: &mut Prepared,
+        sp: usize,
+        t: u32,
+        data: &TreeGpu,
+        view: &PrepareView,
+        settings: &BtfSettings,
+        vcm: Option<&VcmShading>,
+        hybrid: bool,
+    ) {
+        let Some(parts) = self.species.get(sp) else {
+            return;
+        };
+        let cam = view.camera.position;
+        let m = Mat4::from_cols_array_2d(&data.model);
+        let scale = m.x_axis.truncate().length();
+        let z = (m.transform_point3(parts.bounds.center()) - cam).length();
+        let choice = choose_level(&parts.texels, scale, view.focal_px, z, settings);
+        // Only a tree at the twig level alone can be past it.
+        let geometry = if hybrid && choice.level == Level::Twig {
+            geometry_fade(&parts.texels, scale, view.focal_px, z, settings)
+        } else {
+            0.0
+        };
+        if geometry >= 1.0 {
+            out.stats.geometry_trees += 1;
+            out.twigs[sp].push((t, 1.0));
+            return;
+        }
+        out.stats.trees_per_level[choice.level] += 1;
+        if choice.fading_in.is_some() || geometry > 0.0 {
+            out.stats.faded_trees += 1;
+        }
+        if geometry > 0.0 {
+            out.twigs[sp].push((t, geometry));
+        }
+        let shading = vcm.map(|v| v.for_tree(t as usize, sp, &m, &parts.frames));
+        let mut pusher = Pusher {
+            scene: self,
+            view,
+            settings,
+            records: &mut out.records,
+            depths: &mut out.depths,
+            stats: &mut out.stats,
+            tint: (
+                [data.tint[0], data.tint[1], data.tint[2]],
+                BillboardMode::Images,
+            ),
+            opacity: 1.0,
+        };
+        for (level, opacity) in choice.draws() {
+            pusher.opacity = opacity * (1.0 - geometry);
+            if settings.show_lod {
+                pusher.tint = (LOD_COLOURS[level], BillboardMode::Tint);
+            } else if settings.show_shadow {
+                pusher.tint = ([1.0; 3], BillboardMode::SunFactor);
+            }
+            expand(&mut pusher, parts, level, m, shading.as_ref());
+        }
+        // The finest level drawn decides which parts are geometry.
+        match choice.draws().map(|(l, _)| l).min_by_key(|l| l.index()) {
+            _ if geometry > 0.0 => {}
+            Some(Level::Branch) => out.trunk_only[sp].push(t),
+            Some(Level::Twig) => out.trunk_and_limbs[sp].push(t),
+            _ => {}
         }
     }
 
@@ -442,6 +496,33 @@ impl BtfScene {
             });
         }
         out
+    }
+}
+
+/// Fewest trees one thread prepares at a time.
+const PREPARE_CHUNK: usize = 256;
+
+/// What one chunk of trees made: their billboards in the order made, with their depths,
+/// and the trees drawn partly or wholly as geometry, per species.
+struct Prepared {
+    records: Vec<BillboardGpu>,
+    depths: Vec<f32>,
+    stats: BtfStats,
+    trunk_only: Vec<Vec<u32>>,
+    trunk_and_limbs: Vec<Vec<u32>>,
+    twigs: Vec<Vec<(u32, f32)>>,
+}
+
+impl Prepared {
+    fn new(species: usize) -> Self {
+        Self {
+            records: Vec::new(),
+            depths: Vec::new(),
+            stats: BtfStats::default(),
+            trunk_only: vec![Vec::new(); species],
+            trunk_and_limbs: vec![Vec::new(); species],
+            twigs: vec![Vec::new(); species],
+        }
     }
 }
 
@@ -502,7 +583,9 @@ struct Pusher<'a, 'v> {
     scene: &'a BtfScene,
     view: &'a PrepareView<'v>,
     settings: &'a BtfSettings,
-    out: &'a mut Vec<(f32, BillboardGpu)>,
+    records: &'a mut Vec<BillboardGpu>,
+    /// Each record's depth along the view.
+    depths: &'a mut Vec<f32>,
     stats: &'a mut BtfStats,
     tint: ([f32; 3], BillboardMode),
     /// Opacity of the whole billboard (the cross-fade).
@@ -581,7 +664,8 @@ impl Pusher<'_, '_> {
             ..BillboardGpu::UNSHADED
         }
         .shade(&shade, set);
-        self.out.push((depth, record));
+        self.records.push(record);
+        self.depths.push(depth);
     }
 }
 
@@ -984,6 +1068,45 @@ pub(crate) mod tests {
             .collect();
         let kept: Vec<f32> = capped.records.iter().map(depth).collect();
         assert_eq!(nearest, kept);
+    }
+
+    #[test]
+    fn a_crowd_prepared_in_chunks_is_what_its_trees_give_one_by_one() {
+        // More trees than one chunk takes, at every level, so that the threads split them.
+        let n = 3 * PREPARE_CHUNK + 17;
+        let trees: Vec<TreeGpu> = (0..n)
+            .map(|i| {
+                let (row, col) = ((i / 40) as f32, (i % 40) as f32);
+                tree_at(col * 6.0 - 120.0, -row * 6.0 + 20.0, i as f32 * 0.7)
+            })
+            .collect();
+        let eye = Vec3::new(0.0, 6.0, 24.0);
+        let (all, camera) = run(&trees, eye, &BtfSettings::default());
+        // Each tree alone, joined in order, then sorted back to front (stable: ties keep
+        // the order made).
+        let mut one_by_one: Vec<BillboardGpu> = Vec::new();
+        let mut stats = BtfStats::default();
+        let (mut trunk_only, mut trunk_and_limbs) = (Vec::new(), Vec::new());
+        for (i, t) in trees.iter().enumerate() {
+            let (f, _) = run(std::slice::from_ref(t), eye, &BtfSettings::default());
+            one_by_one.extend(f.records);
+            stats.add(&f.stats);
+            trunk_only.extend(f.trunk_only[0].iter().map(|_| i as u32));
+            trunk_and_limbs.extend(f.trunk_and_limbs[0].iter().map(|_| i as u32));
+        }
+        let depth = |r: &BillboardGpu| (Vec3::from(r.center) - eye).dot(camera.forward());
+        one_by_one.sort_by(|a, b| depth(b).total_cmp(&depth(a)));
+        assert!(stats.trees_per_level.iter().all(|&c| c > 0), "{stats:?}");
+        assert_eq!(all.stats, stats);
+        assert_eq!(all.trunk_only[0], trunk_only);
+        assert_eq!(all.trunk_and_limbs[0], trunk_and_limbs);
+        assert_eq!(all.records.len(), one_by_one.len());
+        assert!(
+            all.records
+                .iter()
+                .zip(&one_by_one)
+                .all(|(a, b)| bytemuck::bytes_of(a) == bytemuck::bytes_of(b))
+        );
     }
 
     #[test]

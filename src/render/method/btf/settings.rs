@@ -105,6 +105,20 @@ pub struct BtfStats {
 }
 
 impl BtfStats {
+    /// Adds the counts of `o` (a part of the same frame) to these.
+    pub fn add(&mut self, o: &BtfStats) {
+        for level in crate::model::Level::ALL {
+            self.billboards[level] += o.billboards[level];
+            self.trees_per_level[level] += o.trees_per_level[level];
+        }
+        self.faded_trees += o.faded_trees;
+        self.geometry_trees += o.geometry_trees;
+        self.images_sampled += o.images_sampled;
+        self.fetches_saved += o.fetches_saved;
+        self.dropped += o.dropped;
+        self.vcm |= o.vcm;
+    }
+
     pub fn total_billboards(&self) -> u32 {
         self.billboards.iter().sum()
     }
