@@ -340,32 +340,41 @@ impl BtfScene {
         let mut trunk_only = vec![Vec::new(); self.species.len()];
         let mut trunk_and_limbs = vec![Vec::new(); self.species.len()];
         let mut twigs = vec![Vec::new(); self.species.len()];
-        let total: usize = parts.iter().map(|p| p.records.len()).sum();
-        let mut records = Vec::with_capacity(total);
-        let mut depths = Vec::with_capacity(total);
-        for p in parts {
+        // Each chunk's first record in the order made.
+        let mut starts = Vec::with_capacity(parts.len());
+        let mut keys: Vec<(f32, u32)> = Vec::new();
+        for p in &parts {
             stats.add(&p.stats);
             for sp in 0..self.species.len() {
                 trunk_only[sp].extend_from_slice(&p.trunk_only[sp]);
                 trunk_and_limbs[sp].extend_from_slice(&p.trunk_and_limbs[sp]);
                 twigs[sp].extend_from_slice(&p.twigs[sp]);
             }
-            records.extend(p.records);
-            depths.extend(p.depths);
+            let start = keys.len();
+            starts.push(start);
+            keys.extend(
+                p.depths
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &d)| (d, (start + k) as u32)),
+            );
         }
         // Back to front (ties in the order made); keep the nearest ones when there are too
-        // many: they matter most. The keys are sorted, not the 208-byte records.
-        let mut keys: Vec<(f32, u32)> = depths
-            .iter()
-            .enumerate()
-            .map(|(i, &d)| (d, i as u32))
-            .collect();
+        // many: they matter most. The keys are sorted, not the 208-byte records, which are
+        // then copied once, from their chunks.
         keys.par_sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         if keys.len() > max_billboards {
             stats.dropped = (keys.len() - max_billboards) as u32;
             keys.drain(..keys.len() - max_billboards);
         }
-        let records: Vec<BillboardGpu> = keys.iter().map(|&(_, i)| records[i as usize]).collect();
+        let records: Vec<BillboardGpu> = keys
+            .par_iter()
+            .map(|&(_, i)| {
+                let i = i as usize;
+                let c = starts.partition_point(|&s| s <= i) - 1;
+                parts[c].records[i - starts[c]]
+            })
+            .collect();
         BtfFrame {
             trunk_only,
             trunk_and_limbs,
