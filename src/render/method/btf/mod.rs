@@ -16,7 +16,7 @@ use std::collections::HashMap;
 use glam::Vec3;
 
 pub use billboard::{BillboardGpu, BillboardMode};
-pub use prepare::{BtfFrame, BtfScene, LevelChoice, PrepareView, choose_level};
+pub use prepare::{BtfFrame, BtfScene, LevelChoice, PrepareView, SortedBillboards, choose_level};
 pub use settings::{BtfSettings, BtfStats, GEOMETRY_COLOUR, LOD_COLOURS, PlaneMode};
 
 use crate::format::Baked;
@@ -233,7 +233,7 @@ impl BtfAssets {
             to_sun,
             frustum,
         };
-        let mut out = self.scene.prepare(
+        let (out, sorted) = self.scene.prepare_sorted(
             &world.tree_data,
             visible,
             &view,
@@ -241,9 +241,40 @@ impl BtfAssets {
             self.max_capacity,
             hybrid,
         );
-        let records = std::mem::take(&mut out.records);
-        self.upload(ctx, &records);
+        self.upload_sorted(ctx, &sorted);
         out
+    }
+
+    /// Uploads a frame's billboards, copied from their chunks straight into the upload
+    /// (growing the buffer if needed).
+    fn upload_sorted(&mut self, ctx: &GpuContext, sorted: &SortedBillboards) {
+        self.reserve(ctx, sorted.len());
+        let n = sorted.len().min(self.capacity);
+        let size = (n * std::mem::size_of::<BillboardGpu>()) as u64;
+        let Some(size) = wgpu::BufferSize::new(size) else {
+            return;
+        };
+        match ctx.queue.write_buffer_with(&self.billboards, 0, size) {
+            Some(mut view) => sorted.write(view.slice(..)),
+            // Not writable in place (never seen): the records through a copy.
+            None => self.upload(ctx, &sorted.collect()),
+        }
+    }
+
+    /// Grows the billboard buffer to hold `count` records (up to the GPU's limit).
+    fn reserve(&mut self, ctx: &GpuContext, count: usize) {
+        if count > self.capacity {
+            self.capacity = (count * 3 / 2).min(self.max_capacity);
+            self.billboards = billboard_buffer(ctx, self.capacity);
+            self.bind_group = make_bind_group(
+                ctx,
+                &self.layout,
+                &self.billboards,
+                &self.view_axes,
+                &self.texture_view,
+                &self.sampler,
+            );
+        }
     }
 
     /// The frame's draws in the main pass: the trunks (and limbs) of the trees drawn at the
@@ -301,18 +332,7 @@ impl BtfAssets {
 
     /// Uploads a frame's billboard records (back to front), growing the buffer if needed.
     pub fn upload(&mut self, ctx: &GpuContext, records: &[BillboardGpu]) {
-        if records.len() > self.capacity {
-            self.capacity = (records.len() * 3 / 2).min(self.max_capacity);
-            self.billboards = billboard_buffer(ctx, self.capacity);
-            self.bind_group = make_bind_group(
-                ctx,
-                &self.layout,
-                &self.billboards,
-                &self.view_axes,
-                &self.texture_view,
-                &self.sampler,
-            );
-        }
+        self.reserve(ctx, records.len());
         let n = records.len().min(self.capacity);
         if n > 0 {
             ctx.queue

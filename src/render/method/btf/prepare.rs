@@ -307,6 +307,24 @@ impl BtfScene {
         max_billboards: usize,
         hybrid: bool,
     ) -> BtfFrame {
+        let (mut frame, sorted) =
+            self.prepare_sorted(trees, visible, view, settings, max_billboards, hybrid);
+        frame.records = sorted.collect();
+        frame
+    }
+
+    /// [`Self::prepare`], the records left in their chunks with their back-to-front order
+    /// (`BtfFrame::records` empty, `billboards` their count): the GPU path copies them
+    /// once, straight into the upload.
+    pub fn prepare_sorted(
+        &self,
+        trees: &[TreeGpu],
+        visible: &[Vec<u32>],
+        view: &PrepareView,
+        settings: &BtfSettings,
+        max_billboards: usize,
+        hybrid: bool,
+    ) -> (BtfFrame, SortedBillboards) {
         use rayon::prelude::*;
         let vcm = self.vcm.as_ref().filter(|_| settings.vcm);
         // Every visible tree in order, species by species, cut into chunks that the
@@ -367,22 +385,22 @@ impl BtfScene {
             stats.dropped = (keys.len() - max_billboards) as u32;
             keys.drain(..keys.len() - max_billboards);
         }
-        let records: Vec<BillboardGpu> = keys
-            .par_iter()
-            .map(|&(_, i)| {
-                let i = i as usize;
-                let c = starts.partition_point(|&s| s <= i) - 1;
-                parts[c].records[i - starts[c]]
-            })
-            .collect();
-        BtfFrame {
+        let frame = BtfFrame {
             trunk_only,
             trunk_and_limbs,
             twigs,
-            billboards: records.len() as u32,
-            records,
+            billboards: keys.len() as u32,
+            records: Vec::new(),
             stats,
-        }
+        };
+        (
+            frame,
+            SortedBillboards {
+                records: parts.into_iter().map(|p| p.records).collect(),
+                starts,
+                keys,
+            },
+        )
     }
 
     /// One visible tree's level choice and billboards, into `out`.
@@ -505,6 +523,54 @@ impl BtfScene {
             });
         }
         out
+    }
+}
+
+/// One frame's billboard records in the chunks that made them, and their order back to
+/// front.
+pub struct SortedBillboards {
+    records: Vec<Vec<BillboardGpu>>,
+    /// Each chunk's first record, counting through the chunks in order.
+    starts: Vec<usize>,
+    /// Depth and record index (as counted in `starts`), back to front.
+    keys: Vec<(f32, u32)>,
+}
+
+impl SortedBillboards {
+    /// Records to draw.
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+
+    /// The `k`-th record back to front.
+    fn get(&self, k: usize) -> &BillboardGpu {
+        let i = self.keys[k].1 as usize;
+        let c = self.starts.partition_point(|&s| s <= i) - 1;
+        &self.records[c][i - self.starts[c]]
+    }
+
+    /// Every record, back to front.
+    pub fn collect(&self) -> Vec<BillboardGpu> {
+        use rayon::prelude::*;
+        (0..self.len())
+            .into_par_iter()
+            .map(|k| *self.get(k))
+            .collect()
+    }
+
+    /// Writes the records back to front into `out` as bytes (as many as it holds).
+    /// (`wgpu::WriteOnly` of a slice is not `Send`, so this runs on one thread.)
+    pub fn write(&self, mut out: wgpu::WriteOnly<'_, [u8]>) {
+        const SIZE: usize = std::mem::size_of::<BillboardGpu>();
+        let count = (out.len() / SIZE).min(self.len());
+        for k in 0..count {
+            out.slice(k * SIZE..(k + 1) * SIZE)
+                .copy_from_slice(bytemuck::bytes_of(self.get(k)));
+        }
     }
 }
 
