@@ -103,6 +103,27 @@ fn far_frame(scene: &Scene, distance: f32) -> FrameDesc {
     f
 }
 
+/// `frame` drawn as the reference (2x supersampled) at `size`.
+fn reference_image(
+    ctx: &GpuContext,
+    world: &World,
+    renderer: &mut Renderer,
+    frame: &FrameDesc,
+    (w, h): (u32, u32),
+) -> image::RgbaImage {
+    renderer
+        .prepare_reference(
+            ctx,
+            world,
+            canopy::render::sky_visibility::SKY_DIRECTIONS,
+            true,
+        )
+        .unwrap();
+    let mut reference = *frame;
+    reference.reference = Some(canopy::render::Reference::default());
+    renderer.render_image(ctx, &reference, w, h, 2).unwrap().0
+}
+
 /// Mean FLIP of btf against the 2x supersampled reference render over the pixels the
 /// billboards cover, every tree at the tree level, 6 x 6 directions at 32 x 32 texels.
 /// Measured on lavapipe (Mesa 22.3, llvmpipe 15): 0.147 (0.143 against the interactive
@@ -123,17 +144,7 @@ fn btf_matches_geometry_where_the_tree_level_is_valid() {
     // measure 0.161 against 0.143 without.)
     frame.btf.vcm = false;
     let (w, h) = (192, 192);
-    renderer
-        .prepare_reference(
-            &ctx,
-            &world,
-            canopy::render::sky_visibility::SKY_DIRECTIONS,
-            true,
-        )
-        .unwrap();
-    let mut reference = frame;
-    reference.reference = Some(canopy::render::Reference::default());
-    let (truth, _) = renderer.render_image(&ctx, &reference, w, h, 2).unwrap();
+    let truth = reference_image(&ctx, &world, &mut renderer, &frame, (w, h));
     frame.method = Method::Btf;
     let (btf, stats) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
     let b = stats.btf.expect("btf stats");
@@ -188,17 +199,7 @@ fn the_light_gain_brings_btf_closer_to_the_reference_between_light_samples() {
     frame.sun.azimuth_deg = 135.0;
     frame.sun.elevation_deg = 35.0;
     let (w, h) = (192, 192);
-    renderer
-        .prepare_reference(
-            &ctx,
-            &world,
-            canopy::render::sky_visibility::SKY_DIRECTIONS,
-            true,
-        )
-        .unwrap();
-    let mut reference = frame;
-    reference.reference = Some(canopy::render::Reference::default());
-    let (truth, _) = renderer.render_image(&ctx, &reference, w, h, 2).unwrap();
+    let truth = reference_image(&ctx, &world, &mut renderer, &frame, (w, h));
     frame.method = Method::Btf;
     let (with, _) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
     frame.btf.light_gain = 0.0;
