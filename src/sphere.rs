@@ -211,11 +211,11 @@ impl DirectionSet {
 
     /// How much a blend of light samples must be brightened to light like `d` itself. The
     /// blend of unit directions, sum of w_i l_i, is a chord inside the sphere: shorter than
-    /// `d` (down to 1/sqrt(3) of it between the 6 samples, 0.82 between the 18). Whatever responds
-    /// linearly to the light direction (a diffuse or translucent leaf lit on one side by
-    /// every sample) comes out of the blended images darker by that length along `d`; this
-    /// is its inverse, at least 1 and at most [`MAX_LIGHT_GAIN`] (a blend culled to one
-    /// far sample).
+    /// `d` (down to 1/sqrt(3) of it between the 6 samples, 0.82 between the 18). Whatever
+    /// responds linearly to the light direction (a diffuse or translucent leaf lit on one
+    /// side by every sample) comes out of the blended images darker by that length along
+    /// `d`; this is its inverse, at least 1 and at most [`MAX_LIGHT_GAIN`] (a blend culled
+    /// to one far sample).
     pub fn light_gain(&self, b: &Blend, d: Vec3) -> f32 {
         let d = d.normalize_or_zero();
         let sum: Vec3 = (0..3)

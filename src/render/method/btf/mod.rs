@@ -254,10 +254,10 @@ impl BtfAssets {
         let Some(size) = wgpu::BufferSize::new(size) else {
             return;
         };
-        match ctx.queue.write_buffer_with(&self.billboards, 0, size) {
-            Some(mut view) => sorted.write(view.slice(..)),
-            // Not writable in place (never seen): the records through a copy.
-            None => self.upload(ctx, &sorted.collect()),
+        // None only where the write is invalid, which wgpu reports to the device's error
+        // handler (as `write_buffer` would).
+        if let Some(mut view) = ctx.queue.write_buffer_with(&self.billboards, 0, size) {
+            sorted.write(view.slice(..));
         }
     }
 
