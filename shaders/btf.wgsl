@@ -1,6 +1,6 @@
 // BTF billboard pass (Meyer 2001, ch. 5 and annex A, on one fragment pass): each billboard
-// blends its 3 nearest views x (3 nearest lights + the sky-lit image), weighted, from one
-// texture array, and is composited back to front with premultiplied alpha,
+// blends its 3 nearest views x (3 nearest lights + the sky-lit and the ground-lit image),
+// weighted, from one texture array, and is composited back to front with premultiplied alpha,
 // T = M + (1 - M_alpha) T0, which is the thesis' equation A.2 without its extra passes.
 // With crossed planes the sum M = sum of w_k M_k runs over the three planes where the eye's
 // ray meets each at this pixel, so they too are blended as annex A says, never one plane
@@ -46,7 +46,10 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
         let t = view_texcoords(v, pts[k].xyz, dxs[k], dys[k]);
         let f = vcm_factors(b, pts[k].xyz);
         let amb = btf_sample(base + b.view_count * lights + v, t.uv, t.gx, t.gy);
-        var c = amb.rgb * frame.sky_ambient * f.y;
+        // The light the ground sends up, as the geometry's ambient has it: never hidden, so
+        // no cube map darkens it.
+        let gnd = btf_sample(base + b.view_count * (lights + 1u) + v, t.uv, t.gx, t.gy);
+        var c = amb.rgb * frame.sky_ambient * f.y + gnd.rgb * frame.ground_ambient;
         var direct = vec3<f32>(0.0);
         for (var j = 0; j < 3; j++) {
             let wl = b.light_weight[j];

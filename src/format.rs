@@ -50,8 +50,9 @@
 //!   40     8   direct_len      u64, must equal views*lights*resolution²*4
 //!   48     D   direct          RGBA8 premultiplied, view-major: image (v, l) at
 //!                              (v*lights + l) * resolution² * 4
-//!   48+D   8   ambient_len     u64, must equal views*resolution²*4
-//!   56+D   A   ambient         RGBA8 premultiplied, one image per view
+//!   48+D   8   ambient_len     u64, must equal 2*views*resolution²*4
+//!   56+D   A   ambient         RGBA8 premultiplied: the sky-lit image of each view, then
+//!                              the ground-lit image of each view (v at v, and at views + v)
 //!
 //! VCM SET RECORD (kind 2; 56 bytes + opacity data)
 //!    0     4   species         u32; 0xFFFFFFFF (VCM_CELL_SPECIES, level tree) marks the cube
@@ -121,7 +122,10 @@ pub const MAGIC: [u8; 8] = *b"CANOPY\r\n";
 /// cell's index in `crate::vcm::cells::ForestCells`), not one tree's.
 pub const VCM_CELL_SPECIES: u32 = u32::MAX;
 /// The format version this code writes and the only one it reads.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
+/// Ambient images per view in a BTF image set: lit by the sky alone, then by the light the
+/// ground sends up alone (the two halves of the renderer's hemispherical ambient).
+pub const AMBIENT_IMAGES_PER_VIEW: u32 = 2;
 /// Most sections a file may have.
 pub const MAX_SECTIONS: u32 = 4096;
 /// Largest payload of one section (1 GiB).
@@ -321,7 +325,9 @@ pub struct BtfImageSet {
     /// RGBA8 premultiplied, views*lights images of resolution², view-major: image (v, l)
     /// starts at ((v*lights + l) * res*res*4).
     pub direct: Vec<u8>,
-    /// RGBA8 premultiplied, views images of resolution² (sky light only).
+    /// RGBA8 premultiplied, [`AMBIENT_IMAGES_PER_VIEW`] x views images of resolution²:
+    /// each view's image under the sky light only, then each view's under the ground's
+    /// light only.
     pub ambient: Vec<u8>,
 }
 
@@ -455,9 +461,11 @@ impl BtfImageSet {
             .checked_mul(u64::from(self.lights))
     }
 
-    /// The length `ambient` must have: views*resolution²*4, or None on overflow.
+    /// The length `ambient` must have: 2*views*resolution²*4, or None on overflow.
     pub fn expected_ambient_len(&self) -> Option<u64> {
-        image_bytes(self.resolution)?.checked_mul(u64::from(self.views))
+        image_bytes(self.resolution)?
+            .checked_mul(u64::from(self.views))?
+            .checked_mul(u64::from(AMBIENT_IMAGES_PER_VIEW))
     }
 
     /// What is wrong with this set's fields given its image lengths, if anything.
@@ -505,7 +513,7 @@ impl BtfImageSet {
         let expected = self.expected_ambient_len();
         if expected != Some(ambient_len) {
             return Some(format!(
-                "ambient holds {ambient_len} bytes, expected {} ({} views x {}² x 4)",
+                "ambient holds {ambient_len} bytes, expected {} ({AMBIENT_IMAGES_PER_VIEW} x {} views x {}² x 4)",
                 show_len(expected),
                 self.views,
                 self.resolution
@@ -756,7 +764,8 @@ fn texel_record_len(t: &TexelVolume) -> u64 {
 /// Bytes of a BTF image-set record of these sizes.
 pub fn btf_record_bytes(views: u32, lights: u32, resolution: u32) -> u64 {
     let image = u64::from(resolution).pow(2) * 4;
-    BTF_RECORD_FIXED_BYTES + (u64::from(views) * u64::from(lights) + u64::from(views)) * image
+    let per_view = u64::from(lights) + u64::from(AMBIENT_IMAGES_PER_VIEW);
+    BTF_RECORD_FIXED_BYTES + u64::from(views) * per_view * image
 }
 
 /// Bytes of a VCM set record (8 corners x 6 faces) of this face resolution.
@@ -1700,7 +1709,10 @@ mod tests {
             radius: 2.5 + species as f32,
             texel_size: 0.01,
             direct: noise(species * 7 + 1, image * (views * lights) as usize),
-            ambient: noise(species * 7 + 2, image * views as usize),
+            ambient: noise(
+                species * 7 + 2,
+                image * (views * AMBIENT_IMAGES_PER_VIEW) as usize,
+            ),
         }
     }
 
@@ -2063,7 +2075,7 @@ mod tests {
 
     #[test]
     fn wrong_version_is_unsupported() {
-        for version in [0u32, 1, 2, 4, u32::MAX] {
+        for version in [0u32, 1, 2, 3, 5, u32::MAX] {
             let mut bytes = to_bytes(&small());
             bytes[8..12].copy_from_slice(&version.to_le_bytes());
             reseal_header(&mut bytes);
@@ -2450,7 +2462,7 @@ mod tests {
     #[test]
     fn sizes_are_counted() {
         let baked = sample();
-        assert_eq!(baked.btf_bytes(), 2 * (6 * 6 + 6) * 32 * 32 * 4);
+        assert_eq!(baked.btf_bytes(), 2 * (6 * 6 + 2 * 6) * 32 * 32 * 4);
         assert_eq!(baked.vcm_bytes(), 48 * 64 + 48 * 256);
         let set = &baked.btf[0];
         assert_eq!(set.expected_direct_len(), Some(set.direct.len() as u64));

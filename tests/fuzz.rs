@@ -241,7 +241,7 @@ fn baked_seeds() -> Vec<Vec<u8>> {
             radius: 2.0,
             texel_size: 0.05,
             direct: noise(1, image * 36),
-            ambient: noise(2, image * 6),
+            ambient: noise(2, image * 12),
         }],
         ..small.clone()
     };

@@ -73,7 +73,8 @@ pub struct Progress {
 
 /// Number of images the bake renders for `species` species.
 pub fn image_count(settings: &BakeSettings, species: usize) -> u64 {
-    let per_level = u64::from(settings.views) * (u64::from(settings.lights) + 1);
+    let per_level = u64::from(settings.views)
+        * (u64::from(settings.lights) + u64::from(crate::format::AMBIENT_IMAGES_PER_VIEW));
     per_level * Level::ALL.len() as u64 * species as u64
 }
 
@@ -227,7 +228,8 @@ pub fn bake_btf(
             let shadow_map = (2 * res * settings.supersample).clamp(256, 2048);
             let image_bytes = (res * res * 4) as usize;
             let mut direct = Vec::with_capacity(views.len() * lights.len() * image_bytes);
-            let mut ambient = Vec::with_capacity(views.len() * image_bytes);
+            let mut ambient = Vec::with_capacity(2 * views.len() * image_bytes);
+            let mut ground = Vec::with_capacity(views.len() * image_bytes);
             for &v in views.directions() {
                 let (_, up) = billboard_axes(v);
                 let camera = Camera::orthographic(center + v * (2.0 * radius), -v, up, radius);
@@ -249,7 +251,21 @@ pub fn bake_btf(
                         what: format!("{} {}", tree.name, level.name()),
                     });
                 }
+                // Then its ground-lit one: the light the ground sends up, which the
+                // renderer's hemispherical ambient adds to the sky's.
+                let frame = studio_ground_frame(camera, shadow_map);
+                let (img, _) =
+                    renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
+                ground.extend_from_slice(img.as_raw());
+                done += 1;
+                progress(&Progress {
+                    done,
+                    total,
+                    what: format!("{} {}", tree.name, level.name()),
+                });
             }
+            // Each view's sky-lit image, then each view's ground-lit image.
+            ambient.extend_from_slice(&ground);
             btf.push(BtfImageSet {
                 species: s as u32,
                 level,
@@ -315,6 +331,23 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         render_scale: Default::default(),
         pixel_classes: false,
     }
+}
+
+/// A studio frame lit by the ground alone: no sun, a black sky, a white ground (the
+/// ambient's lower half, which the renderer never hides).
+fn studio_ground_frame(camera: Camera, shadow_map: u32) -> FrameDesc {
+    let mut frame = studio_frame(
+        camera,
+        Sun::from_direction(Vec3::Y, Vec3::ZERO, 0.0),
+        1.0,
+        shadow_map,
+    );
+    frame.sky = Sky {
+        color: Vec3::ZERO,
+        ground_color: Vec3::ONE,
+        intensity: 1.0,
+    };
+    frame
 }
 
 /// Where a bake came from.

@@ -29,18 +29,21 @@ impl AlphaSet {
             .map_err(|e| Error::BadInput(format!("BTF set: {e}")))?;
         let res = set.resolution.max(1);
         let n = (res * res) as usize;
-        if set.ambient.len() != set.views as usize * n * 4 {
+        let per_view = crate::format::AMBIENT_IMAGES_PER_VIEW as usize;
+        if set.ambient.len() != per_view * set.views as usize * n * 4 {
             return Err(Error::BadInput(format!(
-                "BTF set of species {} level {:?}: sky images hold {} bytes, expected {}",
+                "BTF set of species {} level {:?}: ambient images hold {} bytes, expected {}",
                 set.species,
                 set.level,
                 set.ambient.len(),
-                set.views as usize * n * 4
+                per_view * set.views as usize * n * 4
             )));
         }
+        // The sky-lit images (the first of each view's two): their alpha is the coverage.
         let mips = set
             .ambient
             .chunks_exact(n * 4)
+            .take(set.views as usize)
             .map(|img| {
                 let mut level: Vec<f32> = img
                     .chunks_exact(4)

@@ -105,9 +105,9 @@ pub fn prepare(
             let (right, up) = billboard_axes((cam - center).normalize_or(Vec3::Y));
             stats.trees_per_level.tree += 1;
             stats.billboards.tree += 1;
-            // One view, one light, and the sky image.
-            stats.images_sampled += 2;
-            stats.fetches_saved += 10;
+            // One view, one light, and the sky-lit and ground-lit images.
+            stats.images_sampled += 3;
+            stats.fetches_saved += 12;
             let record = BillboardGpu {
                 center: center.to_array(),
                 radius,

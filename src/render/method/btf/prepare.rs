@@ -162,7 +162,7 @@ impl BtfScene {
             }
             index.insert((set.species, set.level), i);
         }
-        let layers_per_set = s.views * s.lights + s.views;
+        let layers_per_set = s.views * (s.lights + crate::format::AMBIENT_IMAGES_PER_VIEW);
         let mut order = Vec::new();
         let mut species = Vec::new();
         for (sp, tree) in world.species.iter().enumerate() {
@@ -577,6 +577,10 @@ impl SortedBillboards {
 /// Fewest trees one thread prepares at a time.
 const PREPARE_CHUNK: usize = 256;
 
+/// Image fetches per billboard pixel without image-weight culling: 3 views x (3 lights +
+/// the sky-lit and the ground-lit image).
+const FETCHES_AT_MOST: u64 = 3 * (3 + crate::format::AMBIENT_IMAGES_PER_VIEW as u64);
+
 /// What one chunk of trees made: their billboards in the order made, with their depths,
 /// and the trees drawn partly or wholly as geometry, per species.
 struct Prepared {
@@ -707,9 +711,11 @@ impl Pusher<'_, '_> {
         }
         let lights_used = lb.weight.iter().filter(|&&w| w > 0.0).count() as u64;
         let views_used = vb.weight.iter().filter(|&&w| w > 0.0).count() as u64;
-        let fetches = views_used * (lights_used + 1);
+        // Per view: its lights, its sky-lit and its ground-lit image.
+        let fetches =
+            views_used * (lights_used + u64::from(crate::format::AMBIENT_IMAGES_PER_VIEW));
         self.stats.images_sampled += fetches;
-        self.stats.fetches_saved += 12 - fetches.min(12);
+        self.stats.fetches_saved += FETCHES_AT_MOST - fetches.min(FETCHES_AT_MOST);
         self.stats.billboards[level] += 1;
         let depth = (center - cam).dot(self.view.camera.forward());
         // The quad faces the eye in both modes; with crossed planes it only bounds the
@@ -775,7 +781,7 @@ pub(crate) mod tests {
             branch: aabb([-0.5, -0.5, 0.0], [0.5, 0.5, 3.0]),
             tree: aabb([-3.0, 0.0, -3.0], [3.0, 10.0, 3.0]),
         };
-        let per_set = 18 * 18 + 18;
+        let per_set = 18 * (18 + crate::format::AMBIENT_IMAGES_PER_VIEW);
         let sets = PerLevel::from_fn(|l| SetInfo {
             layer_base: l.index() as u32 * per_set,
             center: bounds[l].center(),
@@ -1028,7 +1034,7 @@ pub(crate) mod tests {
                 }
             }
             // Every record points into its level's image set.
-            let per_set = 18 * 18 + 18;
+            let per_set = 18 * (18 + crate::format::AMBIENT_IMAGES_PER_VIEW);
             for r in &f.records {
                 assert!(r.layer_base % per_set == 0 && r.layer_base / per_set <= 2);
             }
@@ -1049,13 +1055,13 @@ pub(crate) mod tests {
         let tree: Vec<f32> = f
             .records
             .iter()
-            .filter(|r| r.layer_base == 2 * (18 * 18 + 18))
+            .filter(|r| r.layer_base == 2 * 18 * (18 + crate::format::AMBIENT_IMAGES_PER_VIEW))
             .map(|r| r.opacity)
             .collect();
         let finer: Vec<f32> = f
             .records
             .iter()
-            .filter(|r| r.layer_base != 2 * (18 * 18 + 18))
+            .filter(|r| r.layer_base != 2 * 18 * (18 + crate::format::AMBIENT_IMAGES_PER_VIEW))
             .map(|r| r.opacity)
             .collect();
         assert_eq!(tree.len(), 1);
@@ -1105,11 +1111,11 @@ pub(crate) mod tests {
         assert!(dropped > 0, "a threshold of {threshold} dropped nothing");
         assert!(culled.stats.images_sampled < all.stats.images_sampled);
         assert!(culled.stats.fetches_saved > all.stats.fetches_saved);
-        // Images sampled plus those saved is 12 per billboard.
+        // Images sampled plus those saved is 15 per billboard.
         let n = culled.records.len() as u64;
         assert_eq!(
             culled.stats.images_sampled + culled.stats.fetches_saved,
-            12 * n
+            15 * n
         );
     }
 

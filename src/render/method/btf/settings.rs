@@ -94,9 +94,9 @@ pub struct BtfStats {
     pub faded_trees: u32,
     /// `hybrid`: trees drawn wholly as geometry (not in `trees_per_level`).
     pub geometry_trees: u32,
-    /// Image fetches per fragment summed over billboards (views x (lights + ambient)).
+    /// Image fetches per fragment summed over billboards (views x (lights + sky + ground)).
     pub images_sampled: u64,
-    /// Fetches skipped by image-weight culling, against 3 x (3 + 1) = 12 per billboard.
+    /// Fetches skipped by image-weight culling, against 3 x (3 + 2) = 15 per billboard.
     pub fetches_saved: u64,
     /// Billboards left out because the instance buffer would pass the GPU's limit.
     pub dropped: u32,

@@ -764,7 +764,7 @@ mod tests {
         let b = world.species[sp as usize].tree_bounds;
         let image = (32 * 32 * 4) as usize;
         // Every view an opaque disc of 0.4 the image's side across (a crown's outline).
-        let mut ambient = vec![0u8; 6 * image];
+        let mut ambient = vec![0u8; 2 * 6 * image];
         for (i, px) in ambient.chunks_exact_mut(4).enumerate() {
             let (x, y) = ((i % 32) as f32 - 15.5, ((i / 32) % 32) as f32 - 15.5);
             if x * x + y * y < 12.8 * 12.8 {
