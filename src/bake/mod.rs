@@ -233,15 +233,20 @@ pub fn bake_btf(
             for &v in views.directions() {
                 let (_, up) = billboard_axes(v);
                 let camera = Camera::orthographic(center + v * (2.0 * radius), -v, up, radius);
-                // The view's direct images (sun only, one per light), then its sky-lit one.
-                for (i, (sun, sky)) in studio_shots(&lights).into_iter().enumerate() {
-                    let frame = studio_frame(camera, sun, sky, shadow_map);
+                // The view's direct images (sun only, one per light), its sky-lit one, then
+                // its ground-lit one (the light the ground sends up, which the renderer's
+                // hemispherical ambient adds to the sky's).
+                let frames = studio_shots(&lights)
+                    .into_iter()
+                    .map(|(sun, sky)| studio_frame(camera, sun, sky, shadow_map))
+                    .chain(std::iter::once(studio_ground_frame(camera, shadow_map)));
+                for (i, frame) in frames.enumerate() {
                     let (img, _) =
                         renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
-                    let dest = if i < lights.len() {
-                        &mut direct
-                    } else {
-                        &mut ambient
+                    let dest = match i.cmp(&lights.len()) {
+                        std::cmp::Ordering::Less => &mut direct,
+                        std::cmp::Ordering::Equal => &mut ambient,
+                        std::cmp::Ordering::Greater => &mut ground,
                     };
                     dest.extend_from_slice(img.as_raw());
                     done += 1;
@@ -251,18 +256,6 @@ pub fn bake_btf(
                         what: format!("{} {}", tree.name, level.name()),
                     });
                 }
-                // Then its ground-lit one: the light the ground sends up, which the
-                // renderer's hemispherical ambient adds to the sky's.
-                let frame = studio_ground_frame(camera, shadow_map);
-                let (img, _) =
-                    renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
-                ground.extend_from_slice(img.as_raw());
-                done += 1;
-                progress(&Progress {
-                    done,
-                    total,
-                    what: format!("{} {}", tree.name, level.name()),
-                });
             }
             // Each view's sky-lit image, then each view's ground-lit image.
             ambient.extend_from_slice(&ground);

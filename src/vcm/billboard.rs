@@ -29,14 +29,14 @@ impl AlphaSet {
             .map_err(|e| Error::BadInput(format!("BTF set: {e}")))?;
         let res = set.resolution.max(1);
         let n = (res * res) as usize;
-        let per_view = crate::format::AMBIENT_IMAGES_PER_VIEW as usize;
-        if set.ambient.len() != per_view * set.views as usize * n * 4 {
+        let expected = set.expected_ambient_len();
+        if expected != Some(set.ambient.len() as u64) {
             return Err(Error::BadInput(format!(
-                "BTF set of species {} level {:?}: ambient images hold {} bytes, expected {}",
+                "BTF set of species {} level {:?}: ambient images hold {} bytes, expected {:?}",
                 set.species,
                 set.level,
                 set.ambient.len(),
-                per_view * set.views as usize * n * 4
+                expected
             )));
         }
         // The sky-lit images (the first of each view's two): their alpha is the coverage.

@@ -106,8 +106,9 @@ pub fn prepare(
             stats.trees_per_level.tree += 1;
             stats.billboards.tree += 1;
             // One view, one light, and the sky-lit and ground-lit images.
-            stats.images_sampled += 3;
-            stats.fetches_saved += 12;
+            let fetches = 1 + u64::from(crate::format::AMBIENT_IMAGES_PER_VIEW);
+            stats.images_sampled += fetches;
+            stats.fetches_saved += super::btf::FETCHES_AT_MOST - fetches;
             let record = BillboardGpu {
                 center: center.to_array(),
                 radius,

@@ -17,7 +17,9 @@ use glam::Vec3;
 
 pub use billboard::{BillboardGpu, BillboardMode};
 pub use prepare::{BtfFrame, BtfScene, LevelChoice, PrepareView, SortedBillboards, choose_level};
-pub use settings::{BtfSettings, BtfStats, GEOMETRY_COLOUR, LOD_COLOURS, PlaneMode};
+pub use settings::{
+    BtfSettings, BtfStats, FETCHES_AT_MOST, GEOMETRY_COLOUR, LOD_COLOURS, PlaneMode,
+};
 
 use crate::format::Baked;
 use crate::lod::LevelTexels;

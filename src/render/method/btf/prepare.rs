@@ -12,7 +12,7 @@ use std::collections::HashMap;
 use glam::{Mat3, Mat4, Vec3};
 
 use super::billboard::{BillboardGpu, BillboardMode, SetInfo};
-use super::settings::{BtfSettings, BtfStats, LOD_COLOURS, PlaneMode};
+use super::settings::{BtfSettings, BtfStats, FETCHES_AT_MOST, LOD_COLOURS, PlaneMode};
 use super::shading::{ObjectFrame, Shade, VcmShading};
 use crate::format::{Baked, BtfImageSet};
 use crate::lod::{self, LevelTexels};
@@ -576,10 +576,6 @@ impl SortedBillboards {
 
 /// Fewest trees one thread prepares at a time.
 const PREPARE_CHUNK: usize = 256;
-
-/// Image fetches per billboard pixel without image-weight culling: 3 views x (3 lights +
-/// the sky-lit and the ground-lit image).
-const FETCHES_AT_MOST: u64 = 3 * (3 + crate::format::AMBIENT_IMAGES_PER_VIEW as u64);
 
 /// What one chunk of trees made: their billboards in the order made, with their depths,
 /// and the trees drawn partly or wholly as geometry, per species.

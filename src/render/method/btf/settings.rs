@@ -82,6 +82,10 @@ impl Default for BtfSettings {
     }
 }
 
+/// Image fetches per billboard pixel without image-weight culling: 3 views x (3 lights +
+/// the sky-lit and the ground-lit image).
+pub const FETCHES_AT_MOST: u64 = 3 * (3 + crate::format::AMBIENT_IMAGES_PER_VIEW as u64);
+
 /// What the `btf` method did in one frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct BtfStats {
