@@ -31,6 +31,10 @@ struct VertexOut {
     @location(4) @interpolate(flat) opacity: f32,
     // 1 for a tree's parts, 0 for the terrain (drawn as instance 0).
     @location(5) @interpolate(flat) tree: f32,
+    // The tree's slot in the tree buffer, and its key (`tree_key`): the reference's own
+    // sun map of the tree, and the cascade texels it leaves out.
+    @location(6) @interpolate(flat) slot: u32,
+    @location(7) @interpolate(flat) key: u32,
 }
 
 @vertex
@@ -45,6 +49,8 @@ fn vs_main(v: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
     out.foliage = v.foliage;
     out.opacity = instance_opacity(instance);
     out.tree = select(1.0, 0.0, instance / max(part_set.count, 1u) == 0u);
+    out.slot = instance_slot(instance);
+    out.key = tree_key(out.slot);
     return out;
 }
 
@@ -169,22 +175,9 @@ fn shade(in: VertexOut, front: bool) -> vec3<f32> {
 // the sun is hidden by the terrain's map and by the cascades, which hold the geometry trees
 // alone, instead of by the trees' alpha map (which holds this tree as a billboard too).
 fn shade_as(in: VertexOut, front: bool, own_cascades: bool) -> vec3<f32> {
-    var n = normalize(in.normal);
-    let leaf = in.foliage > 0.5;
-    if leaf && !front {
-        n = -n;
-    }
-    let to_eye = frame.camera_pos - in.world;
-    let l = frame.sun_dir;
-    let ndl = dot(n, l);
-    // Leaves let some light through: a leaf lit from behind still glows a little.
-    var direct = max(ndl, 0.0);
-    if leaf {
-        direct = max(ndl, 0.0) + 0.3 * max(-ndl, 0.0);
-    }
-    // View depth along the camera axis picks the cascade.
-    let view_depth = dot(-to_eye, frame.camera_forward);
-    let offset_normal = select(n, sign(ndl) * n, leaf);
+    let n = surface_normal(in, front);
+    let view_depth = dot(in.world - frame.camera_pos, frame.camera_forward);
+    let offset_normal = shadow_offset_normal(in, n);
     var vis = sun_visibility(in.world, offset_normal, view_depth);
     if own_cascades {
         vis = 1.0;
@@ -199,6 +192,32 @@ fn shade_as(in: VertexOut, front: bool, own_cascades: bool) -> vec3<f32> {
         if frame.hybrid_cascades != 0u {
             vis *= cascade_visibility(in.world, offset_normal, view_depth);
         }
+    }
+    return lit_by(in, n, vis);
+}
+
+// The normal that faces the viewer's side for a leaf (two-sided), the mesh's otherwise.
+fn surface_normal(in: VertexOut, front: bool) -> vec3<f32> {
+    let n = normalize(in.normal);
+    if in.foliage > 0.5 && !front {
+        return -n;
+    }
+    return n;
+}
+
+// The normal shadow lookups are offset along: a leaf's side towards the sun.
+fn shadow_offset_normal(in: VertexOut, n: vec3<f32>) -> vec3<f32> {
+    return select(n, sign(dot(n, frame.sun_dir)) * n, in.foliage > 0.5);
+}
+
+// The lit colour of a fragment of normal `n` that sees `vis` of the sun.
+fn lit_by(in: VertexOut, n: vec3<f32>, vis: f32) -> vec3<f32> {
+    let leaf = in.foliage > 0.5;
+    let ndl = dot(n, frame.sun_dir);
+    // Leaves let some light through: a leaf lit from behind still glows a little.
+    var direct = max(ndl, 0.0);
+    if leaf {
+        direct = max(ndl, 0.0) + 0.3 * max(-ndl, 0.0);
     }
     // Hemispherical sky light; in the reference its sky part only where the sky is open.
     // (Leaves take the side of their normal that faces up.)
@@ -285,4 +304,85 @@ fn fs_voxel(in: VertexOut, @builtin(front_facing) front: bool) {
     } else {
         atomicOr(&voxel_sums[i + 5u], 1u << (bit - 32u));
     }
+}
+
+// The reference's trees (src/render/self_shadow.rs): a tree's own needles shade it through
+// its own sun map, a square around it alone, fine at any distance; everything else (other
+// trees, the terrain) through the cascades, whose texels nearest the sun on this tree are
+// left out (the tree would shade itself twice, the second time through coarse texels).
+struct SelfLight {
+    matrix: mat4x4<f32>,
+    texel_world: f32,
+    layer: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+@group(3) @binding(2) var<storage, read> self_lights: array<SelfLight>;
+@group(3) @binding(3) var self_maps: texture_depth_2d_array;
+@group(3) @binding(4) var cascade_keys: texture_2d_array<u32>;
+
+@fragment
+fn fs_reference(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    if frame.pixel_classes != 0u {
+        return pixel_class(in);
+    }
+    let n = surface_normal(in, front);
+    let view_depth = dot(in.world - frame.camera_pos, frame.camera_forward);
+    let offset_normal = shadow_offset_normal(in, n);
+    var vis = 1.0;
+    if frame.shadows_on != 0u {
+        vis = others_visibility(in.world, offset_normal, view_depth, in.key)
+            * own_visibility(in.world, offset_normal, in.slot);
+    }
+    let dist = length(frame.camera_pos - in.world);
+    return vec4<f32>(fog_and_exposure(lit_by(in, n, vis), 1.0, dist), 1.0);
+}
+
+// `cascade_visibility` without the texels whose nearest caster is the tree `key`: each of
+// the 3x3 taps a bilinear blend of 4 depth comparisons (as the comparison sampler's).
+fn others_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32, key: u32) -> f32 {
+    if view_depth >= frame.cascade_splits.z {
+        return 1.0;
+    }
+    let c = cascade_for(view_depth);
+    let p = world + normal * frame.cascade_texel_world[c] * 1.5;
+    let lp = frame.light_view_proj[c] * vec4<f32>(p, 1.0);
+    let ndc = lp.xyz / lp.w;
+    let uv = ndc_to_uv(ndc.xy);
+    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) || ndc.z > 1.0 {
+        return 1.0;
+    }
+    let size = vec2<f32>(textureDimensions(shadow_map).xy);
+    let step = frame.cascade_texel_uv * frame.pcf_radius;
+    var lit = 0.0;
+    for (var y = -1; y <= 1; y++) {
+        for (var x = -1; x <= 1; x++) {
+            let t = (uv + vec2<f32>(f32(x), f32(y)) * step) * size - 0.5;
+            let f = fract(t);
+            let i0 = vec2<i32>(floor(t));
+            var s: array<f32, 4>;
+            for (var k = 0; k < 4; k++) {
+                let q = clamp(i0 + vec2<i32>(k & 1, k >> 1u), vec2<i32>(0), vec2<i32>(size) - 1);
+                let d = textureLoad(shadow_map, q, i32(c), 0);
+                let own = textureLoad(cascade_keys, q, i32(c), 0).r == key;
+                s[k] = select(select(0.0, 1.0, ndc.z <= d), 1.0, own);
+            }
+            lit += mix(mix(s[0], s[1], f.x), mix(s[2], s[3], f.x), f.y);
+        }
+    }
+    return lit / 9.0;
+}
+
+// How much of the sun the tree in `slot` lets through to `world` (on it), from its own map.
+fn own_visibility(world: vec3<f32>, normal: vec3<f32>, slot: u32) -> f32 {
+    let l = self_lights[slot];
+    let p = world + normal * l.texel_world * 1.5;
+    let lp = l.matrix * vec4<f32>(p, 1.0);
+    let ndc = lp.xyz / lp.w;
+    let uv = ndc_to_uv(ndc.xy);
+    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) || ndc.z > 1.0 {
+        return 1.0;
+    }
+    let texel = 1.0 / f32(textureDimensions(self_maps).x);
+    return pcf3x3(self_maps, i32(l.layer), uv, ndc.z, texel * max(frame.pcf_radius, 1.0));
 }

@@ -44,3 +44,23 @@ fn instance_opacity(instance: u32) -> f32 {
     let count = max(part_set.count, 1u);
     return trees[instance / count].tint.a;
 }
+
+// A key naming the tree of a draw's slot `slot` (its index in the tree buffer) the same in
+// every pass that draws it, whatever slot it has there: a hash of its position, never 0.
+// Slot 0 is the terrain's, whose key is 0.
+fn tree_key(slot: u32) -> u32 {
+    if slot == 0u {
+        return 0u;
+    }
+    let t = trees[slot].model[3];
+    var h = 2166136261u;
+    h = (h ^ bitcast<u32>(t.x)) * 16777619u;
+    h = (h ^ bitcast<u32>(t.y)) * 16777619u;
+    h = (h ^ bitcast<u32>(t.z)) * 16777619u;
+    return h | 1u;
+}
+
+// The slot of instance `instance` of a draw in the tree buffer.
+fn instance_slot(instance: u32) -> u32 {
+    return instance / max(part_set.count, 1u);
+}

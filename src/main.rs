@@ -241,6 +241,12 @@ struct RenderArgs {
     #[arg(long, default_value_t = canopy::render::sky_visibility::SKY_DIRECTIONS,
           value_parser = clap::value_parser!(u32).range(1..=1024), requires = "reference")]
     sky_directions: u32,
+    /// With --reference: side in texels of each tree's own sun map (its shadows on
+    /// itself, fine at any distance); 0: none, the cascades alone (the reference before
+    /// session 15).
+    #[arg(long, default_value_t = canopy::render::self_shadow::SELF_MAP_SIZE,
+          value_parser = clap::value_parser!(u32).range(0..=8192), requires = "reference")]
+    self_map: u32,
     /// btf: a level is used while its largest texel projects below this many pixels
     /// (default: the scene's [render] table, else 1).
     #[arg(long, value_parser = parse_positive)]
@@ -526,6 +532,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         }
         frame.reference = Some(canopy::render::Reference {
             sky_directions: args.sky_directions,
+            self_map_size: args.self_map,
             ..Default::default()
         });
     }

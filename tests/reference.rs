@@ -308,3 +308,91 @@ fn bare_hills_keep_most_of_their_sky() {
     // Measured p10 0.984, median 1.000.
     assert!(p50 > 0.97 && p10 > 0.9, "p10 {p10}, median {p50}");
 }
+
+/// A lone fir (today's preset) in the reference, framed the same from 80 m and from
+/// 1,200 m (a lens 15 times narrower), sun from the side: mean linear luminance of the
+/// tree (the box where it differs from the bare frame) and mean FLIP, far against near;
+/// with each tree's own sun map (`self_map_size`) or without (the cascades alone).
+fn far_fir_against_near(self_map_size: u32) -> (f32, f32) {
+    let ctx = gpu();
+    let text = std::fs::read_to_string(data("lone_tree.toml")).unwrap();
+    let start = text.find("[species.params]").unwrap();
+    let end = text.find("[forest]").unwrap();
+    let text = format!("{}preset = \"fir\"\n\n{}", &text[..start], &text[end..]);
+    let scene = Scene::parse(&text, "lone_tree.toml with the fir preset").unwrap();
+    let world = scene.build_world().unwrap();
+    let tree = world.forest.instances[0];
+    let bounds = world.species[0].tree_bounds.transformed(tree.transform());
+    let (centre, radius) = (bounds.center(), 0.5 * bounds.extent().length());
+    let mut r = Renderer::new(&ctx, &world).unwrap();
+    r.prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
+        .unwrap();
+    let mut frame = FrameDesc::from_scene(&scene);
+    frame.fog_density = 0.0;
+    frame.sun = canopy::render::Sun {
+        azimuth_deg: 90.0,
+        elevation_deg: 30.0,
+        ..frame.sun
+    };
+    frame.reference = Some(Reference {
+        self_map_size,
+        ..Default::default()
+    });
+    let size = 192;
+    let look = Vec3::new(0.0, 0.15, -1.0).normalize();
+    let mut render = |dist: f32, trees: bool| {
+        let fov = 2.0 * (1.1 * radius / dist).atan().to_degrees();
+        let mut f = frame;
+        f.camera = canopy::render::Camera::look_at(centre - look * dist, centre, fov);
+        f.trees = trees;
+        rgb(&r.render_image(&ctx, &f, size, size, 2).unwrap().0)
+    };
+    let (near, far) = (render(80.0, true), render(1200.0, true));
+    let (bare_near, bare_far) = (render(80.0, false), render(1200.0, false));
+    let linear = |v: u8| (f32::from(v) / 255.0).powf(2.2);
+    let lum =
+        |p: &image::Rgb<u8>| 0.2126 * linear(p[0]) + 0.7152 * linear(p[1]) + 0.0722 * linear(p[2]);
+    // Mean luminance of a frame's tree: its pixels that differ from its bare frame.
+    let tree_mean = |img: &image::RgbImage, bare: &image::RgbImage| {
+        let (mut sum, mut n) = (0.0f32, 0usize);
+        for (x, y, p) in img.enumerate_pixels() {
+            if (0..3).any(|c| p[c].abs_diff(bare.get_pixel(x, y)[c]) > 24) {
+                sum += lum(p);
+                n += 1;
+            }
+        }
+        (sum / n.max(1) as f32, n)
+    };
+    let ((l_near, n_near), (l_far, n_far)) =
+        (tree_mean(&near, &bare_near), tree_mean(&far, &bare_far));
+    let ratio = l_far / l_near;
+    let flip = canopy::metrics::flip(&near, &far).unwrap().stats.mean;
+    eprintln!(
+        "lone fir, self maps {self_map_size}: tree luminance near {l_near:.4} ({n_near} px), far {l_far:.4} ({n_far} px), far / near {ratio:.4}; FLIP far vs near {flip:.4}"
+    );
+    let dir = std::env::temp_dir().join("canopy-far-fir");
+    let _ = std::fs::create_dir_all(&dir);
+    let _ = near.save(dir.join(format!("near-{self_map_size}.png")));
+    let _ = far.save(dir.join(format!("far-{self_map_size}.png")));
+    (ratio, flip)
+}
+
+/// Far from the camera the cascades' texels grow to tens of centimetres and a tree stops
+/// shading its own needles; each tree's own sun map keeps that shade at any distance.
+#[test]
+fn a_far_tree_shades_itself_in_the_reference_as_it_does_up_close() {
+    let (with, flip_with) = far_fir_against_near(canopy::render::self_shadow::SELF_MAP_SIZE);
+    let (without, flip_without) = far_fir_against_near(0);
+    // Measured far / near 1.030 with the trees' own maps at every size from 256 to 4096 (so
+    // the 3 % is the change of perspective, not shadows), 1.145 with the cascades alone.
+    assert!(
+        (with - 1.0).abs() < 0.06,
+        "with the trees' own maps: {with}"
+    );
+    assert!(
+        without > with + 0.06,
+        "cascades alone {without}, own maps {with}"
+    );
+    // Measured 0.1133 and 0.1192 (most of either is the change of perspective).
+    assert!(flip_with < flip_without, "{flip_with} vs {flip_without}");
+}

@@ -14,8 +14,9 @@ use crate::scene::Scene;
 use crate::{Error, Result};
 
 /// Bumped whenever the reference renderer changes what it draws: old truths are re-rendered.
-/// (3: the presets grew denser foliage and the horizon ring carries the far forest.)
-pub const TRUTH_REVISION: u32 = 3;
+/// (3: the presets grew denser foliage and the horizon ring carries the far forest; 4: each
+/// tree shades itself through a sun map of its own.)
+pub const TRUTH_REVISION: u32 = 4;
 
 /// Everything that decides the pixels of one reference frame.
 #[derive(Clone, Copy, Debug)]

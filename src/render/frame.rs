@@ -141,14 +141,18 @@ impl Default for ShadowSettings {
 }
 
 /// The `geometry` method as the reference every accuracy figure is measured against: the
-/// sky light hidden where trees and hills hide the sky (a sky visibility volume), and sun
-/// shadows from larger cascade maps reaching the whole scene.
+/// sky light hidden where trees and hills hide the sky (a sky visibility volume), sun
+/// shadows from larger cascade maps reaching the whole scene, and each tree's shadows on
+/// itself from a map of its own (src/render/self_shadow.rs).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Reference {
     /// Directions over the sky hemisphere whose depth maps give the sky visibility.
     pub sky_directions: u32,
     /// Side (texels) of each sun cascade's map (at least the frame's own).
     pub sun_map_size: u32,
+    /// Side (texels) of each tree's own sun map; 0: none, the cascades shade the trees
+    /// themselves too (the reference before them).
+    pub self_map_size: u32,
 }
 
 impl Default for Reference {
@@ -156,6 +160,7 @@ impl Default for Reference {
         Self {
             sky_directions: super::sky_visibility::SKY_DIRECTIONS,
             sun_map_size: 4096,
+            self_map_size: super::self_shadow::SELF_MAP_SIZE,
         }
     }
 }

@@ -19,6 +19,7 @@ pub mod measure;
 pub mod method;
 mod pipelines;
 pub mod scale;
+pub mod self_shadow;
 pub mod shaders;
 pub mod shadow;
 pub mod sky_visibility;
@@ -101,6 +102,8 @@ pub struct Renderer {
     sky_placeholder: SkyVisibility,
     /// The texel bake's voxelisation pipeline, once asked for.
     voxel_pipeline: Option<voxelize::VoxelPipeline>,
+    /// The reference's per-tree sun maps, once a reference frame used them.
+    self_shadow: Option<self_shadow::SelfShadow>,
 }
 
 impl Renderer {
@@ -140,6 +143,7 @@ impl Renderer {
             texel: None,
             texel_problem: None,
             voxel_pipeline: None,
+            self_shadow: None,
         })
     }
 
@@ -521,6 +525,28 @@ impl Renderer {
                 false,
             ),
         };
+        // The reference's trees shade themselves through maps of their own, drawn in batches.
+        let self_map_size = reference.map_or(0, |r| r.self_map_size);
+        let self_batches = match &prepared {
+            Prepared::Geometry(g) if g.shadows_on && self_map_size > 0 && !studio => {
+                let ss = match self.self_shadow.take() {
+                    Some(ss) if ss.size == self_map_size => ss,
+                    _ => self_shadow::SelfShadow::new(
+                        ctx,
+                        &self.layouts,
+                        self_map_size,
+                        self_shadow::layers_for(self_map_size),
+                        self.world.tree_data.len() + 1,
+                    )?,
+                };
+                let ss = self.self_shadow.insert(ss);
+                ss.ensure_keys(ctx, frame.shadows.map_size)?;
+                ss.ensure_pipelines(ctx, &self.layouts, format)?;
+                let trees = g.lists.first().map_or(&[][..], |l| &l[..]);
+                Some(ss.write_lights(ctx, &self.world, &runs[0], trees, to_sun))
+            }
+            _ => None,
+        };
         // The sun-dependent VCM reads inside the prepare step are the sun update's.
         let prepare_ms = prepare_start.elapsed().as_secs_f64() * 1e3 - sun_update_ms;
         let mut uniforms =
@@ -638,6 +664,7 @@ impl Renderer {
             _ => None,
         };
         let geometry_casts_terrain = matches!(prepared, Prepared::Geometry(_)) && !studio;
+        let self_shadow = self.self_shadow.as_ref().filter(|_| self_batches.is_some());
         encode_cascades(
             &mut encoder,
             bindings,
@@ -645,15 +672,21 @@ impl Renderer {
             &self.world,
             casters,
             geometry_casts_terrain,
+            self_shadow,
             queries.as_ref(),
             &mut stats,
         );
+        // The reference's trees are drawn after the main pass, batch by batch, which then
+        // ends the frame's timing.
+        let batches = self_batches.as_deref().unwrap_or(&[]);
 
         {
-            let ts = queries.as_ref().map(|q| wgpu::RenderPassTimestampWrites {
-                query_set: q,
-                beginning_of_pass_write_index: None,
-                end_of_pass_write_index: Some(1),
+            let ts = queries.as_ref().filter(|_| batches.is_empty()).map(|q| {
+                wgpu::RenderPassTimestampWrites {
+                    query_set: q,
+                    beginning_of_pass_write_index: None,
+                    end_of_pass_write_index: Some(1),
+                }
             });
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("main"),
@@ -674,7 +707,11 @@ impl Renderer {
                     view: &depth.view,
                     depth_ops: Some(wgpu::Operations {
                         load: wgpu::LoadOp::Clear(0.0),
-                        store: wgpu::StoreOp::Discard,
+                        store: if batches.is_empty() {
+                            wgpu::StoreOp::Discard
+                        } else {
+                            wgpu::StoreOp::Store
+                        },
                     }),
                     stencil_ops: None,
                 }),
@@ -733,11 +770,65 @@ impl Renderer {
                 _ => GeometryMethod::draw_main(
                     &mut pass,
                     &self.world,
-                    &runs[0],
+                    if batches.is_empty() { &runs[0] } else { &[] },
                     pipes,
                     !studio,
                     &mut stats,
                 ),
+            }
+        }
+        if let Some(ss) = self_shadow.filter(|_| !batches.is_empty()) {
+            let Some((trees, group)) = ss.pipelines(format) else {
+                return Err(Error::Gpu(
+                    "the reference's tree pipelines were not built".into(),
+                ));
+            };
+            for (i, batch) in batches.iter().enumerate() {
+                stats.shadow_triangles += ss.encode_maps(&mut encoder, &self.world, batch);
+                let ts = queries
+                    .as_ref()
+                    .filter(|_| i + 1 == batches.len())
+                    .map(|q| wgpu::RenderPassTimestampWrites {
+                        query_set: q,
+                        beginning_of_pass_write_index: None,
+                        end_of_pass_write_index: Some(1),
+                    });
+                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                    label: Some("reference trees"),
+                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                        view: target,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Load,
+                            store: wgpu::StoreOp::Store,
+                        },
+                    })],
+                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                        view: &depth.view,
+                        depth_ops: Some(wgpu::Operations {
+                            load: wgpu::LoadOp::Load,
+                            store: wgpu::StoreOp::Store,
+                        }),
+                        stencil_ops: None,
+                    }),
+                    timestamp_writes: ts,
+                    occlusion_query_set: None,
+                    multiview_mask: None,
+                });
+                pass.set_bind_group(0, &bindings.bind_group, &[]);
+                pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
+                pass.set_bind_group(3, group, &[]);
+                let (tris, drawn, calls) = self.world.draw(
+                    &mut pass,
+                    batch,
+                    Some(trees),
+                    false,
+                    &method::geometry::ALL_PARTS,
+                );
+                stats.triangles += tris;
+                stats.trees_drawn += drawn;
+                stats.draw_calls += calls;
             }
         }
         if let Some(t) = &self.timer {
@@ -886,6 +977,7 @@ impl Renderer {
             casters,
             !studio,
             None,
+            None,
             &mut stats,
         );
         target.clear(&mut encoder);
@@ -959,6 +1051,7 @@ fn encode_cascades(
     world: &WorldGpu,
     casters: Option<&[Vec<world_gpu::TreeRun>]>,
     terrain: bool,
+    keys: Option<&self_shadow::SelfShadow>,
     queries: Option<&wgpu::QuerySet>,
     stats: &mut FrameStats,
 ) {
@@ -970,9 +1063,25 @@ fn encode_cascades(
                 beginning_of_pass_write_index: Some(0),
                 end_of_pass_write_index: None,
             });
+        // The reference's cascades keep which tree is nearest the sun in each texel.
+        let keyed = keys.and_then(|k| k.cascade_keys(c));
+        let key_target = keyed.map(|(_, view)| wgpu::RenderPassColorAttachment {
+            view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                store: wgpu::StoreOp::Store,
+            },
+        });
+        let color_attachments = if key_target.is_some() {
+            std::slice::from_ref(&key_target)
+        } else {
+            &[]
+        };
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("shadow cascade"),
-            color_attachments: &[],
+            color_attachments,
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &bindings.cascades.layer_views[c],
                 depth_ops: Some(wgpu::Operations {
@@ -986,7 +1095,15 @@ fn encode_cascades(
             multiview_mask: None,
         });
         if let Some(runs) = casters.and_then(|r| r.get(c)) {
-            geometry.draw_cascade(&mut pass, c, world, runs, terrain, stats);
+            geometry.draw_cascade(
+                &mut pass,
+                c,
+                world,
+                runs,
+                terrain,
+                keyed.map(|k| k.0),
+                stats,
+            );
         }
     }
 }

@@ -9,7 +9,7 @@ use super::super::world_gpu::{PartKind, TreeRun, WorldGpu};
 use super::super::{Frustum, GpuContext};
 use crate::Result;
 
-const ALL_PARTS: [PartKind; 3] = [PartKind::Trunk, PartKind::Limbs, PartKind::Twigs];
+pub(crate) const ALL_PARTS: [PartKind; 3] = [PartKind::Trunk, PartKind::Limbs, PartKind::Twigs];
 
 /// The pipelines and buffers of the method's shadow cascades.
 pub struct GeometryMethod {
@@ -125,7 +125,9 @@ impl GeometryMethod {
         }
     }
 
-    /// Draws cascade `c`'s casters (`runs` of its list) into its pass.
+    /// Draws cascade `c`'s casters (`runs` of its list) into its pass, with the shadow
+    /// pipeline or `pipeline` (the reference's, which keeps the trees' keys too).
+    #[allow(clippy::too_many_arguments)]
     pub fn draw_cascade(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
@@ -133,9 +135,10 @@ impl GeometryMethod {
         world: &WorldGpu,
         runs: &[TreeRun],
         terrain: bool,
+        pipeline: Option<&wgpu::RenderPipeline>,
         stats: &mut FrameStats,
     ) {
-        pass.set_pipeline(&self.shadow_pipeline);
+        pass.set_pipeline(pipeline.unwrap_or(&self.shadow_pipeline));
         pass.set_bind_group(0, &self.cascade_uniforms[c].1, &[]);
         pass.set_bind_group(1, &world.trees_bind_group, &[]);
         let (tris, casters, calls) = world.draw(pass, runs, None, terrain, &ALL_PARTS);
