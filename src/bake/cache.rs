@@ -8,7 +8,7 @@ use crate::format::{BakeSettings, Baked};
 use crate::scene::Scene;
 
 /// Bumped whenever the generator or the bake changes what it makes: old caches are rebaked.
-pub const BAKE_REVISION: u32 = 8;
+pub const BAKE_REVISION: u32 = 9;
 
 /// The bake settings a scene asks for.
 pub fn settings_of(scene: &Scene) -> BakeSettings {

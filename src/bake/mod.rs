@@ -224,8 +224,7 @@ pub fn bake_btf(
             // part of the sky from its inner leaves, as in the world's reference.
             renderer.prepare_reference(ctx, &studio, SKY_DIRECTIONS, false)?;
             let res = settings.resolution;
-            // Twice the rendered image's resolution: self-shadows as sharp as the image.
-            let shadow_map = (2 * res * settings.supersample).clamp(256, 2048);
+            let shadow_map = studio_shadow_map(res * settings.supersample);
             let image_bytes = (res * res * 4) as usize;
             let mut direct = Vec::with_capacity(views.len() * lights.len() * image_bytes);
             let mut ambient = Vec::with_capacity(2 * views.len() * image_bytes);
@@ -297,6 +296,16 @@ fn studio_shots(lights: &DirectionSet) -> Vec<(Sun, f32)> {
 }
 
 /// A studio frame: the object alone, lit by the sun only (`sky` = 0) or the sky only.
+/// Side of the studio's shadow map for images of `pixels` a side: twice that, and at least
+/// the reference's own map of a tree (`Reference::self_map_size`), so that an object at the
+/// tree level shades itself in the bake as finely as each tree does in the reference (the
+/// average light between needles depends on it even where the image cannot resolve them).
+pub(crate) fn studio_shadow_map(pixels: u32) -> u32 {
+    (2 * pixels)
+        .max(crate::render::self_shadow::SELF_MAP_SIZE)
+        .clamp(256, 2048)
+}
+
 fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDesc {
     FrameDesc {
         camera,

@@ -338,7 +338,7 @@ pub fn bake_volume_from(
     let mut acc = Accumulator::new(shots.len(), n);
     let mut colouring = Colouring::new(shots.len(), n);
     let target = renderer.voxel_target(ctx, grid.box_min, grid.dims, grid.voxel, ss)?;
-    let shadow_map = (2 * grid.dims.max_element() * ss).clamp(256, 2048);
+    let shadow_map = super::studio_shadow_map(grid.dims.max_element() * ss);
     let per_pixel = 1.0 / (ss * ss) as f32;
     for (ax, side) in AXES.iter().flat_map(|ax| [(ax, 1.0), (ax, -1.0)]) {
         let view = AxisView::new(grid, ax, side);
@@ -399,7 +399,7 @@ pub fn bake_volume_by_slabs(
     let n = grid.voxel_count();
     let mut acc = Accumulator::new(shots.len(), n);
     let lut = srgb_lut();
-    let shadow_map = (2 * grid.dims.max_element() * supersample).clamp(256, 2048);
+    let shadow_map = super::studio_shadow_map(grid.dims.max_element() * supersample);
     for (ax, side) in AXES.iter().flat_map(|ax| [(ax, 1.0), (ax, -1.0)]) {
         let a = ax.axis;
         let view = AxisView::new(grid, ax, side);

@@ -535,7 +535,8 @@ impl Renderer {
                         ctx,
                         &self.layouts,
                         self_map_size,
-                        self_shadow::layers_for(self_map_size),
+                        self_shadow::layers_for(self_map_size)
+                            .min(self.world.tree_data.len().max(1) as u32),
                         self.world.tree_data.len() + 1,
                     )?,
                 };
