@@ -250,14 +250,16 @@ fn a_lone_tree_at_a_baked_view_and_light_is_nearly_the_reference() {
 /// Lit from the middle of three light samples (the centre of an octant of the 6), the
 /// blended images are lit as by a light direction 1/sqrt(3) long; the whole light gain
 /// would brighten them by sqrt(3), the default strength 0.5 by 3^(1/4). Seen from one of
-/// those three samples' directions, the blend holds that view's bright "hot spot" image and
-/// is about as bright as the reference without the gain; the whole gain overshoots.
-/// Measured on lavapipe with today's fir: FLIP 0.0618 at 0.5, 0.0637 without, 0.0716 with
-/// the whole gain; luminance (of a tree darker than the sky behind it, so a ratio below 1
-/// is brighter) 0.982, 1.015 and 0.938. tests/btf.rs shows the gain's benefit with the sun
-/// behind the camera.
+/// those three samples' directions, the blend holds that view's bright "hot spot" image, and
+/// the gain overshoots. Against the reference before each tree had its own sun map the
+/// default strength was level with no gain here (FLIP 0.0618 against 0.0637); against the
+/// converged one the fir is darker and the gain costs more: measured on lavapipe with
+/// today's fir, FLIP 0.0740 at 0.5 against 0.0651 without, luminance (of a tree darker than
+/// the sky behind it, so a ratio below 1 is brighter) 0.944 and 0.973. tests/btf.rs shows
+/// the gain's benefit with the sun behind the camera (which keeps the default at 0.5: on
+/// the bench's default flights 0 and 0.5 are within 0.0006 of each other).
 #[test]
-fn a_lone_tree_lit_between_light_samples_stays_near_the_reference_with_the_light_gain() {
+fn the_light_gain_overshoots_a_lone_tree_lit_between_light_samples_a_bounded_amount() {
     // Today's fir preset, whose crown shades itself more than the fixture's.
     let text = std::fs::read_to_string(data("lone_tree.toml")).unwrap();
     let start = text.find("[species.params]").unwrap();
@@ -273,9 +275,14 @@ fn a_lone_tree_lit_between_light_samples_stays_near_the_reference_with_the_light
             )
             .normalize()
         });
-    assert!(with < without + 0.004, "{with} vs {without}");
+    // The gain brightens, by a bounded amount.
     assert!(
-        (bright_with - 1.0).abs() < 0.05 && (bright_without - 1.0).abs() < 0.05,
+        bright_with < bright_without,
+        "{bright_with} vs {bright_without}"
+    );
+    assert!(with < without + 0.012, "{with} vs {without}");
+    assert!(
+        (bright_with - 1.0).abs() < 0.07 && (bright_without - 1.0).abs() < 0.04,
         "{bright_with}, {bright_without}"
     );
 }
