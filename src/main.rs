@@ -265,6 +265,10 @@ struct RenderArgs {
     /// btf: tree shadows on the ground (alpha shadow map) and terrain self-shadows: on or off.
     #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
     ground_shadows: bool,
+    /// btf, hybrid, texel: the ground sees the sky only where the trees leave it open (the
+    /// reference's sky visibility, computed once before the first frame): on or off.
+    #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+    ground_sky: bool,
     /// btf: shade billboards by the visibility cube maps (trees shading each other): on or off.
     #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
     vcm: bool,
@@ -513,6 +517,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     frame.method = args.method;
     frame.shadows.map_size = args.shadow_map;
     frame.ground_shadows = args.ground_shadows;
+    frame.ground_sky = args.ground_sky;
     if args.pixel_classes {
         if args.method != Method::Geometry {
             return Err(canopy::Error::BadInput(
@@ -583,6 +588,14 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     )?;
     let ctx = GpuContext::headless(adapter(args.cpu))?;
     let mut renderer = Renderer::new(&ctx, &world)?;
+    if frame.ground_sky && (args.method.is_btf() || args.method == Method::Texel) {
+        let t0 = Instant::now();
+        renderer.prepare_sky(&ctx, &world)?;
+        log::info!(
+            "the ground's sky visibility in {:.1} s",
+            t0.elapsed().as_secs_f64()
+        );
+    }
     if let Some(r) = frame.reference {
         let t0 = Instant::now();
         renderer.prepare_reference(&ctx, &world, r.sky_directions, true)?;

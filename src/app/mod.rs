@@ -22,6 +22,7 @@ use winit::keyboard::{KeyCode, ModifiersState, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::model::World;
+use crate::render::sky_visibility::{SKY_DIRECTIONS, SkyVolume};
 use crate::render::{AdapterPreference, FrameDesc, GpuContext, Method, Renderer};
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -120,6 +121,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         gallery: gallery::Gallery::default(),
         watch: scene_path.map(reload::Watch::new),
         rebake: None,
+        sky_job: None,
         soak: script.map(|script| SoakRun {
             script,
             started: None,
@@ -300,6 +302,9 @@ struct App {
     /// The scene file, watched for edits (none for the embedded default forest).
     watch: Option<reload::Watch>,
     rebake: Option<Rebake>,
+    /// The ground's sky visibility, computed on its own thread for the renderer of the
+    /// given id (`Renderer::id`).
+    sky_job: Option<(u64, std::thread::JoinHandle<SkyVolume>)>,
     /// The soak script being run.
     soak: Option<SoakRun>,
     /// The render scale's start was set (from the adapter or `--render-scale`).
@@ -802,9 +807,44 @@ impl App {
         }
     }
 
+    /// The image-based methods' ground sees the sky through the trees
+    /// (`FrameDesc::ground_sky`): its volume is computed on its own thread for the renderer
+    /// on show, and attached when done (a renderer replaced meanwhile gets its own).
+    fn tend_sky(&mut self) {
+        let Some(r) = &mut self.running else { return };
+        if !self.frame.ground_sky || r.renderer.has_sky() {
+            return;
+        }
+        match self.sky_job.take() {
+            Some((id, job)) if id == r.renderer.id() && job.is_finished() => match job.join() {
+                Ok(volume) => {
+                    if let Err(e) = r.renderer.attach_sky(&r.ctx, &volume, SKY_DIRECTIONS) {
+                        log::warn!("the ground's sky visibility could not be used: {e}");
+                        self.frame.ground_sky = false;
+                    }
+                }
+                Err(_) => {
+                    log::warn!("the ground's sky visibility thread stopped unexpectedly");
+                    self.frame.ground_sky = false;
+                }
+            },
+            Some((id, job)) if id == r.renderer.id() => self.sky_job = Some((id, job)),
+            // None yet, or one for a renderer no longer on show (left to finish unseen).
+            _ => {
+                let world = self.world.clone();
+                let job = std::thread::spawn(move || {
+                    let bounds = crate::render::sky_visibility::bounds_of(&world, true);
+                    SkyVolume::compute(&world, &bounds, true, SKY_DIRECTIONS)
+                });
+                self.sky_job = Some((r.renderer.id(), job));
+            }
+        }
+    }
+
     fn redraw(&mut self, event_loop: &ActiveEventLoop) {
         self.heap.tend();
         self.tend_bake();
+        self.tend_sky();
         self.tend_reload();
         let now = Instant::now();
         let dt = now.duration_since(self.last_frame).as_secs_f32();

@@ -143,6 +143,10 @@ pub fn controls(
             &mut frame.ground_shadows,
             "ground shadows (alpha map + terrain)",
         );
+        ui.checkbox(
+            &mut frame.ground_sky,
+            "ground sky visibility (through the trees)",
+        );
         if let Some(s) = &stats.btf {
             egui::Grid::new("btf stats").num_columns(2).show(ui, |ui| {
                 ui.label("billboards twig/branch/tree");

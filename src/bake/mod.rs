@@ -328,6 +328,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         texel: Default::default(),
         trees: true,
         ground_shadows: false,
+        ground_sky: false,
         sun_held: false,
         reference: Some(Reference::default()),
         render_scale: Default::default(),

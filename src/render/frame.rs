@@ -187,6 +187,10 @@ pub struct FrameDesc {
     /// the terrain's own shadows from a depth map of the terrain, both seen from the sun
     /// and rebuilt only when it moves. (The geometry method always has both.)
     pub ground_shadows: bool,
+    /// Image-based methods: the terrain (and `hybrid`'s geometry trees) see the sky only
+    /// where the trees leave it open, from the sky visibility volume the reference uses,
+    /// when the renderer has one ([`super::Renderer::prepare_sky`]).
+    pub ground_sky: bool,
     /// The user is moving the sun right now (a drag in progress): the ground shadow maps
     /// are rebuilt at a reduced resolution while it lasts, and at full resolution on the
     /// first frame after it ends.
@@ -231,6 +235,7 @@ impl FrameDesc {
             texel: Default::default(),
             trees: true,
             ground_shadows: true,
+            ground_sky: true,
             sun_held: false,
             reference: None,
             render_scale: Default::default(),

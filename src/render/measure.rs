@@ -216,7 +216,9 @@ pub struct FrameReport {
     /// The frame was the reference (`geometry` with sky visibility and whole-scene sun
     /// shadows).
     pub reference: bool,
-    /// The reference's sky visibility (absent for other frames).
+    /// An image-based method's ground saw the sky visibility (`FrameDesc::ground_sky`).
+    pub ground_sky: bool,
+    /// The sky visibility of a reference frame or of the ground (absent for other frames).
     #[serde(flatten)]
     pub sky: Option<SkyReport>,
 }
@@ -317,13 +319,15 @@ impl FrameReport {
                 tile_distance: frame.texel.tile_distance,
             }),
             reference: reference.is_some(),
-            sky: reference.and_then(|_| renderer.sky_visibility()).map(
-                |(sky_directions, sky_cell_m, sky_volume_bytes)| SkyReport {
+            ground_sky: renderer.ground_sky_applies(frame),
+            sky: (reference.is_some() || renderer.ground_sky_applies(frame))
+                .then(|| renderer.sky_visibility())
+                .flatten()
+                .map(|(sky_directions, sky_cell_m, sky_volume_bytes)| SkyReport {
                     sky_directions,
                     sky_cell_m,
                     sky_volume_bytes,
-                },
-            ),
+                }),
         }
     }
 }

@@ -104,7 +104,12 @@ pub struct Renderer {
     voxel_pipeline: Option<voxelize::VoxelPipeline>,
     /// The reference's per-tree sun maps, once a reference frame used them.
     self_shadow: Option<self_shadow::SelfShadow>,
+    /// Unique among the renderers of this process (see [`Self::id`]).
+    id: u64,
 }
+
+/// The next [`Renderer::id`].
+static NEXT_RENDERER_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
 impl Renderer {
     pub fn new(ctx: &GpuContext, world: &World) -> Result<Self> {
@@ -144,6 +149,7 @@ impl Renderer {
             texel_problem: None,
             voxel_pipeline: None,
             self_shadow: None,
+            id: NEXT_RENDERER_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         })
     }
 
@@ -187,6 +193,29 @@ impl Renderer {
     /// bytes on the GPU).
     pub fn sky_visibility(&self) -> Option<(u32, f32, u64)> {
         self.sky_vis.as_ref().map(|s| (s.count, s.cell, s.bytes))
+    }
+
+    /// It has a sky visibility volume (the reference's, or the ground's).
+    pub fn has_sky(&self) -> bool {
+        self.sky_vis.is_some()
+    }
+
+    /// Names this renderer among the process's (work started for one renderer, such as a
+    /// sky volume computed on another thread, is not handed to its successor).
+    pub fn id(&self) -> u64 {
+        self.id
+    }
+
+    /// Uploads a sky visibility `volume` of this renderer's world, computed from
+    /// `directions` directions (e.g. on another thread, by [`SkyVolume::compute`]).
+    pub fn attach_sky(
+        &mut self,
+        ctx: &GpuContext,
+        volume: &SkyVolume,
+        directions: u32,
+    ) -> Result<()> {
+        self.sky_vis = Some(SkyVisibility::upload(ctx, volume, directions.max(1))?);
+        Ok(())
     }
 
     /// Bytes of texel volumes on the GPU (0 without them).
@@ -312,8 +341,25 @@ impl Renderer {
             ));
         }
         let volume = SkyVolume::compute(world, &bounds, terrain, directions.max(1));
-        self.sky_vis = Some(SkyVisibility::upload(ctx, &volume, directions.max(1))?);
-        Ok(())
+        self.attach_sky(ctx, &volume, directions)
+    }
+
+    /// Computes the sky visibility of `world` (trees and terrain, the reference's 64
+    /// directions) once, for the image-based methods' ground (`FrameDesc::ground_sky`); a
+    /// no-op when the reference's is there already.
+    pub fn prepare_sky(&mut self, ctx: &GpuContext, world: &World) -> Result<()> {
+        if self.sky_vis.is_some() {
+            return Ok(());
+        }
+        self.prepare_reference(ctx, world, sky_visibility::SKY_DIRECTIONS, true)
+    }
+
+    /// The image-based methods' ground sees the sky visibility in `frame`.
+    pub fn ground_sky_applies(&self, frame: &FrameDesc) -> bool {
+        frame.ground_sky
+            && self.sky_vis.is_some()
+            && frame.stage == Stage::World
+            && (frame.method.is_btf() || frame.method == Method::Texel)
     }
 
     fn ensure_depth(&mut self, ctx: &GpuContext, width: u32, height: u32) -> Result<()> {
@@ -550,8 +596,9 @@ impl Renderer {
         };
         // The sun-dependent VCM reads inside the prepare step are the sun update's.
         let prepare_ms = prepare_start.elapsed().as_secs_f64() * 1e3 - sun_update_ms;
+        let sky_hidden = reference.is_some() || self.ground_sky_applies(frame);
         let mut uniforms =
-            self.frame_uniforms_for(frame, aspect, &cascades, shadows_on, reference.is_some());
+            self.frame_uniforms_for(frame, aspect, &cascades, shadows_on, sky_hidden);
         if matches!(prepared, Prepared::Btf(_)) && shadows_on {
             uniforms.hybrid_cascades = 1;
         }
@@ -884,19 +931,20 @@ impl Renderer {
     }
 
     /// The uniforms of `frame` with its sun shadows on or off as prepared, and the sky
-    /// visibility in them when the frame is a reference.
+    /// visibility in them when `sky_hidden` (a reference frame, or an image-based method's
+    /// ground).
     fn frame_uniforms_for(
         &self,
         frame: &FrameDesc,
         aspect: f32,
         cascades: &Cascades,
         shadows_on: bool,
-        reference: bool,
+        sky_hidden: bool,
     ) -> FrameUniforms {
         let mut uniform_frame = *frame;
         uniform_frame.shadows.enabled = shadows_on;
         let mut uniforms = FrameUniforms::new(&uniform_frame, aspect, cascades);
-        if let Some(s) = self.sky_vis.as_ref().filter(|_| reference) {
+        if let Some(s) = self.sky_vis.as_ref().filter(|_| sky_hidden) {
             uniforms.sky_vis_count = s.count;
             uniforms.sky_vis_texel_world = s.cell;
         }
