@@ -128,19 +128,28 @@ fn sun_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> f32 {
 
 // The cascades' part of `sun_visibility` (1 past the last cascade).
 fn cascade_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> f32 {
-    if view_depth >= frame.cascade_splits.z {
+    let c = cascade_coords(world, normal, view_depth);
+    if c.w < 0.0 {
         return 1.0;
     }
+    return pcf3x3(shadow_map, i32(c.w), c.xy, c.z, frame.cascade_texel_uv * frame.pcf_radius);
+}
+
+// Where `world` (offset along `normal` by about a texel of its cascade, against acne) falls
+// in the cascade its view depth picks: uv, depth, and the cascade (w < 0: in none).
+fn cascade_coords(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> vec4<f32> {
+    if view_depth >= frame.cascade_splits.z {
+        return vec4<f32>(0.0, 0.0, 0.0, -1.0);
+    }
     let c = cascade_for(view_depth);
-    // Offset along the normal by about a texel of this cascade, against acne.
     let p = world + normal * frame.cascade_texel_world[c] * 1.5;
     let lp = frame.light_view_proj[c] * vec4<f32>(p, 1.0);
     let ndc = lp.xyz / lp.w;
     let uv = ndc_to_uv(ndc.xy);
     if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) || ndc.z > 1.0 {
-        return 1.0;
+        return vec4<f32>(0.0, 0.0, 0.0, -1.0);
     }
-    return pcf3x3(shadow_map, i32(c), uv, ndc.z, frame.cascade_texel_uv * frame.pcf_radius);
+    return vec4<f32>(uv, ndc.z, f32(c));
 }
 
 // Fraction of the sky `world` sees (1 = all of it), read trilinearly from the volume half
@@ -310,14 +319,7 @@ fn fs_voxel(in: VertexOut, @builtin(front_facing) front: bool) {
 // its own sun map, a square around it alone, fine at any distance; everything else (other
 // trees, the terrain) through the cascades, whose texels nearest the sun on this tree are
 // left out (the tree would shade itself twice, the second time through coarse texels).
-struct SelfLight {
-    matrix: mat4x4<f32>,
-    texel_world: f32,
-    layer: u32,
-    _pad0: u32,
-    _pad1: u32,
-}
-@group(3) @binding(2) var<storage, read> self_lights: array<SelfLight>;
+// (`SelfLight` and `self_lights` are in instancing.wgsl.)
 @group(3) @binding(3) var self_maps: texture_depth_2d_array;
 @group(3) @binding(4) var cascade_keys: texture_2d_array<u32>;
 
@@ -341,17 +343,12 @@ fn fs_reference(in: VertexOut, @builtin(front_facing) front: bool) -> @location(
 // `cascade_visibility` without the texels whose nearest caster is the tree `key`: each of
 // the 3x3 taps a bilinear blend of 4 depth comparisons (as the comparison sampler's).
 fn others_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32, key: u32) -> f32 {
-    if view_depth >= frame.cascade_splits.z {
+    let cc = cascade_coords(world, normal, view_depth);
+    if cc.w < 0.0 {
         return 1.0;
     }
-    let c = cascade_for(view_depth);
-    let p = world + normal * frame.cascade_texel_world[c] * 1.5;
-    let lp = frame.light_view_proj[c] * vec4<f32>(p, 1.0);
-    let ndc = lp.xyz / lp.w;
-    let uv = ndc_to_uv(ndc.xy);
-    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) || ndc.z > 1.0 {
-        return 1.0;
-    }
+    let uv = cc.xy;
+    let c = i32(cc.w);
     let size = vec2<f32>(textureDimensions(shadow_map).xy);
     let step = frame.cascade_texel_uv * frame.pcf_radius;
     var lit = 0.0;
@@ -363,9 +360,9 @@ fn others_visibility(world: vec3<f32>, normal: vec3<f32>, view_depth: f32, key: 
             var s: array<f32, 4>;
             for (var k = 0; k < 4; k++) {
                 let q = clamp(i0 + vec2<i32>(k & 1, k >> 1u), vec2<i32>(0), vec2<i32>(size) - 1);
-                let d = textureLoad(shadow_map, q, i32(c), 0);
-                let own = textureLoad(cascade_keys, q, i32(c), 0).r == key;
-                s[k] = select(select(0.0, 1.0, ndc.z <= d), 1.0, own);
+                let d = textureLoad(shadow_map, q, c, 0);
+                let own = textureLoad(cascade_keys, q, c, 0).r == key;
+                s[k] = select(select(0.0, 1.0, cc.z <= d), 1.0, own);
             }
             lit += mix(mix(s[0], s[1], f.x), mix(s[2], s[3], f.x), f.y);
         }

@@ -64,3 +64,17 @@ fn tree_key(slot: u32) -> u32 {
 fn instance_slot(instance: u32) -> u32 {
     return instance / max(part_set.count, 1u);
 }
+
+// The reference's per-tree sun maps (src/render/self_shadow.rs): the light matrix of the
+// tree in each slot of the tree buffer, a square around its bounding sphere seen from the
+// sun (`SelfLightGpu`).
+struct SelfLight {
+    matrix: mat4x4<f32>,
+    // World size of one texel of the tree's map.
+    texel_world: f32,
+    // Layer of the map array that holds the tree's map.
+    layer: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+@group(3) @binding(2) var<storage, read> self_lights: array<SelfLight>;

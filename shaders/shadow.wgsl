@@ -33,17 +33,7 @@ fn fs_shadow_keyed(in: KeyedOut) -> @location(0) u32 {
 }
 
 // The reference's per-tree sun maps: each tree alone, seen from the sun through the light
-// matrix of its slot (a square around its bounding sphere).
-struct SelfLight {
-    matrix: mat4x4<f32>,
-    // World size of one texel of the tree's map.
-    texel_world: f32,
-    // Layer of the map array that holds the tree's map.
-    layer: u32,
-    _pad0: u32,
-    _pad1: u32,
-}
-@group(3) @binding(2) var<storage, read> self_lights: array<SelfLight>;
+// matrix of its slot (`self_lights`, instancing.wgsl).
 
 @vertex
 fn vs_self_shadow(v: VertexIn, @builtin(instance_index) instance: u32) -> @builtin(position) vec4<f32> {

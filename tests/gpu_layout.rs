@@ -7,6 +7,7 @@ use std::mem::{offset_of, size_of};
 
 use canopy::render::btf::BillboardGpu;
 use canopy::render::frame::FrameUniforms;
+use canopy::render::self_shadow::SelfLightGpu;
 use canopy::render::world_gpu::{PartSetGpu, TreeGpu};
 
 /// (size, [(field, offset)]) of a Rust struct, fields named as in WGSL.
@@ -154,6 +155,17 @@ fn instancing_structs_match_instancing_wgsl() {
             _pad0,
             _pad1,
             _pad2
+        }),
+    );
+    check(
+        "SelfLight",
+        wgsl_layout(&source, "SelfLight"),
+        rust_layout!(SelfLightGpu {
+            matrix,
+            texel_world,
+            layer,
+            _pad0,
+            _pad1
         }),
     );
 }

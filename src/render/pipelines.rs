@@ -293,37 +293,9 @@ impl ColorPipelines {
             write_mask: wgpu::ColorWrites::ALL,
         })];
         let mesh_pipeline = |label: &str, cull_mode: Option<wgpu::Face>, fragment: &str| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &geometry,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(vertex_layout())],
-                },
-                primitive: wgpu::PrimitiveState {
-                    cull_mode,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    // Reversed Z: nearer is larger.
-                    depth_compare: Some(wgpu::CompareFunction::Greater),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &geometry,
-                    entry_point: Some(fragment),
-                    compilation_options: Default::default(),
-                    targets: &target,
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+            mesh_pipeline(
+                device, &layout, &geometry, label, cull_mode, fragment, &target,
+            )
         };
         let opaque = mesh_pipeline("geometry opaque", Some(wgpu::Face::Back), "fs_main");
         let foliage = mesh_pipeline("geometry foliage", None, "fs_main");
@@ -364,6 +336,49 @@ impl ColorPipelines {
             sky,
         }
     }
+}
+
+/// A pipeline drawing meshes of `geometry.wgsl` (`vs_main` and `fragment`) into one colour
+/// target, depth-tested and written (reversed Z: nearer is larger).
+pub(crate) fn mesh_pipeline(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    label: &str,
+    cull_mode: Option<wgpu::Face>,
+    fragment: &str,
+    target: &[Option<wgpu::ColorTargetState>],
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[Some(vertex_layout())],
+        },
+        primitive: wgpu::PrimitiveState {
+            cull_mode,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Greater),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some(fragment),
+            compilation_options: Default::default(),
+            targets: target,
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }
 
 /// A pipeline drawing procedural instances (no vertex buffers) over the frame, blended

@@ -20,10 +20,10 @@ use std::collections::HashMap;
 
 use glam::{Mat4, Vec3};
 
-use super::pipelines::{Layouts, MeshPipelines, buffer_entry};
+use super::pipelines::{Layouts, MeshPipelines, buffer_entry, mesh_pipeline};
 use super::shadow::{CASCADES, Cascades};
 use super::world_gpu::{TreeRun, WorldGpu, vertex_layout};
-use super::{DEPTH_FORMAT, GpuContext, SHADOW_FORMAT, shaders};
+use super::{GpuContext, SHADOW_FORMAT, shaders};
 use crate::Result;
 
 /// Texel format of the cascades' tree keys.
@@ -54,7 +54,8 @@ pub struct SelfLightGpu {
     pub matrix: [[f32; 4]; 4],
     pub texel_world: f32,
     pub layer: u32,
-    pub _pad: [u32; 2],
+    pub _pad0: u32,
+    pub _pad1: u32,
 }
 
 /// The light matrix of a tree of world `bounds`'s own map seen from `to_sun`, `size`
@@ -375,7 +376,8 @@ impl SelfShadow {
                     matrix: m.to_cols_array_2d(),
                     texel_world: texel,
                     layer: n % self.layers,
-                    _pad: [0; 2],
+                    _pad0: 0,
+                    _pad1: 0,
                 };
                 n += 1;
             }
@@ -513,37 +515,15 @@ fn reference_pipelines(
         write_mask: wgpu::ColorWrites::ALL,
     })];
     let pipeline = |label: &str, cull_mode: Option<wgpu::Face>| {
-        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some(label),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(vertex_layout())],
-            },
-            primitive: wgpu::PrimitiveState {
-                cull_mode,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                // Reversed Z, as the geometry pipelines.
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_reference"),
-                compilation_options: Default::default(),
-                targets: &target,
-            }),
-            multiview_mask: None,
-            cache: None,
-        })
+        mesh_pipeline(
+            device,
+            &layout,
+            &module,
+            label,
+            cull_mode,
+            "fs_reference",
+            &target,
+        )
     };
     (
         pipeline("reference opaque", Some(wgpu::Face::Back)),
