@@ -112,3 +112,51 @@ impl DepthTarget {
         })
     }
 }
+
+impl DepthTarget {
+    /// A pass drawing into `target` and this depth buffer: both cleared (the colour to
+    /// `clear`, depth to the far plane) or, without `clear`, both loaded; the depth kept for
+    /// a later pass when `keep_depth`. `end_timestamp`: the frame's timing ends with it.
+    pub fn colour_pass<'e>(
+        &self,
+        encoder: &'e mut wgpu::CommandEncoder,
+        label: &str,
+        target: &wgpu::TextureView,
+        clear: Option<wgpu::Color>,
+        keep_depth: bool,
+        end_timestamp: Option<&wgpu::QuerySet>,
+    ) -> wgpu::RenderPass<'e> {
+        encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some(label),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: target,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: clear.map_or(wgpu::LoadOp::Load, wgpu::LoadOp::Clear),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.view,
+                depth_ops: Some(wgpu::Operations {
+                    // Reversed Z: the far plane is 0.
+                    load: clear.map_or(wgpu::LoadOp::Load, |_| wgpu::LoadOp::Clear(0.0)),
+                    store: if keep_depth {
+                        wgpu::StoreOp::Store
+                    } else {
+                        wgpu::StoreOp::Discard
+                    },
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: end_timestamp.map(|q| wgpu::RenderPassTimestampWrites {
+                query_set: q,
+                beginning_of_pass_write_index: None,
+                end_of_pass_write_index: Some(1),
+            }),
+            occlusion_query_set: None,
+            multiview_mask: None,
+        })
+    }
+}

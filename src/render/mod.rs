@@ -729,44 +729,18 @@ impl Renderer {
         let batches = self_batches.as_deref().unwrap_or(&[]);
 
         {
-            let ts = queries.as_ref().filter(|_| batches.is_empty()).map(|q| {
-                wgpu::RenderPassTimestampWrites {
-                    query_set: q,
-                    beginning_of_pass_write_index: None,
-                    end_of_pass_write_index: Some(1),
-                }
-            });
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("main"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: target,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(if studio {
-                            wgpu::Color::TRANSPARENT
-                        } else {
-                            wgpu::Color::BLACK
-                        }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &depth.view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(0.0),
-                        store: if batches.is_empty() {
-                            wgpu::StoreOp::Discard
-                        } else {
-                            wgpu::StoreOp::Store
-                        },
-                    }),
-                    stencil_ops: None,
+            let mut pass = depth.colour_pass(
+                &mut encoder,
+                "main",
+                target,
+                Some(if studio {
+                    wgpu::Color::TRANSPARENT
+                } else {
+                    wgpu::Color::BLACK
                 }),
-                timestamp_writes: ts,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+                !batches.is_empty(),
+                queries.as_ref().filter(|_| batches.is_empty()),
+            );
             pass.set_bind_group(0, &bindings.bind_group, &[]);
             if !studio {
                 pass.set_pipeline(&pipes.sky);
@@ -826,58 +800,15 @@ impl Renderer {
             }
         }
         if let Some(ss) = self_shadow.filter(|_| !batches.is_empty()) {
-            let Some((trees, group)) = ss.pipelines(format) else {
-                return Err(Error::Gpu(
-                    "the reference's tree pipelines were not built".into(),
-                ));
-            };
-            for (i, batch) in batches.iter().enumerate() {
-                stats.shadow_triangles += ss.encode_maps(&mut encoder, &self.world, batch);
-                let ts = queries
-                    .as_ref()
-                    .filter(|_| i + 1 == batches.len())
-                    .map(|q| wgpu::RenderPassTimestampWrites {
-                        query_set: q,
-                        beginning_of_pass_write_index: None,
-                        end_of_pass_write_index: Some(1),
-                    });
-                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("reference trees"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: target,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Load,
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
-                    depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &depth.view,
-                        depth_ops: Some(wgpu::Operations {
-                            load: wgpu::LoadOp::Load,
-                            store: wgpu::StoreOp::Store,
-                        }),
-                        stencil_ops: None,
-                    }),
-                    timestamp_writes: ts,
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
-                pass.set_bind_group(0, &bindings.bind_group, &[]);
-                pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
-                pass.set_bind_group(3, group, &[]);
-                let (tris, drawn, calls) = self.world.draw(
-                    &mut pass,
-                    batch,
-                    Some(trees),
-                    false,
-                    &method::geometry::ALL_PARTS,
-                );
-                stats.triangles += tris;
-                stats.trees_drawn += drawn;
-                stats.draw_calls += calls;
-            }
+            ss.draw_trees(
+                &mut encoder,
+                &self.world,
+                &bindings.bind_group,
+                (target, format, depth),
+                batches,
+                queries.as_ref(),
+                &mut stats,
+            )?;
         }
         if let Some(t) = &self.timer {
             t.resolve(&mut encoder);

@@ -129,20 +129,23 @@ impl Layouts {
     }
 }
 
+/// The depth bias of every map the sun's view draws for shadows (cascades, per-tree maps).
+pub(crate) const SHADOW_BIAS: wgpu::DepthBiasState = wgpu::DepthBiasState {
+    constant: 2,
+    slope_scale: 1.5,
+    clamp: 0.0,
+};
+
 /// The shadow pipeline (independent of the colour format): depth only, biased.
 pub fn shadow_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu::RenderPipeline {
-    let bias = wgpu::DepthBiasState {
-        constant: 2,
-        slope_scale: 1.5,
-        clamp: 0.0,
-    };
     light_view_pipeline(
         device,
-        layouts,
-        "shadow",
-        wgpu::CompareFunction::LessEqual,
-        bias,
-        None,
+        &LightView {
+            label: "shadow",
+            compare: wgpu::CompareFunction::LessEqual,
+            bias: SHADOW_BIAS,
+            ..LightView::shadow_frame(layouts)
+        },
     )
 }
 
@@ -151,56 +154,96 @@ pub fn shadow_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu::Render
 pub fn ground_terrain_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu::RenderPipeline {
     light_view_pipeline(
         device,
-        layouts,
-        "ground terrain",
-        wgpu::CompareFunction::Less,
-        Default::default(),
-        Some(("fs_white", super::GROUND_FORMAT)),
+        &LightView {
+            label: "ground terrain",
+            compare: wgpu::CompareFunction::Less,
+            fragment: Some(LightFragment {
+                entry: "fs_white",
+                source: Some(shaders::ground_map()),
+                format: super::GROUND_FORMAT,
+            }),
+            ..LightView::shadow_frame(layouts)
+        },
     )
 }
 
-/// A pipeline drawing meshes from the sun with `shadow.wgsl`'s vertex stage, nothing culled:
-/// depth only, or with a fragment entry point of `ground_map.wgsl` writing one colour target.
-fn light_view_pipeline(
+/// A pipeline drawing meshes from the sun with a vertex stage of `shadow.wgsl`, nothing
+/// culled: depth only, or with a fragment stage writing one colour target.
+pub(crate) struct LightView<'a> {
+    pub label: &'a str,
+    pub groups: [Option<&'a wgpu::BindGroupLayout>; 4],
+    pub vertex: &'a str,
+    pub compare: wgpu::CompareFunction,
+    pub bias: wgpu::DepthBiasState,
+    pub fragment: Option<LightFragment<'a>>,
+}
+
+/// The fragment stage of a [`LightView`]: its entry point in `source` (None: `shadow.wgsl`
+/// itself) and the format of its one target.
+pub(crate) struct LightFragment<'a> {
+    pub entry: &'a str,
+    pub source: Option<String>,
+    pub format: wgpu::TextureFormat,
+}
+
+impl<'a> LightView<'a> {
+    /// `vs_shadow` with the frame uniforms of a light (`shadow_frame`), the trees and the
+    /// parts; depth only, unbiased.
+    pub fn shadow_frame(layouts: &'a Layouts) -> Self {
+        Self {
+            label: "light view",
+            groups: [
+                Some(&layouts.shadow_frame),
+                Some(&layouts.trees),
+                Some(&layouts.parts),
+                None,
+            ],
+            vertex: "vs_shadow",
+            compare: wgpu::CompareFunction::LessEqual,
+            bias: Default::default(),
+            fragment: None,
+        }
+    }
+}
+
+pub(crate) fn light_view_pipeline(
     device: &wgpu::Device,
-    layouts: &Layouts,
-    label: &str,
-    compare: wgpu::CompareFunction,
-    bias: wgpu::DepthBiasState,
-    fragment: Option<(&str, wgpu::TextureFormat)>,
+    p: &LightView<'_>,
 ) -> wgpu::RenderPipeline {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("shadow.wgsl"),
         source: wgpu::ShaderSource::Wgsl(shaders::shadow().into()),
     });
+    let groups = match p.groups.iter().rposition(Option::is_some) {
+        Some(last) => &p.groups[..=last],
+        None => &p.groups[..0],
+    };
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &[
-            Some(&layouts.shadow_frame),
-            Some(&layouts.trees),
-            Some(&layouts.parts),
-        ],
+        label: Some(p.label),
+        bind_group_layouts: groups,
         immediate_size: 0,
     });
-    let fragment_module = fragment.map(|_| {
-        device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("ground_map.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::ground_map().into()),
+    let fragment_module = p.fragment.as_ref().and_then(|f| {
+        f.source.as_ref().map(|source| {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(f.entry),
+                source: wgpu::ShaderSource::Wgsl(source.as_str().into()),
+            })
         })
     });
-    let targets = fragment.map(|(_, format)| {
+    let targets = p.fragment.as_ref().map(|f| {
         [Some(wgpu::ColorTargetState {
-            format,
+            format: f.format,
             blend: None,
             write_mask: wgpu::ColorWrites::ALL,
         })]
     });
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
+        label: Some(p.label),
         layout: Some(&layout),
         vertex: wgpu::VertexState {
             module: &module,
-            entry_point: Some("vs_shadow"),
+            entry_point: Some(p.vertex),
             compilation_options: Default::default(),
             buffers: &[Some(vertex_layout())],
         },
@@ -211,17 +254,18 @@ fn light_view_pipeline(
         depth_stencil: Some(wgpu::DepthStencilState {
             format: SHADOW_FORMAT,
             depth_write_enabled: Some(true),
-            depth_compare: Some(compare),
+            depth_compare: Some(p.compare),
             stencil: Default::default(),
-            bias,
+            bias: p.bias,
         }),
         multisample: Default::default(),
-        fragment: fragment
+        fragment: p
+            .fragment
+            .as_ref()
             .zip(targets.as_ref())
-            .zip(fragment_module.as_ref())
-            .map(|(((entry, _), targets), module)| wgpu::FragmentState {
-                module,
-                entry_point: Some(entry),
+            .map(|(f, targets)| wgpu::FragmentState {
+                module: fragment_module.as_ref().unwrap_or(&module),
+                entry_point: Some(f.entry),
                 compilation_options: Default::default(),
                 targets,
             }),

@@ -20,11 +20,16 @@ use std::collections::HashMap;
 
 use glam::{Mat4, Vec3};
 
-use super::pipelines::{Layouts, MeshPipelines, buffer_entry, mesh_pipeline};
-use super::shadow::{CASCADES, Cascades};
-use super::world_gpu::{TreeRun, WorldGpu, vertex_layout};
+use super::frame::FrameStats;
+use super::frame_bindings::DepthTarget;
+use super::pipelines::{
+    Layouts, LightFragment, LightView, MeshPipelines, SHADOW_BIAS, buffer_entry,
+    light_view_pipeline, mesh_pipeline,
+};
+use super::shadow::{CASCADES, Cascades, layered_target};
+use super::world_gpu::{TreeRun, WorldGpu};
 use super::{GpuContext, SHADOW_FORMAT, shaders};
-use crate::Result;
+use crate::{Error, Result};
 
 /// Texel format of the cascades' tree keys.
 pub const KEY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
@@ -128,24 +133,8 @@ impl SelfShadow {
         let device = &ctx.device;
         let size = size.clamp(16, device.limits().max_texture_dimension_2d);
         let layers = layers.clamp(1, device.limits().max_texture_array_layers);
-        let texture = ctx.checked("allocating the reference's per-tree sun maps", || {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("per-tree sun maps"),
-                size: wgpu::Extent3d {
-                    width: size,
-                    height: size,
-                    depth_or_array_layers: layers,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: SHADOW_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                    | wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            })
-        })?;
-        let (map_array, map_views) = array_views(&texture, layers);
+        let (map_array, map_views) =
+            layered_target(ctx, "per-tree sun maps", size, layers, SHADOW_FORMAT)?;
         let lights = ctx.checked("allocating the per-tree sun matrices", || {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("per-tree sun matrices"),
@@ -191,83 +180,40 @@ impl SelfShadow {
                 resource: lights.as_entire_binding(),
             }],
         });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("shadow.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::shadow().into()),
-        });
-        let light_pipeline = |label: &str,
-                              groups: &[Option<&wgpu::BindGroupLayout>],
-                              vertex: &str,
-                              key_target: bool| {
-            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(label),
-                bind_group_layouts: groups,
-                immediate_size: 0,
-            });
-            let targets = [Some(wgpu::ColorTargetState {
-                format: KEY_FORMAT,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })];
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some(vertex),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(vertex_layout())],
-                },
-                primitive: wgpu::PrimitiveState {
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                // As the cascades' (`pipelines::shadow_pipeline`).
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: SHADOW_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::LessEqual),
-                    stencil: Default::default(),
-                    bias: wgpu::DepthBiasState {
-                        constant: 2,
-                        slope_scale: 1.5,
-                        clamp: 0.0,
-                    },
-                }),
-                multisample: Default::default(),
-                fragment: key_target.then(|| wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_shadow_keyed"),
-                    compilation_options: Default::default(),
-                    targets: &targets,
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        };
         let (map_pipeline, keyed_pipeline) =
             ctx.checked("building the per-tree sun map pipelines", || {
+                // Biased as the cascades are.
+                let base = || LightView {
+                    bias: SHADOW_BIAS,
+                    ..LightView::shadow_frame(layouts)
+                };
                 (
-                    light_pipeline(
-                        "per-tree sun map",
-                        &[
-                            None,
-                            Some(&layouts.trees),
-                            Some(&layouts.parts),
-                            Some(&lights_layout),
-                        ],
-                        "vs_self_shadow",
-                        false,
+                    light_view_pipeline(
+                        device,
+                        &LightView {
+                            label: "per-tree sun map",
+                            groups: [
+                                None,
+                                Some(&layouts.trees),
+                                Some(&layouts.parts),
+                                Some(&lights_layout),
+                            ],
+                            vertex: "vs_self_shadow",
+                            ..base()
+                        },
                     ),
-                    light_pipeline(
-                        "keyed shadow cascade",
-                        &[
-                            Some(&layouts.shadow_frame),
-                            Some(&layouts.trees),
-                            Some(&layouts.parts),
-                        ],
-                        "vs_shadow_keyed",
-                        true,
+                    light_view_pipeline(
+                        device,
+                        &LightView {
+                            label: "keyed shadow cascade",
+                            vertex: "vs_shadow_keyed",
+                            fragment: Some(LightFragment {
+                                entry: "fs_shadow_keyed",
+                                source: None,
+                                format: KEY_FORMAT,
+                            }),
+                            ..base()
+                        },
                     ),
                 )
             })?;
@@ -302,24 +248,8 @@ impl SelfShadow {
         }
         self.keys = None;
         let device = &ctx.device;
-        let texture = ctx.checked("allocating the reference's cascade keys", || {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("cascade tree keys"),
-                size: wgpu::Extent3d {
-                    width: size,
-                    height: size,
-                    depth_or_array_layers: CASCADES as u32,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: KEY_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                    | wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            })
-        })?;
-        let (array, views) = array_views(&texture, CASCADES as u32);
+        let (array, views) =
+            layered_target(ctx, "cascade tree keys", size, CASCADES as u32, KEY_FORMAT)?;
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("reference sun maps"),
             layout: &self.reference_layout,
@@ -437,6 +367,53 @@ impl SelfShadow {
         tris
     }
 
+    /// Draws the reference's trees into `target` (of `format`, over `depth`, after the
+    /// frame's main pass): each of `batches` (from [`Self::write_lights`]) its trees' maps,
+    /// then its trees; the last pass ends the frame's timing (`queries`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn draw_trees(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        world: &WorldGpu,
+        frame_group: &wgpu::BindGroup,
+        (target, format, depth): (&wgpu::TextureView, wgpu::TextureFormat, &DepthTarget),
+        batches: &[Vec<TreeRun>],
+        queries: Option<&wgpu::QuerySet>,
+        stats: &mut FrameStats,
+    ) -> Result<()> {
+        let Some((trees, group)) = self.pipelines(format) else {
+            return Err(Error::Gpu(
+                "the reference's tree pipelines were not built".into(),
+            ));
+        };
+        for (i, batch) in batches.iter().enumerate() {
+            stats.shadow_triangles += self.encode_maps(encoder, world, batch);
+            let last = i + 1 == batches.len();
+            let mut pass = depth.colour_pass(
+                encoder,
+                "reference trees",
+                target,
+                None,
+                !last,
+                queries.filter(|_| last),
+            );
+            pass.set_bind_group(0, frame_group, &[]);
+            pass.set_bind_group(1, &world.trees_bind_group, &[]);
+            pass.set_bind_group(3, group, &[]);
+            let (tris, drawn, calls) = world.draw(
+                &mut pass,
+                batch,
+                Some(trees),
+                false,
+                &super::method::geometry::ALL_PARTS,
+            );
+            stats.triangles += tris;
+            stats.trees_drawn += drawn;
+            stats.draw_calls += calls;
+        }
+        Ok(())
+    }
+
     /// Builds the reference trees' pipelines for a target of `format`, once.
     pub fn ensure_pipelines(
         &mut self,
@@ -463,28 +440,6 @@ impl SelfShadow {
         let (_, _, group) = self.keys.as_ref()?;
         Some((MeshPipelines { opaque, foliage }, group))
     }
-}
-
-/// An array texture's whole view and one view per layer.
-fn array_views(
-    texture: &wgpu::Texture,
-    layers: u32,
-) -> (wgpu::TextureView, Vec<wgpu::TextureView>) {
-    let array = texture.create_view(&wgpu::TextureViewDescriptor {
-        dimension: Some(wgpu::TextureViewDimension::D2Array),
-        ..Default::default()
-    });
-    let views = (0..layers)
-        .map(|i| {
-            texture.create_view(&wgpu::TextureViewDescriptor {
-                dimension: Some(wgpu::TextureViewDimension::D2),
-                base_array_layer: i,
-                array_layer_count: Some(1),
-                ..Default::default()
-            })
-        })
-        .collect();
-    (array, views)
 }
 
 /// `geometry.wgsl`'s `fs_reference` as the opaque (back faces culled) and foliage

@@ -154,43 +154,56 @@ pub struct CascadeMaps {
 
 impl CascadeMaps {
     pub fn new(ctx: &GpuContext, size: u32) -> crate::Result<Self> {
-        let texture = ctx.checked("allocating the shadow maps", || {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("shadow cascades"),
-                size: wgpu::Extent3d {
-                    width: size,
-                    height: size,
-                    depth_or_array_layers: CASCADES as u32,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: SHADOW_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                    | wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            })
-        })?;
-        let array_view = texture.create_view(&wgpu::TextureViewDescriptor {
-            dimension: Some(wgpu::TextureViewDimension::D2Array),
-            ..Default::default()
-        });
-        let layer_views = (0..CASCADES as u32)
-            .map(|i| {
-                texture.create_view(&wgpu::TextureViewDescriptor {
-                    dimension: Some(wgpu::TextureViewDimension::D2),
-                    base_array_layer: i,
-                    array_layer_count: Some(1),
-                    ..Default::default()
-                })
-            })
-            .collect();
+        let (array_view, layer_views) =
+            layered_target(ctx, "shadow cascades", size, CASCADES as u32, SHADOW_FORMAT)?;
         Ok(Self {
             size,
             array_view,
             layer_views,
         })
     }
+}
+
+/// A square array texture of `layers` layers, `size` texels a side, drawn into a layer at a
+/// time and sampled whole: its whole view and one view per layer.
+pub(crate) fn layered_target(
+    ctx: &GpuContext,
+    label: &str,
+    size: u32,
+    layers: u32,
+    format: wgpu::TextureFormat,
+) -> crate::Result<(wgpu::TextureView, Vec<wgpu::TextureView>)> {
+    let texture = ctx.checked(&format!("allocating the {label}"), || {
+        ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width: size,
+                height: size,
+                depth_or_array_layers: layers,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        })
+    })?;
+    let array = texture.create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    });
+    let views = (0..layers)
+        .map(|i| {
+            texture.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2),
+                base_array_layer: i,
+                array_layer_count: Some(1),
+                ..Default::default()
+            })
+        })
+        .collect();
+    Ok((array, views))
 }
 
 #[cfg(test)]
