@@ -700,7 +700,10 @@ impl App {
             }
         };
         let Some(started) = run.started else {
-            if r.renderer.has_btf() || self.bake_failed {
+            // The clock starts once the one-off background work is on show: the bake, and
+            // the ground's sky visibility (`tend_sky`), whose allocations are not growth.
+            let baked = r.renderer.has_btf() || self.bake_failed;
+            if baked && (r.renderer.has_sky() || !self.frame.ground_sky) {
                 run.started = Some(Instant::now());
                 run.samples.push(sample(0.0, &mut run.resident));
             }

@@ -2,7 +2,7 @@
 //! TOML file:
 //!
 //! ```toml
-//! seconds = 120          # how long to run once the bake is on show
+//! seconds = 120          # how long to run once the bake (and the ground's sky) is on show
 //! sample_seconds = 60    # memory sampled this often (and at the start and the end)
 //! every_frames = 4       # one action per this many frames, cycling through `actions`
 //! report = "soak.csv"    # optional: the samples as CSV
