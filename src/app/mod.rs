@@ -130,6 +130,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
             samples: Vec::new(),
             warm_at: None,
             resident: soak::Range::default(),
+            device: soak::Range::default(),
         }),
         scale_chosen: false,
         lose_device_at: std::env::var("CANOPY_TEST_LOSE_DEVICE_AT_FRAME")
@@ -261,6 +262,9 @@ struct SoakRun {
     warm_at: Option<f64>,
     /// Resident memory read every frame since the last sample: its floor and its peak.
     resident: soak::Range,
+    /// The device's allocated bytes (wgpu's allocator) read every frame since the last
+    /// sample.
+    device: soak::Range,
 }
 
 /// An edit of the scene file that changes the bake: its bake runs while the old scene
@@ -687,7 +691,10 @@ impl App {
         };
         let gpu_bytes = r.renderer.btf_bytes() + r.renderer.texel_bytes() + r.renderer.mesh_bytes();
         run.resident.add(soak::resident_bytes());
-        let sample = |t: f64, resident: &mut soak::Range| {
+        if let Some(b) = r.ctx.device_allocated_bytes() {
+            run.device.add(b);
+        }
+        let sample = |t: f64, resident: &mut soak::Range, device: &mut soak::Range| {
             let (heap_used_bytes, heap_free_bytes) = heap::heap_bytes();
             let (floor, peak) = resident.take();
             soak::Sample {
@@ -695,8 +702,9 @@ impl App {
                 resident_bytes: floor,
                 resident_peak_bytes: peak,
                 gpu_bytes,
-                heap_used_bytes,
+                device_peak_bytes: device.take().1,
                 heap_free_bytes,
+                heap_used_bytes,
             }
         };
         let Some(started) = run.started else {
@@ -705,7 +713,8 @@ impl App {
             let baked = r.renderer.has_btf() || self.bake_failed;
             if baked && (r.renderer.has_sky() || !self.frame.ground_sky) {
                 run.started = Some(Instant::now());
-                run.samples.push(sample(0.0, &mut run.resident));
+                run.samples
+                    .push(sample(0.0, &mut run.resident, &mut run.device));
             }
             return;
         };
@@ -721,14 +730,16 @@ impl App {
             run.warm_at = Some(t);
         }
         if t >= soak::next_due(&run.samples, run.script.sample_seconds) {
-            run.samples.push(sample(t, &mut run.resident));
+            run.samples
+                .push(sample(t, &mut run.resident, &mut run.device));
         }
         let judged = soak::judgeable(&run.samples, run.script.sample_seconds, run.warm_at);
         // The script's length, and past it until the growth can be judged (a slow machine
         // warms up later), but never past `MAX_STRETCH` times the length.
         let done = t >= run.script.seconds && judged || t >= run.script.seconds * soak::MAX_STRETCH;
         if done && !judged && run.samples.last().is_some_and(|s| s.seconds < t) {
-            run.samples.push(sample(t, &mut run.resident));
+            run.samples
+                .push(sample(t, &mut run.resident, &mut run.device));
         }
         if done {
             let Some(run) = self.soak.take() else { return };
@@ -752,9 +763,10 @@ impl App {
                     self.fail(
                         event_loop,
                         Error::BadInput(format!(
-                            "soak: no two samples after the warm-up ({} s, and every action run {} times) within {:.0} s: run longer",
+                            "soak: no two samples after the warm-up ({} s, every action run {} times, and an interval whose resident peak rose by at most {:.0} %) within {:.0} s: memory still rising, or run longer",
                             run.script.sample_seconds,
                             soak::WARM_CYCLES,
+                            soak::SETTLED * 100.0,
                             run.script.seconds * soak::MAX_STRETCH
                         )),
                     );

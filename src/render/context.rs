@@ -33,6 +33,17 @@ pub struct GpuContext {
     pub last_error: Arc<Mutex<Option<String>>>,
 }
 
+/// How wgpu sizes its device-memory blocks. A CPU adapter's (lavapipe's) device memory is
+/// the process's own memory: wgpu's default blocks of 128–256 MiB would make resident
+/// memory step by a whole block as targets come and go (a method switch, a resize), so a
+/// CPU adapter gets the small blocks (8–64 MiB). A GPU keeps the fast default.
+pub fn memory_hints(device_type: wgpu::DeviceType) -> wgpu::MemoryHints {
+    match device_type {
+        wgpu::DeviceType::Cpu => wgpu::MemoryHints::MemoryUsage,
+        _ => wgpu::MemoryHints::Performance,
+    }
+}
+
 impl GpuContext {
     /// A context for offscreen rendering.
     pub fn headless(pref: AdapterPreference) -> Result<Self> {
@@ -73,7 +84,7 @@ impl GpuContext {
             required_features,
             required_limits,
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
-            memory_hints: wgpu::MemoryHints::Performance,
+            memory_hints: memory_hints(info.device_type),
             trace: wgpu::Trace::Off,
         }))
         .map_err(|source| Error::RequestDevice {
@@ -116,6 +127,14 @@ impl GpuContext {
     pub fn adapter_name(&self) -> String {
         let info = self.adapter.get_info();
         format!("{} ({:?})", info.name, info.backend)
+    }
+
+    /// Bytes of every buffer and texture wgpu holds on the device now (its allocator's
+    /// report), or `None` where the backend keeps no report.
+    pub fn device_allocated_bytes(&self) -> Option<u64> {
+        self.device
+            .generate_allocator_report()
+            .map(|r| r.total_allocated_bytes)
     }
 
     /// True once the device has been lost.
