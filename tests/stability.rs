@@ -77,6 +77,7 @@ fn btf(label: &str, f: impl FnOnce(&mut BtfSettings)) -> Config {
         method: Method::Btf,
         btf,
         texel: Default::default(),
+        ground_sky: None,
     }
 }
 

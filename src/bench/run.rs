@@ -39,10 +39,12 @@ pub enum Knob {
     TexelTiles,
     /// texel: the distance beyond which tiles draw (m).
     TileDistance,
+    /// btf, hybrid and texel: the ground sees the sky through the trees (on or off).
+    GroundSky,
 }
 
 impl Knob {
-    pub const ALL: [Knob; 12] = [
+    pub const ALL: [Knob; 13] = [
         Knob::LodScale,
         Knob::WeightThreshold,
         Knob::LodFade,
@@ -55,6 +57,7 @@ impl Knob {
         Knob::TexelMode,
         Knob::TexelTiles,
         Knob::TileDistance,
+        Knob::GroundSky,
     ];
 
     /// The method this knob belongs to.
@@ -70,8 +73,12 @@ impl Knob {
         }
     }
 
-    /// The knob changes `method` (the `btf` knobs also drive `hybrid`).
+    /// The knob changes `method` (the `btf` knobs also drive `hybrid`; the ground sky is
+    /// every image-based method's).
     pub fn applies_to(self, method: Method) -> bool {
+        if self == Knob::GroundSky {
+            return method.is_btf() || method == Method::Texel;
+        }
         let own = self.method();
         own == method || (own == Method::Btf && method == Method::Hybrid)
     }
@@ -90,12 +97,14 @@ impl Knob {
             Knob::TexelMode => "texel_mode",
             Knob::TexelTiles => "texel_tiles",
             Knob::TileDistance => "tile_distance",
+            Knob::GroundSky => "ground_sky",
         }
     }
 
-    /// Sets this knob to `value` (in `s` or `t`, whichever method it belongs to), or says
+    /// Sets this knob to `value` (in `k`'s settings of the method it belongs to), or says
     /// what values it takes.
-    pub fn apply(self, value: &str, s: &mut BtfSettings, t: &mut TexelSettings) -> Result<()> {
+    pub fn apply(self, value: &str, k: &mut Knobs) -> Result<()> {
+        let (s, t) = (&mut k.btf, &mut k.texel);
         let bad = |what: &str| Error::BadInput(format!("--sweep {}={value}: {what}", self.name()));
         let number = |lo: f32, hi: f32| -> Result<f32> {
             let v: f32 = value
@@ -123,6 +132,9 @@ impl Knob {
             Knob::TexelMode => {
                 t.mode = TexelMode::parse(value)
                     .ok_or_else(|| bad("give slices3d, stacks or polygons"))?
+            }
+            Knob::GroundSky => {
+                k.ground_sky = Some(on_off(value).ok_or_else(|| bad("give on or off"))?)
             }
         }
         Ok(())
@@ -171,15 +183,24 @@ impl Sweep {
         if values.is_empty() {
             return Err(Error::BadInput(format!("--sweep {s}: no values")));
         }
-        let (mut probe, mut texel) = (BtfSettings::default(), TexelSettings::default());
+        let mut probe = Knobs::default();
         for v in &values {
-            knob.apply(v, &mut probe, &mut texel)?;
+            knob.apply(v, &mut probe)?;
         }
         Ok(Sweep { knob, values })
     }
 }
 
-/// One configuration: a method and, for `btf` and `texel`, their knobs.
+/// The knobs a sweep sets.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Knobs {
+    pub btf: BtfSettings,
+    pub texel: TexelSettings,
+    /// `None`: the frame's own (on by default).
+    pub ground_sky: Option<bool>,
+}
+
+/// One configuration: a method and, for `btf`, `hybrid` and `texel`, their knobs.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Config {
     /// e.g. `btf lod_scale=2 weight_threshold=0.1`, or the method's name.
@@ -187,6 +208,8 @@ pub struct Config {
     pub method: Method,
     pub btf: BtfSettings,
     pub texel: TexelSettings,
+    /// The ground's sky visibility (`FrameDesc::ground_sky`); `None`: the frame's own.
+    pub ground_sky: Option<bool>,
 }
 
 /// Most configurations one bench may run.
@@ -201,15 +224,18 @@ pub fn configurations(
 ) -> Result<Vec<Config>> {
     let mut out = Vec::new();
     for &method in methods {
-        let mut combos: Vec<(String, BtfSettings, TexelSettings)> =
-            vec![(String::new(), base, TexelSettings::default())];
+        let start = Knobs {
+            btf: base,
+            ..Knobs::default()
+        };
+        let mut combos: Vec<(String, Knobs)> = vec![(String::new(), start)];
         for sweep in sweeps.iter().filter(|s| s.knob.applies_to(method)) {
             let mut next = Vec::new();
-            for (label, s, t) in &combos {
+            for (label, k) in &combos {
                 for v in &sweep.values {
-                    let (mut s, mut t) = (*s, *t);
-                    sweep.knob.apply(v, &mut s, &mut t)?;
-                    next.push((format!("{label} {}={v}", sweep.knob.name()), s, t));
+                    let mut k = *k;
+                    sweep.knob.apply(v, &mut k)?;
+                    next.push((format!("{label} {}={v}", sweep.knob.name()), k));
                 }
             }
             combos = next;
@@ -219,12 +245,13 @@ pub fn configurations(
                 )));
             }
         }
-        for (label, btf, texel) in combos {
+        for (label, k) in combos {
             out.push(Config {
                 label: format!("{}{label}", method.name()),
                 method,
-                btf,
-                texel,
+                btf: k.btf,
+                texel: k.texel,
+                ground_sky: k.ground_sky,
             });
         }
     }
@@ -464,6 +491,9 @@ pub fn run(
             d.method = config.method;
             d.btf = config.btf;
             d.texel = config.texel;
+            if let Some(on) = config.ground_sky {
+                d.ground_sky = on;
+            }
             // The flight's own knobs win over the configuration's.
             f.apply(&mut d);
             if i == 0 {
@@ -644,6 +674,32 @@ mod tests {
         let plain = configurations(&[Method::Btf], &[], BtfSettings::default()).unwrap();
         assert_eq!((plain.len(), plain[0].label.as_str()), (1, "btf"));
         assert!(configurations(&[], &[], BtfSettings::default()).is_err());
+    }
+
+    #[test]
+    fn the_ground_sky_is_swept_for_every_image_based_method_and_reaches_the_frame() {
+        let sweeps = [Sweep::parse("ground_sky=on,off").unwrap()];
+        assert!(Sweep::parse("ground_sky=maybe").is_err());
+        let methods = [Method::Geometry, Method::Btf, Method::Hybrid, Method::Texel];
+        let c = configurations(&methods, &sweeps, BtfSettings::default()).unwrap();
+        let labels: Vec<&str> = c.iter().map(|c| c.label.as_str()).collect();
+        assert_eq!(
+            labels,
+            [
+                "geometry",
+                "btf ground_sky=on",
+                "btf ground_sky=off",
+                "hybrid ground_sky=on",
+                "hybrid ground_sky=off",
+                "texel ground_sky=on",
+                "texel ground_sky=off"
+            ]
+        );
+        assert_eq!(c[0].ground_sky, None);
+        assert_eq!(
+            (c[1].ground_sky, c[2].ground_sky),
+            (Some(true), Some(false))
+        );
     }
 
     fn row(

@@ -78,6 +78,7 @@ pub fn bake_knob_candidates(base: BtfSettings) -> Vec<Config> {
                 method: Method::Btf,
                 btf,
                 texel: Default::default(),
+                ground_sky: None,
             });
         }
     }
@@ -192,6 +193,7 @@ pub fn candidates(base: BtfSettings) -> Vec<Config> {
                         method: Method::Btf,
                         btf,
                         texel: Default::default(),
+                        ground_sky: None,
                     });
                 }
             }

@@ -216,6 +216,13 @@ pub struct FrameReport {
     /// The frame was the reference (`geometry` with sky visibility and whole-scene sun
     /// shadows).
     pub reference: bool,
+    /// A reference frame's sun cascades' side (texels; absent for other frames).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sun_map_size: Option<u32>,
+    /// A reference frame's per-tree sun maps' side (texels; 0: none, the cascades alone;
+    /// absent for other frames).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub self_map_size: Option<u32>,
     /// An image-based method's ground saw the sky visibility (`FrameDesc::ground_sky`).
     pub ground_sky: bool,
     /// The sky visibility of a reference frame or of the ground (absent for other frames).
@@ -319,6 +326,8 @@ impl FrameReport {
                 tile_distance: frame.texel.tile_distance,
             }),
             reference: reference.is_some(),
+            sun_map_size: reference.map(|r| r.sun_map_size.max(frame.shadows.map_size)),
+            self_map_size: reference.map(|r| r.self_map_size),
             ground_sky: renderer.ground_sky_applies(frame),
             sky: (reference.is_some() || renderer.ground_sky_applies(frame))
                 .then(|| renderer.sky_visibility())
