@@ -45,8 +45,8 @@ struct Frame {
     cascade_texel_uv: f32,
     // World size of one texel in each cascade.
     cascade_texel_world: vec3<f32>,
-    // Half the side of the square the ground maps cover (m; 0: not built): past it, on
-    // the horizon ring, they shade nothing (`ground_coords`).
+    // Half the side of the scene's square (m; 0: not built): past it, on the horizon
+    // ring, the terrain depth map shades nothing (`ground_coords`).
     ground_half: f32,
     // The sun's view of the whole scene, for the ground shadow maps.
     ground_light_view_proj: mat4x4<f32>,

@@ -71,14 +71,18 @@ fn cascade_for(view_depth: f32) -> u32 {
 }
 
 // Where `world` falls in the ground shadow maps: texture coordinates (already scaled to
-// the part in use) and depth; uv < 0 when outside, or past the square they were drawn
-// from (the horizon ring is drawn, not shadowed: read there, the square's maps cast
-// streaks of shadow across it).
-fn ground_coords(world: vec3<f32>) -> vec3<f32> {
+// the part in use) and depth; uv < 0 when outside them, or when `square_only` and past the
+// scene's square. The terrain depth is read in the square only: the horizon ring's coarse
+// cells, raised where its far forest stands, cast blocks of shadow across it in that map.
+// The trees' transmittance is read wherever the maps reach, so the edge trees' shadows
+// fall on the ring as they do in the reference (the ring is drawn into the same pass,
+// with depth, so it hides the trees behind it from the sun).
+fn ground_coords(world: vec3<f32>, square_only: bool) -> vec3<f32> {
     let lp = frame.ground_light_view_proj * vec4<f32>(world, 1.0);
     let ndc = lp.xyz / lp.w;
     let uv = ndc_to_uv(ndc.xy);
-    let past = frame.ground_half > 0.0 && max(abs(world.x), abs(world.z)) > frame.ground_half;
+    let past = square_only && frame.ground_half > 0.0
+        && max(abs(world.x), abs(world.z)) > frame.ground_half;
     if past || any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
         return vec3<f32>(-1.0, -1.0, ndc.z);
     }
@@ -106,7 +110,7 @@ fn pcf3x3(map: texture_depth_2d_array, layer: i32, uv: vec2<f32>, depth: f32, st
 fn terrain_visibility(world: vec3<f32>, normal: vec3<f32>) -> f32 {
     // Offset along the normal and towards the sun by about a texel, against acne.
     let p = world + (normal * 1.5 + frame.sun_dir) * frame.ground_texel_world;
-    let c = ground_coords(p);
+    let c = ground_coords(p, true);
     if c.x < 0.0 || c.z > 1.0 {
         return 1.0;
     }
@@ -146,10 +150,13 @@ fn cascade_coords(world: vec3<f32>, normal: vec3<f32>, view_depth: f32) -> vec4<
     let lp = frame.light_view_proj[c] * vec4<f32>(p, 1.0);
     let ndc = lp.xyz / lp.w;
     let uv = ndc_to_uv(ndc.xy);
-    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) || ndc.z > 1.0 {
+    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) {
         return vec4<f32>(0.0, 0.0, 0.0, -1.0);
     }
-    return vec4<f32>(uv, ndc.z, f32(c));
+    // The maps' depth spans the scene's bounds. A point past their far side (the horizon
+    // ring beyond them, away from the sun) is behind everything drawn in them: compared at
+    // the far side, every caster over it shades it and open texels (cleared to 1) do not.
+    return vec4<f32>(uv, min(ndc.z, 0.99999), f32(c));
 }
 
 // Fraction of the sky `world` sees (1 = all of it), read trilinearly from the volume half
@@ -168,7 +175,7 @@ fn sky_visibility(world: vec3<f32>, normal: vec3<f32>) -> f32 {
 
 // How much of the sun the trees let through to `world`, from the alpha shadow map.
 fn ground_transmittance(world: vec3<f32>) -> f32 {
-    let c = ground_coords(world);
+    let c = ground_coords(world, false);
     if c.x < 0.0 {
         return 1.0;
     }

@@ -1,6 +1,7 @@
 //! Ground shadows of the image-based methods: the alpha shadow map darkens the terrain under
-//! a tree (and nowhere else), and the terrain's own depth shadows let a ridge shade the
-//! valley behind it at a low sun but not at noon.
+//! a tree (and nowhere else), also past the scene's square on the horizon ring, and the
+//! terrain's own depth shadows let a ridge shade the valley behind it at a low sun but not
+//! at noon.
 
 mod common;
 
@@ -111,6 +112,62 @@ fn the_alpha_shadow_map_darkens_the_ground_under_a_tree_and_nowhere_else() {
         (sunny - sunny_without).abs() < 0.05 * sunny_without,
         "{sunny} vs {sunny_without}"
     );
+}
+
+#[test]
+fn a_tree_at_the_squares_edge_shadows_the_horizon_ring_past_it() {
+    // The lone fir at the centre of a 10 m square with the horizon ring around it: its
+    // crown's shadow falls about 11 m to the north-west, past the square, on the ring. The
+    // trees' alpha map is read wherever it reaches (only the terrain's depth map stops at
+    // the square), so btf shadows the ring there as the ground truth's cascades do.
+    let ctx = gpu();
+    let mut scene = lone_tree();
+    scene.terrain.size = 10.0;
+    scene.terrain.horizon = true;
+    let mut world = scene.build_world().unwrap();
+    // Bare ring: no far forest's canopy raised around so small a square.
+    world.terrain.set_far_cover(None);
+    world.forest.instances.truncate(1);
+    world.forest.instances[0].position = Vec3::new(0.0, world.terrain.height_at(0.0, 0.0), 0.0);
+    let mut renderer = Renderer::new(&ctx, &world).unwrap();
+    // The 80 m scene's bake: the same fir (its tree cube maps were baked on that square;
+    // they shade the crown, not the ground).
+    renderer.attach_btf(&ctx, baked(), &world).unwrap();
+    let (w, h) = (96u32, 96u32);
+    let CrownShadow {
+        frame,
+        shadow_px: (sx, sy),
+        lit_px: (lx, ly),
+    } = crown_shadow(&scene, &world, w, h);
+    let shadow_at = frame.camera.position - Vec3::new(0.0, 70.0, 0.01);
+    let half = 0.5 * world.terrain.size;
+    assert!(
+        shadow_at.x.abs().max(shadow_at.z.abs()) > half + 2.0,
+        "the test needs the shadow past the square: {shadow_at}"
+    );
+    for method in [Method::Geometry, Method::Btf] {
+        let mut f = frame;
+        f.method = method;
+        let (with, _) = renderer.render_image(&ctx, &f, w, h, 1).unwrap();
+        f.ground_shadows = false;
+        f.shadows.enabled = false;
+        let (without, _) = renderer.render_image(&ctx, &f, w, h, 1).unwrap();
+        let under = mean_luminance(&with, sx, sy, 3);
+        let under_without = mean_luminance(&without, sx, sy, 3);
+        let sunny = mean_luminance(&with, lx, ly, 3);
+        let sunny_without = mean_luminance(&without, lx, ly, 3);
+        eprintln!(
+            "{method:?}: ring under the crown's shadow {under:.4} (no shadows: {under_without:.4}); sunny side {sunny:.4} ({sunny_without:.4})"
+        );
+        assert!(
+            under < 0.8 * under_without,
+            "{method:?}: the ring past the square should be shaded: {under} vs {under_without}"
+        );
+        assert!(
+            (sunny - sunny_without).abs() < 0.05 * sunny_without,
+            "{method:?}: {sunny} vs {sunny_without}"
+        );
+    }
 }
 
 /// A north-south ridge 30 m high at x = 0 on a 200 m square, flat elsewhere.

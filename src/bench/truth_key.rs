@@ -15,8 +15,9 @@ use crate::{Error, Result};
 
 /// Bumped whenever the reference renderer changes what it draws: old truths are re-rendered.
 /// (3: the presets grew denser foliage and the horizon ring carries the far forest; 4: each
-/// tree shades itself through a sun map of its own.)
-pub const TRUTH_REVISION: u32 = 4;
+/// tree shades itself through a sun map of its own; 5: the cascades shade points past the
+/// scene's bounds away from the sun, the horizon ring under the edge trees' shadows.)
+pub const TRUTH_REVISION: u32 = 5;
 
 /// Everything that decides the pixels of one reference frame.
 #[derive(Clone, Copy, Debug)]

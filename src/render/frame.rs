@@ -334,8 +334,8 @@ pub struct FrameUniforms {
     pub cascade_texel_uv: f32,
     /// World size of one texel in each cascade.
     pub cascade_texel_world: [f32; 3],
-    /// Half the side of the square the ground maps cover (m): past it (the horizon ring)
-    /// nothing is shaded by them. 0 until they are built.
+    /// Half the side of the scene's square (m): past it (the horizon ring) the terrain
+    /// depth map shades nothing; the trees' alpha map still does. 0 until they are built.
     pub ground_half: f32,
     /// The sun's view of the whole scene, for the ground shadow maps.
     pub ground_light_view_proj: [[f32; 4]; 4],
