@@ -75,9 +75,7 @@ fn btf(label: &str, f: impl FnOnce(&mut BtfSettings)) -> Config {
     Config {
         label: label.into(),
         method: Method::Btf,
-        btf,
-        texel: Default::default(),
-        ground_sky: None,
+        knobs: run::Knobs::btf(btf),
     }
 }
 
@@ -120,7 +118,7 @@ fn steps(
     for f in frames {
         let mut d = *base;
         d.method = config.method;
-        d.btf = config.btf;
+        config.knobs.apply_to(&mut d);
         f.apply(&mut d);
         let (img, _) = renderer.render_image(ctx, &d, size, size, 1).unwrap();
         let img = rgb(&img);
@@ -268,7 +266,7 @@ fn light_between_samples_changes_the_image_in_even_steps() {
         for f in &frames {
             let mut d = b;
             d.method = config.method;
-            d.btf = config.btf;
+            config.knobs.apply_to(&mut d);
             f.apply(&mut d);
             let (img, _) = renderer.render_image(&ctx, &d, size, size, 1).unwrap();
             let img = rgb(&img);
@@ -497,7 +495,7 @@ fn hybrid_switches_a_near_tree_to_geometry_and_cross_fades_the_switch() {
     let mut at = |k: f32, fade: f32| {
         let mut d = b;
         d.method = Method::Hybrid;
-        d.btf = hybrid("", fade).btf;
+        d.btf = hybrid("", fade).knobs.btf;
         frame(0, centre + dir * bound * k, centre, None).apply(&mut d);
         let (_, stats) = renderer.render_image(&ctx, &d, size, size, 1).unwrap();
         stats.btf.expect("hybrid reports btf stats")

@@ -389,7 +389,7 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
                 path.display()
             ))
         })?;
-        let mut new = with_render_table(&text, &configs[i].btf);
+        let mut new = with_render_table(&text, &configs[i].knobs.btf);
         if let Some((b, _)) = bakes[i] {
             new = with_table_keys(
                 &new,
@@ -426,7 +426,7 @@ impl TuneOutcome {
     /// What `canopy tune --json` prints.
     pub fn json(&self, target: &TuneTarget) -> String {
         let settings = self.chosen.map(|i| {
-            let b = &self.configs[i].btf;
+            let b = &self.configs[i].knobs.btf;
             serde_json::json!({
                 "lod_scale": b.lod_scale,
                 "weight_threshold": b.weight_threshold,

@@ -81,8 +81,8 @@ pub fn summary_json(run: &RunInfo, results: &BenchResults) -> String {
         .zip(&results.configs)
         .map(|(summary, c)| ConfigJson {
             summary,
-            settings: c.method.is_btf().then(|| Settings::from(&c.btf)),
-            texel_settings: (c.method == crate::render::Method::Texel).then_some(c.texel),
+            settings: c.method.is_btf().then(|| Settings::from(&c.knobs.btf)),
+            texel_settings: (c.method == crate::render::Method::Texel).then_some(c.knobs.texel),
         })
         .collect();
     serde_json::to_string_pretty(&SummaryJson {

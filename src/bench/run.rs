@@ -200,16 +200,32 @@ pub struct Knobs {
     pub ground_sky: Option<bool>,
 }
 
+impl Knobs {
+    /// `btf`'s knobs only (texel's and the ground sky's the frame's own).
+    pub fn btf(btf: BtfSettings) -> Self {
+        Self {
+            btf,
+            ..Self::default()
+        }
+    }
+
+    /// Sets these knobs on a frame.
+    pub fn apply_to(&self, d: &mut FrameDesc) {
+        d.btf = self.btf;
+        d.texel = self.texel;
+        if let Some(on) = self.ground_sky {
+            d.ground_sky = on;
+        }
+    }
+}
+
 /// One configuration: a method and, for `btf`, `hybrid` and `texel`, their knobs.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Config {
     /// e.g. `btf lod_scale=2 weight_threshold=0.1`, or the method's name.
     pub label: String,
     pub method: Method,
-    pub btf: BtfSettings,
-    pub texel: TexelSettings,
-    /// The ground's sky visibility (`FrameDesc::ground_sky`); `None`: the frame's own.
-    pub ground_sky: Option<bool>,
+    pub knobs: Knobs,
 }
 
 /// Most configurations one bench may run.
@@ -224,10 +240,7 @@ pub fn configurations(
 ) -> Result<Vec<Config>> {
     let mut out = Vec::new();
     for &method in methods {
-        let start = Knobs {
-            btf: base,
-            ..Knobs::default()
-        };
+        let start = Knobs::btf(base);
         let mut combos: Vec<(String, Knobs)> = vec![(String::new(), start)];
         for sweep in sweeps.iter().filter(|s| s.knob.applies_to(method)) {
             let mut next = Vec::new();
@@ -249,9 +262,7 @@ pub fn configurations(
             out.push(Config {
                 label: format!("{}{label}", method.name()),
                 method,
-                btf: k.btf,
-                texel: k.texel,
-                ground_sky: k.ground_sky,
+                knobs: k,
             });
         }
     }
@@ -489,11 +500,7 @@ pub fn run(
             });
             let mut d = desc;
             d.method = config.method;
-            d.btf = config.btf;
-            d.texel = config.texel;
-            if let Some(on) = config.ground_sky {
-                d.ground_sky = on;
-            }
+            config.knobs.apply_to(&mut d);
             // The flight's own knobs win over the configuration's.
             f.apply(&mut d);
             if i == 0 {
@@ -664,7 +671,7 @@ mod tests {
         assert_eq!(c[13].label, "billboard");
         assert_eq!(c[1].label, "btf lod_scale=0.5 weight_threshold=0");
         assert_eq!(
-            (c[12].btf.lod_scale, c[12].btf.weight_threshold),
+            (c[12].knobs.btf.lod_scale, c[12].knobs.btf.weight_threshold),
             (4.0, 0.2)
         );
         let mut labels: Vec<&str> = c.iter().map(|c| c.label.as_str()).collect();
@@ -695,9 +702,9 @@ mod tests {
                 "texel ground_sky=off"
             ]
         );
-        assert_eq!(c[0].ground_sky, None);
+        assert_eq!(c[0].knobs.ground_sky, None);
         assert_eq!(
-            (c[1].ground_sky, c[2].ground_sky),
+            (c[1].knobs.ground_sky, c[2].knobs.ground_sky),
             (Some(true), Some(false))
         );
     }

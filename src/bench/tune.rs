@@ -3,7 +3,7 @@
 //! the cheapest one whose mean FLIP and flicker ratio meet the targets is chosen. One grid
 //! measured once: a looser target can only pick a configuration as cheap or cheaper.
 
-use super::run::{Config, ConfigSummary};
+use super::run::{Config, ConfigSummary, Knobs};
 use crate::render::Method;
 use crate::render::btf::{BtfSettings, PlaneMode};
 use crate::{Error, Result};
@@ -76,9 +76,7 @@ pub fn bake_knob_candidates(base: BtfSettings) -> Vec<Config> {
             out.push(Config {
                 label: label(&btf),
                 method: Method::Btf,
-                btf,
-                texel: Default::default(),
-                ground_sky: None,
+                knobs: Knobs::btf(btf),
             });
         }
     }
@@ -191,9 +189,7 @@ pub fn candidates(base: BtfSettings) -> Vec<Config> {
                     out.push(Config {
                         label: label(&btf),
                         method: Method::Btf,
-                        btf,
-                        texel: Default::default(),
-                        ground_sky: None,
+                        knobs: Knobs::btf(btf),
                     });
                 }
             }
