@@ -42,6 +42,7 @@ fn a_tree_between_the_sun_and_the_ground_darkens_the_ground_under_it() {
         mut frame,
         shadow_px: (sx, sy),
         lit_px: (lx, ly),
+        ..
     } = crown_shadow(&scene, &world, w, h);
 
     let shadowed = render(&ctx, &world, &frame, w, h);

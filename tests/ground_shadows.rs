@@ -53,6 +53,7 @@ fn the_alpha_shadow_map_darkens_the_ground_under_a_tree_and_nowhere_else() {
         mut frame,
         shadow_px: (sx, sy),
         lit_px: (lx, ly),
+        ..
     } = crown_shadow(&scene, &world, w, h);
     frame.method = Method::Btf;
     let (with, stats) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
@@ -136,10 +137,10 @@ fn a_tree_at_the_squares_edge_shadows_the_horizon_ring_past_it() {
     let (w, h) = (96u32, 96u32);
     let CrownShadow {
         frame,
+        shadow_at,
         shadow_px: (sx, sy),
         lit_px: (lx, ly),
     } = crown_shadow(&scene, &world, w, h);
-    let shadow_at = frame.camera.position - Vec3::new(0.0, 70.0, 0.01);
     let half = 0.5 * world.terrain.size;
     assert!(
         shadow_at.x.abs().max(shadow_at.z.abs()) > half + 2.0,
@@ -315,9 +316,12 @@ fn the_alpha_shadow_map_darkens_the_ground_in_proportion_to_the_trees_opacity() 
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     renderer.attach_btf(&ctx, baked(), &world).unwrap();
     let (w, h) = (192u32, 192u32);
-    let mut frame = crown_shadow(&scene, &world, w, h).frame;
+    let CrownShadow {
+        mut frame,
+        shadow_at,
+        ..
+    } = crown_shadow(&scene, &world, w, h);
     // Closer than the other shadow tests: about 0.15 m per pixel.
-    let shadow_at = frame.camera.position - Vec3::new(0.0, 70.0, 0.01);
     frame.camera = Camera::look_at(shadow_at + Vec3::new(0.0, 40.0, 0.01), shadow_at, 40.0);
 
     let mut darkness = |method: Method, supersample: u32| {

@@ -58,9 +58,10 @@ pub const SETTLED: f64 = 0.01;
 /// then or later) and whose resident peak has settled ([`SETTLED`]): it holds nothing of
 /// the warm-up. Lavapipe's own allocations (the bulk of resident memory: heaptrack puts
 /// 666 MB of the soak's peak under one call site on lavapipe's queue thread, millions of
-/// small blocks) reach their high-water mark in steps of about 38 MB, at times set by how the frames fall, up to a minute after every
-/// action has run twice (the small scene in the debug profile, 2026-11); a leak never
-/// settles, and the run then stops at [`MAX_STRETCH`] unjudged, which fails it.
+/// small blocks) reach their high-water mark in steps of about 38 MB, at times set by how
+/// the frames fall, up to a minute after every action has run twice (the small scene in
+/// the debug profile, 2026-11); a leak never settles, and the run then stops at
+/// [`MAX_STRETCH`] unjudged, which fails it.
 fn baseline(samples: &[Sample], after: f64) -> Option<&Sample> {
     samples
         .windows(2)

@@ -201,7 +201,7 @@ pub struct Knobs {
 }
 
 impl Knobs {
-    /// `btf`'s knobs only (texel's and the ground sky's the frame's own).
+    /// `btf`'s knobs; texel's at their defaults, the ground sky the frame's own.
     pub fn btf(btf: BtfSettings) -> Self {
         Self {
             btf,

@@ -94,6 +94,8 @@ pub fn mean_luminance(img: &RgbaImage, cx: i64, cy: i64, half: i64) -> f32 {
 /// mirrored to the tree's sunny side, for a `w` x `h` image.
 pub struct CrownShadow {
     pub frame: FrameDesc,
+    /// Where the sun projects the crown's centre onto the ground (what the camera looks at).
+    pub shadow_at: Vec3,
     pub shadow_px: (i64, i64),
     pub lit_px: (i64, i64),
 }
@@ -119,6 +121,7 @@ pub fn crown_shadow(scene: &Scene, world: &World, w: u32, h: u32) -> CrownShadow
     };
     CrownShadow {
         frame,
+        shadow_at,
         shadow_px: to_px(shadow_at),
         lit_px: to_px(lit_at),
     }
