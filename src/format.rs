@@ -2,36 +2,39 @@
 //! texel volumes),
 //! in one versioned, checksummed file that the viewer caches and validates on load.
 //!
-//! # Byte layout (format version 3)
+//! # Byte layout (format version 5)
 //!
 //! All integers are little-endian, `f32` is IEEE 754 binary32 (little-endian bits). Offsets
 //! are in bytes. There is no padding anywhere.
 //!
 //! ```text
-//! HEADER (60 + 16*N bytes)
+//! HEADER (64 + 16*N bytes)
 //!   off  size  field
 //!    0     8   magic           "CANOPY\r\n" (43 41 4E 4F 50 59 0D 0A); the CR LF pair catches
 //!                              a file whose line endings were converted in transfer
-//!    8     4   version         u32, 3
+//!    8     4   version         u32, 5
 //!   12     4   section_count   u32 N, at most MAX_SECTIONS (4096)
 //!   16     8   file_size       u64, total length of the file in bytes, header included
 //!   24     8   scene_hash      u64, hash of the scene text + bake settings (from the caller)
-//!   32     4   views           u32, one of 6, 18, 66, 258          \
+//!   32     4   views           u32, one of 6, 18, 66, 258 (twig and   \
+//!                              main-branch sets)                     |
 //!   36     4   lights          u32, one of 6, 18, 66, 258           |
 //!   40     4   resolution      u32, one of 32, 64, 128              | BakeSettings
 //!   44     4   supersample     u32, 1..=8                           |
-//!   48     4   vcm_resolution  u32, 8..=128                        /
+//!   48     4   vcm_resolution  u32, 8..=128                         |
 //!   52     4   texel_resolution u32, 0 (no texel volumes) or 16..=256: voxels along the
-//!                              longest side of each species' box
-//!   56  16*N   section table, one 16-byte entry per section, in file order:
+//!                              longest side of each species' box    |
+//!   56     4   tree_views      u32, one of 6, 18, 66, 258 (tree-   /
+//!                              level sets)
+//!   60  16*N   section table, one 16-byte entry per section, in file order:
 //!                +0  u32 kind      1 = BTF image sets, 2 = VCM sets, 3 = texel volumes
 //!                                  (0 and others invalid)
 //!                +4  u32 crc32     CRC-32 (IEEE, as crc32fast) of the section's payload
 //!                +8  u64 length    payload length in bytes, 4..=MAX_SECTION_BYTES (1 GiB)
-//!   56+16N  4  header_crc      u32, CRC-32 of header bytes [0, 56+16N)
+//!   60+16N  4  header_crc      u32, CRC-32 of header bytes [0, 60+16N)
 //!
 //! PAYLOADS: the N section payloads, back to back in table order, starting right after
-//! header_crc; their lengths sum to exactly file_size - (60 + 16N) and the file ends there.
+//! header_crc; their lengths sum to exactly file_size - (64 + 16N) and the file ends there.
 //!
 //! SECTION PAYLOAD (either kind)
 //!    0     4   record_count    u32 R
@@ -122,7 +125,7 @@ pub const MAGIC: [u8; 8] = *b"CANOPY\r\n";
 /// cell's index in `crate::vcm::cells::ForestCells`), not one tree's.
 pub const VCM_CELL_SPECIES: u32 = u32::MAX;
 /// The format version this code writes and the only one it reads.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 /// Ambient images per view in a BTF image set: lit by the sky alone, then by the light the
 /// ground sends up alone (the two halves of the renderer's hemispherical ambient).
 pub const AMBIENT_IMAGES_PER_VIEW: u32 = 2;
@@ -148,7 +151,7 @@ pub const TEXEL_DIM_RANGE: RangeInclusive<u32> = 1..=256;
 pub const CUBE_FACES: usize = 6;
 
 /// Bytes of the header before the section table.
-const FIXED_HEADER_BYTES: usize = 56;
+const FIXED_HEADER_BYTES: usize = 60;
 /// Bytes of one section-table entry.
 const SECTION_ENTRY_BYTES: usize = 16;
 /// Bytes of a section payload before its records (the record count).
@@ -291,8 +294,10 @@ pub struct Baked {
 /// The bake parameters stored in the header.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BakeSettings {
-    /// View directions per BTF set: one of [`DIRECTION_COUNTS`].
+    /// View directions per twig and main-branch BTF set: one of [`DIRECTION_COUNTS`].
     pub views: u32,
+    /// View directions per tree-level BTF set: one of [`DIRECTION_COUNTS`].
+    pub tree_views: u32,
     /// Light directions per BTF set: one of [`DIRECTION_COUNTS`].
     pub lights: u32,
     /// BTF image resolution: one of [`BTF_RESOLUTIONS`].
@@ -425,6 +430,9 @@ impl BakeSettings {
         };
         if !DIRECTION_COUNTS.contains(&self.views) {
             return bad("views", self.views, SETTINGS_DIRECTIONS);
+        }
+        if !DIRECTION_COUNTS.contains(&self.tree_views) {
+            return bad("tree_views", self.tree_views, SETTINGS_DIRECTIONS);
         }
         if !DIRECTION_COUNTS.contains(&self.lights) {
             return bad("lights", self.lights, SETTINGS_DIRECTIONS);
@@ -958,6 +966,7 @@ impl<'a> Encoding<'a> {
             s.supersample,
             s.vcm_resolution,
             s.texel_resolution,
+            s.tree_views,
         ] {
             header.extend_from_slice(&v.to_le_bytes());
         }
@@ -1280,6 +1289,7 @@ fn decode<R: Read>(
         supersample: u32_at(&rest, 32),
         vcm_resolution: u32_at(&rest, 36),
         texel_resolution: u32_at(&rest, 40),
+        tree_views: u32_at(&rest, 44),
     };
     settings.validate()?;
 
@@ -1667,6 +1677,7 @@ mod tests {
     fn settings() -> BakeSettings {
         BakeSettings {
             views: 6,
+            tree_views: 6,
             lights: 6,
             resolution: 32,
             supersample: 2,
@@ -1846,7 +1857,7 @@ mod tests {
         assert_eq!(u64_at(&bytes, 16), bytes.len() as u64);
         assert_eq!(
             bytes.len() as u64,
-            60 + 3 * 16
+            64 + 3 * 16
                 + 3 * 4
                 + 2 * 56
                 + 2 * 56
@@ -1875,7 +1886,7 @@ mod tests {
             texels: Vec::new(),
         };
         let bytes = to_bytes(&baked);
-        assert_eq!(bytes.len(), 60);
+        assert_eq!(bytes.len(), 64);
         assert_eq!(from_bytes(&bytes).unwrap(), baked);
     }
 
@@ -1960,7 +1971,7 @@ mod tests {
     fn flipped_header_byte_is_a_checksum_mismatch() {
         let clean = to_bytes(&sample());
         // scene hash, settings, a section crc, a section length, the header crc itself
-        for at in [24, 33, 48, 56 + 5, 56 + 16 + 8, header_end(&clean) + 1] {
+        for at in [24, 33, 48, 57, 60 + 5, 60 + 16 + 8, header_end(&clean) + 1] {
             let mut bytes = clean.clone();
             bytes[at] ^= 0x01;
             match from_bytes(&bytes) {
@@ -2075,7 +2086,7 @@ mod tests {
 
     #[test]
     fn wrong_version_is_unsupported() {
-        for version in [0u32, 1, 2, 3, 5, u32::MAX] {
+        for version in [0u32, 1, 2, 3, 4, 6, u32::MAX] {
             let mut bytes = to_bytes(&small());
             bytes[8..12].copy_from_slice(&version.to_le_bytes());
             reseal_header(&mut bytes);

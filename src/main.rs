@@ -773,11 +773,11 @@ fn bake(
         println!("{}", serde_json::to_string(&r).context("encoding JSON")?);
     } else {
         println!(
-            "baked {} image sets ({} views x {} lights + {} sky images, {}x{} texels) in {:.1} s",
+            "baked {} image sets ({} views, {} at the tree level, x {} lights + 2 sky and ground images, {}x{} texels) in {:.1} s",
             r.sets.len(),
             r.views,
+            r.tree_views,
             r.lights,
-            r.views,
             r.resolution,
             r.resolution,
             r.seconds

@@ -684,6 +684,23 @@ mod tests {
     }
 
     #[test]
+    fn each_set_begins_with_every_smaller_set_in_order() {
+        // The btf method keeps one view-axes buffer, the largest set's, for every level.
+        let sets = all_sets();
+        for (k, small) in sets.iter().enumerate() {
+            for large in &sets[k..] {
+                assert_eq!(
+                    &large.directions()[..small.len()],
+                    small.directions(),
+                    "{} directions against {}",
+                    small.len(),
+                    large.len()
+                );
+            }
+        }
+    }
+
+    #[test]
     fn directions_are_unit_and_distinct() {
         for set in all_sets() {
             let dirs = set.directions();

@@ -383,10 +383,11 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     // One byte changed inside the texel volumes' section (kind 3): refused, naming it.
     let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
     let sections = u32_at(12) as usize;
-    let mut at = 60 + 16 * sections;
+    // The format's header: 60 fixed bytes, the section table, the header checksum.
+    let mut at = 64 + 16 * sections;
     let mut texel_section = None;
     for i in 0..sections {
-        let entry = 56 + 16 * i;
+        let entry = 60 + 16 * i;
         let len = u64::from_le_bytes(bytes[entry + 8..entry + 16].try_into().unwrap()) as usize;
         if u32_at(entry) == 3 {
             texel_section = Some((at, len));

@@ -168,10 +168,11 @@ fn fix_checksums(b: &mut [u8]) {
     let Some(n) = u32_at(b, 12).map(|n| n as usize).filter(|&n| n <= 64) else {
         return;
     };
-    let table_end = 56 + 16 * n;
+    // The format's header: 60 fixed bytes, then the section table.
+    let table_end = 60 + 16 * n;
     let mut at = table_end + 4;
     for i in 0..n {
-        let entry = 56 + 16 * i;
+        let entry = 60 + 16 * i;
         let Some(len) = b
             .get(entry + 8..entry + 16)
             .map(|s| u64::from_le_bytes(s.try_into().unwrap_or([0; 8])) as usize)
@@ -200,6 +201,7 @@ fn noise(seed: u32, len: usize) -> Vec<u8> {
 fn baked_seeds() -> Vec<Vec<u8>> {
     let settings = BakeSettings {
         views: 6,
+        tree_views: 6,
         lights: 6,
         resolution: 32,
         supersample: 2,

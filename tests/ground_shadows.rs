@@ -17,11 +17,12 @@ use glam::Vec3;
 
 use common::*;
 
-/// One fir on flat ground, a coarse bake, but with 18 views rather than the file's 6: they
-/// include east at 45° up, where the proportion test puts the sun.
+/// One fir on flat ground, a coarse bake, but with 18 views rather than the file's 6 (at
+/// every level): they include east at 45° up, where the proportion test puts the sun.
 fn lone_tree() -> Scene {
     let mut scene = Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses");
     scene.bake.views = 18;
+    scene.bake.tree_views = 18;
     scene
 }
 

@@ -142,7 +142,7 @@ fn lone_fir_against_the_reference(
     let world = scene.build_world().unwrap();
     let settings = canopy::bake::cache::settings_of(scene);
     let baked = canopy::bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap();
-    let views = canopy::sphere::DirectionSet::with_count(settings.views as usize).unwrap();
+    let views = canopy::sphere::DirectionSet::with_count(settings.tree_views as usize).unwrap();
     let lights = canopy::sphere::DirectionSet::with_count(settings.lights as usize).unwrap();
     let view = *views
         .directions()

@@ -37,11 +37,16 @@ impl PrototypeInfo {
     /// The list for `world`, with the bake's sampling from `settings`.
     pub fn of_world(world: &World, settings: &crate::format::BakeSettings) -> Vec<PrototypeInfo> {
         let counts = world.forest.species_histogram(world.species.len());
-        let btf = 3 * crate::format::btf_record_bytes(
-            settings.views,
-            settings.lights,
-            settings.resolution,
-        );
+        let btf: u64 = crate::model::Level::ALL
+            .iter()
+            .map(|&l| {
+                crate::format::btf_record_bytes(
+                    crate::bake::views_of(settings, l),
+                    settings.lights,
+                    settings.resolution,
+                )
+            })
+            .sum();
         let vcm = crate::format::vcm_record_bytes(settings.vcm_resolution);
         world
             .species

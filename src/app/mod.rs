@@ -1284,6 +1284,7 @@ mod tests {
             scene_hash: 42,
             settings: crate::format::BakeSettings {
                 views: 6,
+                tree_views: 6,
                 lights: 6,
                 resolution: 32,
                 supersample: 2,

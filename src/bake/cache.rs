@@ -14,6 +14,7 @@ pub const BAKE_REVISION: u32 = 9;
 pub fn settings_of(scene: &Scene) -> BakeSettings {
     BakeSettings {
         views: scene.bake.views,
+        tree_views: scene.bake.tree_views,
         lights: scene.bake.lights,
         resolution: scene.bake.resolution,
         supersample: scene.bake.supersample,
@@ -59,6 +60,7 @@ pub fn scene_hash(scene: &Scene) -> u64 {
         s.supersample,
         s.vcm_resolution,
         s.texel_resolution,
+        s.tree_views,
         BAKE_REVISION,
     ] {
         h = fnv1a(&v.to_le_bytes(), h);
@@ -140,6 +142,9 @@ mod tests {
         assert_eq!(scene_hash(&a), scene_hash(&b));
         let mut c = a.clone();
         c.bake.views = 66;
+        assert_ne!(scene_hash(&a), scene_hash(&c));
+        let mut c = a.clone();
+        c.bake.tree_views = 18;
         assert_ne!(scene_hash(&a), scene_hash(&c));
         let mut d = a.clone();
         d.forest.seed += 1;

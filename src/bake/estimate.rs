@@ -5,19 +5,22 @@
 
 use serde::Serialize;
 
-use super::{image_count, texel, vcm};
+use super::{texel, vcm, views_of};
 use crate::format::{self, BakeSettings};
-use crate::model::World;
+use crate::model::{Level, World};
 use crate::{Error, Result};
 
-/// Seconds per BTF image at 256² pixels rendered (resolution x supersample), per VCM
-/// object, and per texel voxelisation pass of 64 voxels along the longest side. Measured
-/// on lavapipe (llvmpipe, 2 cores) with the default forest of today's presets (the fir of
-/// 123,800 triangles; 756 images of 64² at 4x4, 1122 VCM objects, 84 passes: 33.9, 5.5
-/// and 14.2 s of a 54 s bake); a GPU bakes faster.
-const SECONDS_PER_IMAGE: f64 = 0.045;
+/// Seconds per BTF image at 256² pixels rendered (resolution x supersample): a base and a
+/// share per triangle of the level photographed (the sun images draw its shadow maps too),
+/// per VCM object, and per texel voxelisation pass of 64 voxels along the longest side.
+/// Measured on lavapipe (llvmpipe, 2 cores) with the default forest (tree level at 66
+/// views: the fir's 528 tree images of 123,800 triangles 57.8 s, the broadleaf's of 97,064
+/// 43.0 s, each twig and main-branch level 1.4–2.5 s; 1122 VCM objects 5.5 s and 84 texel
+/// passes 11.3 s: 121 s in all); a GPU bakes faster.
+const SECONDS_PER_IMAGE: f64 = 0.010;
+const SECONDS_PER_IMAGE_TRIANGLE: f64 = 0.75e-6;
 const SECONDS_PER_VCM_OBJECT: f64 = 0.0055;
-const SECONDS_PER_TEXEL_PASS: f64 = 0.17;
+const SECONDS_PER_TEXEL_PASS: f64 = 0.135;
 /// A tree's own cube maps cost a base and a share per neighbour drawn into them (every
 /// tree within [`vcm::TREE_RANGE`]): 5.5 ms a tree with the default forest's 183
 /// neighbours, 118 ms with the example forest's 7,118 (600 trees per hectare; 8.5 trees a
@@ -118,8 +121,16 @@ fn too_large(what: &str, bytes: u64, key: &str) -> Error {
 /// The cost of baking `world` with `settings`.
 pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
     let species = world.species.len();
-    let btf_record = format::btf_record_bytes(settings.views, settings.lights, settings.resolution);
-    let btf = vec![btf_record; species * 3];
+    let btf: Vec<u64> = (0..species)
+        .flat_map(|_| Level::ALL)
+        .map(|level| {
+            format::btf_record_bytes(
+                views_of(settings, level),
+                settings.lights,
+                settings.resolution,
+            )
+        })
+        .collect();
     let mut vcm = vec![
         format::vcm_record_bytes(settings.vcm_resolution);
         vcm::species_object_count(world) as usize
@@ -150,7 +161,25 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
     let pixels = (f64::from(settings.resolution) * f64::from(settings.supersample) / 256.0).powi(2);
     let texel_passes = texel::step_count(world, settings.texel_resolution, settings.lights) as f64;
     let texel_scale = (f64::from(settings.texel_resolution) / 64.0).powi(2);
-    let seconds = image_count(settings, species) as f64 * SECONDS_PER_IMAGE * pixels.max(0.1)
+    let per_view = f64::from(settings.lights + format::AMBIENT_IMAGES_PER_VIEW);
+    let image_seconds: f64 = world
+        .species
+        .iter()
+        .flat_map(|t| {
+            let tris = t.triangle_counts();
+            Level::ALL.map(|l| {
+                let tris = match l {
+                    Level::Twig => tris.twig,
+                    Level::Branch => tris.branch,
+                    Level::Tree => tris.tree,
+                };
+                f64::from(views_of(settings, l))
+                    * per_view
+                    * (SECONDS_PER_IMAGE + SECONDS_PER_IMAGE_TRIANGLE * tris as f64)
+            })
+        })
+        .sum();
+    let seconds = image_seconds * pixels.max(0.1)
         + tree_vcm_seconds(world, tree_objects)
         + vcm::species_object_count(world) as f64 * SECONDS_PER_VCM_OBJECT
         + texel_passes * SECONDS_PER_TEXEL_PASS * texel_scale;
@@ -249,7 +278,8 @@ mod tests {
         assert_eq!(p.tree_vcm_objects, 1000);
         assert!(p.tree_vcm_bytes >= 1000 * 49_152);
         assert!(e.memory_bytes > VIEWER_BASE_BYTES + e.file_bytes);
-        assert!(e.seconds > 10.0 && e.seconds < 120.0, "{}", e.seconds);
+        // Measured: 121 s (lavapipe, 2 cores).
+        assert!(e.seconds > 80.0 && e.seconds < 160.0, "{}", e.seconds);
         assert!(available_memory().is_some_and(|m| m > 0));
     }
 
@@ -313,6 +343,7 @@ mod tests {
         let w = world();
         let huge = BakeSettings {
             views: 258,
+            tree_views: 258,
             lights: 258,
             resolution: 128,
             ..settings()

@@ -71,11 +71,22 @@ pub struct Progress {
     pub what: String,
 }
 
+/// View directions of the image sets of `level`: the tree level has its own count.
+pub fn views_of(settings: &BakeSettings, level: Level) -> u32 {
+    match level {
+        Level::Tree => settings.tree_views,
+        Level::Twig | Level::Branch => settings.views,
+    }
+}
+
 /// Number of images the bake renders for `species` species.
 pub fn image_count(settings: &BakeSettings, species: usize) -> u64 {
-    let per_level = u64::from(settings.views)
-        * (u64::from(settings.lights) + u64::from(crate::format::AMBIENT_IMAGES_PER_VIEW));
-    per_level * Level::ALL.len() as u64 * species as u64
+    let per_view = u64::from(settings.lights) + u64::from(crate::format::AMBIENT_IMAGES_PER_VIEW);
+    let views: u64 = Level::ALL
+        .iter()
+        .map(|&l| u64::from(views_of(settings, l)))
+        .sum();
+    per_view * views * species as u64
 }
 
 /// Steps of a whole bake of `world` (what [`Progress::total`] counts): one per BTF image and
@@ -207,8 +218,17 @@ pub fn bake_btf(
     scene_hash: u64,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Baked> {
-    let views = DirectionSet::with_count(settings.views as usize)
-        .map_err(|e| Error::BadInput(e.to_string()))?;
+    let view_sets = crate::model::PerLevel {
+        twig: settings.views,
+        branch: settings.views,
+        tree: settings.tree_views,
+    }
+    .map(|n| DirectionSet::with_count(n as usize).map_err(|e| Error::BadInput(e.to_string())));
+    let view_sets = crate::model::PerLevel {
+        twig: view_sets.twig?,
+        branch: view_sets.branch?,
+        tree: view_sets.tree?,
+    };
     let lights = DirectionSet::with_count(settings.lights as usize)
         .map_err(|e| Error::BadInput(e.to_string()))?;
     let total = image_count(settings, world.species.len());
@@ -216,6 +236,7 @@ pub fn bake_btf(
     let mut btf = Vec::new();
     for (s, tree) in world.species.iter().enumerate() {
         for level in Level::ALL {
+            let views = &view_sets[level];
             let object = level_object(tree, level);
             let (center, radius) = bounding_sphere(&object.tree_bounds);
             let studio = studio_world(object);
@@ -261,7 +282,7 @@ pub fn bake_btf(
             btf.push(BtfImageSet {
                 species: s as u32,
                 level,
-                views: settings.views,
+                views: views.len() as u32,
                 lights: settings.lights,
                 resolution: res,
                 center: center.to_array(),

@@ -38,7 +38,9 @@ pub struct BakeReport {
     pub texel_bytes: u64,
     /// One per species' texel volumes.
     pub texels: Vec<TexelReport>,
+    /// Views of the twig and main-branch sets, and of the tree-level ones.
     pub views: u32,
+    pub tree_views: u32,
     pub lights: u32,
     pub resolution: u32,
     pub supersample: u32,
@@ -149,6 +151,7 @@ impl BakeReport {
             texel_bytes: baked.texel_bytes(),
             texels,
             views: settings.views,
+            tree_views: settings.tree_views,
             lights: settings.lights,
             resolution: settings.resolution,
             supersample: settings.supersample,

@@ -317,7 +317,9 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
                 continue;
             }
             let mut s = scene.clone();
+            // The tried view count at every level, the tree level's too.
             s.bake.views = b.views;
+            s.bake.tree_views = b.views;
             s.bake.lights = b.lights;
             s.bake.resolution = b.resolution;
             let template = format!(

@@ -19,8 +19,13 @@ pub const TERRAIN_RESOLUTION: (u32, u32) = (2, 4097);
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct BakeParams {
-    /// View directions per image set: 6, 18, 66 or 258 (default 18).
+    /// View directions per twig and main-branch image set: 6, 18, 66 or 258 (default 18).
     pub views: u32,
+    /// View directions per tree-level image set: 6, 18, 66 or 258 (default 66). The tree
+    /// level is what most of a forest is drawn at, and blending 3 views 45° apart (18)
+    /// smears its crowns into ghosts; 66 views, 22° apart, is what the thesis pairs with a
+    /// single plane.
+    pub tree_views: u32,
     /// Light directions per view: 6, 18, 66 or 258 (default 6).
     pub lights: u32,
     /// Image side in texels: 32, 64 or 128 (default 64).
@@ -52,6 +57,7 @@ impl Default for BakeParams {
     fn default() -> Self {
         Self {
             views: 18,
+            tree_views: 66,
             lights: 6,
             resolution: 64,
             supersample: 4,
@@ -68,7 +74,11 @@ pub const BAKE_RESOLUTIONS: [u32; 3] = [32, 64, 128];
 
 impl BakeParams {
     pub fn check(&self) -> Result<(), FieldError> {
-        for (key, v) in [("views", self.views), ("lights", self.lights)] {
+        for (key, v) in [
+            ("views", self.views),
+            ("tree_views", self.tree_views),
+            ("lights", self.lights),
+        ] {
             if !BAKE_DIRECTIONS.contains(&v) {
                 return Err(FieldError::new(key, "must be one of 6, 18, 66, 258").with_found(v));
             }

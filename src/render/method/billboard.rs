@@ -32,7 +32,7 @@ pub struct FixedImage {
 impl FixedImage {
     /// The samples of `scene`'s bake nearest to the side view and its studio light.
     pub fn of(scene: &BtfScene) -> Self {
-        let (views, lights) = scene.directions();
+        let (views, lights) = scene.tree_directions();
         Self {
             view: views.nearest(SIDE) as u32,
             light: lights.nearest((SIDE + Vec3::Y).normalize()) as u32,
@@ -69,7 +69,7 @@ pub fn prepare(
     max: usize,
 ) -> BtfFrame {
     let image = FixedImage::of(scene);
-    let (views, lights) = scene.directions();
+    let (views, lights) = scene.tree_directions();
     let obj = views
         .directions()
         .get(image.view as usize)
@@ -218,7 +218,7 @@ mod tests {
         }
         // The side view is horizontal and the light 45 degrees up in front of it.
         let sc = scene();
-        let (views, lights) = sc.directions();
+        let (views, lights) = sc.tree_directions();
         assert!(views.directions()[image.view as usize].dot(SIDE) > 0.99);
         let l = lights.directions()[image.light as usize];
         assert!(l.dot((SIDE + Vec3::Y).normalize()) > 0.9, "{l}");

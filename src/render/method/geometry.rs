@@ -60,7 +60,10 @@ impl GeometryFrame {
         };
         let mut lists = vec![visible];
         if shadows_on {
-            for m in &cascades.matrices {
+            // The studio's one map serves every pixel (cascade 0, its split at infinity):
+            // the other cascades are never read, so nothing is drawn into them.
+            let used = if studio { 1 } else { cascades.matrices.len() };
+            for m in cascades.matrices.iter().take(used) {
                 lists.push(if frame.trees {
                     world.cull(&Frustum::from_ortho(*m))
                 } else {

@@ -39,14 +39,18 @@ struct SpeciesParts {
 /// What the `btf` method knows of a scene on the CPU.
 pub struct BtfScene {
     species: Vec<SpeciesParts>,
-    views: DirectionSet,
+    /// Each level's view samples (the tree level has its own count, `[bake] tree_views`).
+    views: PerLevel<DirectionSet>,
     lights: DirectionSet,
     vcm: Option<VcmShading>,
     /// Indices into the baked image sets, species by species, each finest level first: the
     /// order of the sets in the texture array.
     order: Vec<usize>,
-    /// Texture layers per image set: views x lights direct images, then views sky images.
-    layers_per_set: u32,
+    /// Each set's first texture layer (in `order`'s order): a set takes views x lights
+    /// direct images, then views sky-lit and views ground-lit images.
+    bases: Vec<u32>,
+    /// Texture layers every set together takes.
+    layers: u32,
     resolution: u32,
 }
 
@@ -151,18 +155,37 @@ impl BtfScene {
             ))
         };
         let s = &baked.settings;
-        let views = DirectionSet::with_count(s.views as usize).map_err(|e| bad(e.to_string()))?;
+        let views = PerLevel {
+            twig: s.views,
+            branch: s.views,
+            tree: s.tree_views,
+        };
         let lights = DirectionSet::with_count(s.lights as usize).map_err(|e| bad(e.to_string()))?;
         let mut index: HashMap<(u32, Level), usize> = HashMap::new();
         for (i, set) in baked.btf.iter().enumerate() {
-            if set.views != s.views || set.lights != s.lights || set.resolution != s.resolution {
+            if set.views != views[set.level]
+                || set.lights != s.lights
+                || set.resolution != s.resolution
+            {
                 return Err(bad(format!(
                     "image set {i} has other sizes than the file's settings"
                 )));
             }
             index.insert((set.species, set.level), i);
         }
-        let layers_per_set = s.views * (s.lights + crate::format::AMBIENT_IMAGES_PER_VIEW);
+        let views = PerLevel {
+            twig: DirectionSet::with_count(views.twig as usize),
+            branch: DirectionSet::with_count(views.branch as usize),
+            tree: DirectionSet::with_count(views.tree as usize),
+        };
+        let views = PerLevel {
+            twig: views.twig.map_err(|e| bad(e.to_string()))?,
+            branch: views.branch.map_err(|e| bad(e.to_string()))?,
+            tree: views.tree.map_err(|e| bad(e.to_string()))?,
+        };
+        let per_view = s.lights + crate::format::AMBIENT_IMAGES_PER_VIEW;
+        let mut layers = 0u32;
+        let mut bases = Vec::new();
         let mut order = Vec::new();
         let mut species = Vec::new();
         for (sp, tree) in world.species.iter().enumerate() {
@@ -184,12 +207,14 @@ impl BtfScene {
                 })?;
                 let set = &baked.btf[i];
                 sets[level] = SetInfo {
-                    layer_base: order.len() as u32 * layers_per_set,
+                    layer_base: layers,
                     center: Vec3::from(set.center),
                     radius: set.radius,
                     bounds: level_bounds[level],
                 };
                 texels[level] = set.texel_size;
+                bases.push(layers);
+                layers = layers.saturating_add(set.views.saturating_mul(per_view));
                 order.push(i);
             }
             species.push(SpeciesParts {
@@ -211,14 +236,15 @@ impl BtfScene {
             lights,
             vcm: VcmShading::new(baked, world)?,
             order,
-            layers_per_set,
+            bases,
+            layers,
             resolution: s.resolution,
         })
     }
 
     /// Texture layers every image set together needs.
     pub fn layer_count(&self) -> u64 {
-        u64::from(self.layers_per_set) * self.order.len() as u64
+        u64::from(self.layers)
     }
 
     /// Side of every image, in texels.
@@ -228,18 +254,21 @@ impl BtfScene {
 
     /// Each image set with its first texture layer, in layer order.
     pub fn image_sets<'a>(&self, baked: &'a Baked) -> impl Iterator<Item = (u32, &'a BtfImageSet)> {
-        let per_set = self.layers_per_set;
         self.order
             .iter()
-            .enumerate()
-            .filter_map(move |(k, &i)| Some((k as u32 * per_set, baked.btf.get(i)?)))
+            .zip(&self.bases)
+            .filter_map(move |(&i, &base)| Some((base, baked.btf.get(i)?)))
     }
 
     /// Each view sample's billboard axes in its object frame (right, up; w = 0), as the
-    /// shader's view-axes buffer holds them.
+    /// shader's view-axes buffer holds them: those of the levels' largest view set, whose
+    /// first directions are every smaller set's, in order (the octahedron's subdivisions
+    /// only add directions), so one buffer serves every level.
     pub fn view_axes(&self) -> Vec<[f32; 4]> {
-        self.views
-            .directions()
+        [&self.views.twig, &self.views.branch, &self.views.tree]
+            .into_iter()
+            .max_by_key(|v| v.len())
+            .map_or(&[][..], |v| v.directions())
             .iter()
             .flat_map(|&v| {
                 let (r, u) = billboard_axes(v);
@@ -248,9 +277,9 @@ impl BtfScene {
             .collect()
     }
 
-    /// The bake's view and light direction sets.
-    pub fn directions(&self) -> (&DirectionSet, &DirectionSet) {
-        (&self.views, &self.lights)
+    /// The tree level's view and light direction sets.
+    pub fn tree_directions(&self) -> (&DirectionSet, &DirectionSet) {
+        (&self.views.tree, &self.lights)
     }
 
     /// Species the scene holds.
@@ -504,7 +533,7 @@ impl BtfScene {
             let set = &parts.sets.tree;
             let rot = Mat3::from_mat4(m) * (1.0 / scale);
             let v_obj = rot.transpose() * to_sun;
-            let vb = self.views.blend(v_obj);
+            let vb = self.views.tree.blend(v_obj);
             let (r, u) = billboard_axes(v_obj);
             out.push(BillboardGpu {
                 center: m.transform_point3(set.center).to_array(),
@@ -517,7 +546,7 @@ impl BtfScene {
                 layer_base: set.layer_base,
                 light_count: self.lights.len() as u32,
                 view_weight: vb.weight,
-                view_count: self.views.len() as u32,
+                view_count: self.views.tree.len() as u32,
                 tint: [1.0; 3],
                 ..BillboardGpu::UNSHADED
             });
@@ -695,7 +724,8 @@ impl Pusher<'_, '_> {
         let v_obj = to_object * (cam - center).normalize_or(Vec3::Y);
         let l_obj = to_object * self.view.to_sun;
         let scene = self.scene;
-        let mut vb = scene.views.blend(v_obj);
+        let views = &scene.views[level];
+        let mut vb = views.blend(v_obj);
         vb.cull(self.settings.weight_threshold);
         let mut lb = scene.lights.blend(l_obj);
         lb.cull(self.settings.weight_threshold);
@@ -734,7 +764,7 @@ impl Pusher<'_, '_> {
             light_index: lb.index,
             light_count: scene.lights.len() as u32,
             view_weight: vb.weight,
-            view_count: scene.views.len() as u32,
+            view_count: views.len() as u32,
             light_weight: lb.weight,
             tint: self.tint.0,
             mode: self.tint.1 as u32,
@@ -810,11 +840,12 @@ pub(crate) mod tests {
                 texels: TEXELS,
                 bounds: bounds.tree,
             }],
-            views: DirectionSet::with_count(18).unwrap(),
+            views: PerLevel::from_fn(|_| DirectionSet::with_count(18).unwrap()),
             lights: DirectionSet::with_count(18).unwrap(),
             vcm: None,
             order: vec![0, 1, 2],
-            layers_per_set: per_set,
+            bases: vec![0, per_set, 2 * per_set],
+            layers: 3 * per_set,
             resolution: 16,
         }
     }

@@ -1197,6 +1197,7 @@ mod tests {
             scene_hash: 0,
             settings: BakeSettings {
                 views: 18,
+                tree_views: 18,
                 lights,
                 resolution: 64,
                 supersample: 4,
