@@ -14,9 +14,9 @@ use crate::{Error, Result};
 /// share per triangle of the level photographed (the sun images draw its shadow maps too),
 /// per VCM object, and per texel voxelisation pass of 64 voxels along the longest side.
 /// Measured on lavapipe (llvmpipe, 2 cores) with the default forest (tree level at 66
-/// views: the fir's 528 tree images of 123,800 triangles 57.8 s, the broadleaf's of 97,064
-/// 43.0 s, each twig and main-branch level 1.4–2.5 s; 1122 VCM objects 5.5 s and 84 texel
-/// passes 11.3 s: 121 s in all); a GPU bakes faster.
+/// views: the fir's 528 tree images of 123,800 triangles 55.3 s, the broadleaf's of 97,064
+/// 35.6 s, each twig and main-branch level 1.4–2.5 s; 1122 VCM objects 5.5 s and 84 texel
+/// passes 9.8 s: 110 s in all, estimated 117); a GPU bakes faster.
 const SECONDS_PER_IMAGE: f64 = 0.010;
 const SECONDS_PER_IMAGE_TRIANGLE: f64 = 0.75e-6;
 const SECONDS_PER_VCM_OBJECT: f64 = 0.0055;
@@ -278,7 +278,7 @@ mod tests {
         assert_eq!(p.tree_vcm_objects, 1000);
         assert!(p.tree_vcm_bytes >= 1000 * 49_152);
         assert!(e.memory_bytes > VIEWER_BASE_BYTES + e.file_bytes);
-        // Measured: 121 s (lavapipe, 2 cores).
+        // Measured: 110 s (lavapipe, 2 cores).
         assert!(e.seconds > 80.0 && e.seconds < 160.0, "{}", e.seconds);
         assert!(available_memory().is_some_and(|m| m > 0));
     }

@@ -247,26 +247,55 @@ pub fn bake_btf(
             let res = settings.resolution;
             let shadow_map = studio_shadow_map(res * settings.supersample);
             let image_bytes = (res * res * 4) as usize;
-            let mut direct = Vec::with_capacity(views.len() * lights.len() * image_bytes);
-            let mut ambient = Vec::with_capacity(2 * views.len() * image_bytes);
-            let mut ground = Vec::with_capacity(views.len() * image_bytes);
-            for &v in views.directions() {
-                let (_, up) = billboard_axes(v);
-                let camera = Camera::orthographic(center + v * (2.0 * radius), -v, up, radius);
-                // The view's direct images (sun only, one per light), its sky-lit one, then
-                // its ground-lit one (the light the ground sends up, which the renderer's
-                // hemispherical ambient adds to the sky's).
-                let frames = studio_shots(&lights)
-                    .into_iter()
-                    .map(|(sun, sky)| studio_frame(camera, sun, sky, shadow_map))
-                    .chain(std::iter::once(studio_ground_frame(camera, shadow_map)));
-                for (i, frame) in frames.enumerate() {
+            let cameras: Vec<Camera> = views
+                .directions()
+                .iter()
+                .map(|&v| {
+                    let (_, up) = billboard_axes(v);
+                    Camera::orthographic(center + v * (2.0 * radius), -v, up, radius)
+                })
+                .collect();
+            // The frames light by light, each through every view: a light's shadow map is
+            // the same from every view, and the renderer draws it once for them all. The
+            // images are stored view-major: the direct image (v, l) at v * lights + l.
+            let shots = studio_shots(&lights);
+            let (suns, sky) = shots.split_at(lights.len());
+            let mut direct = vec![0u8; views.len() * lights.len() * image_bytes];
+            for (l, &(sun, sky)) in suns.iter().enumerate() {
+                for (v, &camera) in cameras.iter().enumerate() {
+                    let frame = studio_frame(camera, sun, sky, shadow_map);
                     let (img, _) =
                         renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
-                    let dest = match i.cmp(&lights.len()) {
-                        std::cmp::Ordering::Less => &mut direct,
-                        std::cmp::Ordering::Equal => &mut ambient,
-                        std::cmp::Ordering::Greater => &mut ground,
+                    let at = (v * lights.len() + l) * image_bytes;
+                    let dest = direct.get_mut(at..at + image_bytes).ok_or_else(|| {
+                        Error::Gpu(format!("image ({v}, {l}) came back the wrong size"))
+                    })?;
+                    dest.copy_from_slice(img.as_raw().get(..image_bytes).unwrap_or(&[]));
+                    done += 1;
+                    progress(&Progress {
+                        done,
+                        total,
+                        what: format!("{} {}", tree.name, level.name()),
+                    });
+                }
+            }
+            // Each view's sky-lit image (the sky alone), then its ground-lit one (the light
+            // the ground sends up, which the renderer's hemispherical ambient adds to the
+            // sky's).
+            let mut ambient = Vec::with_capacity(2 * views.len() * image_bytes);
+            let mut ground = Vec::with_capacity(views.len() * image_bytes);
+            for &camera in &cameras {
+                let frames = sky
+                    .iter()
+                    .map(|&(sun, sky)| studio_frame(camera, sun, sky, shadow_map))
+                    .chain(std::iter::once(studio_ground_frame(camera, shadow_map)));
+                for (k, frame) in frames.enumerate() {
+                    let (img, _) =
+                        renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
+                    let dest = if k < sky.len() {
+                        &mut ambient
+                    } else {
+                        &mut ground
                     };
                     dest.extend_from_slice(img.as_raw());
                     done += 1;
