@@ -14,13 +14,13 @@ use crate::{Error, Result};
 /// share per triangle of the level photographed (the sun images draw its shadow maps too),
 /// per VCM object, and per texel voxelisation pass of 64 voxels along the longest side.
 /// Measured on lavapipe (llvmpipe, 2 cores) with the default forest (tree level at 66
-/// views: the fir's 528 tree images of 123,800 triangles 55.3 s, the broadleaf's of 97,064
-/// 35.6 s, each twig and main-branch level 1.4–2.5 s; 1122 VCM objects 5.5 s and 84 texel
-/// passes 9.8 s: 110 s in all, estimated 117); a GPU bakes faster.
-const SECONDS_PER_IMAGE: f64 = 0.010;
-const SECONDS_PER_IMAGE_TRIANGLE: f64 = 0.75e-6;
+/// views: the fir's 528 tree images of 123,800 triangles 28.9 s, the broadleaf's of 97,064
+/// 20.5 s, each twig and main-branch level 0.7–1.3 s; 1122 VCM objects 5.5 s and 84 texel
+/// passes 10.2 s: 65 s in all); a GPU bakes faster.
+const SECONDS_PER_IMAGE: f64 = 0.006;
+const SECONDS_PER_IMAGE_TRIANGLE: f64 = 0.38e-6;
 const SECONDS_PER_VCM_OBJECT: f64 = 0.0055;
-const SECONDS_PER_TEXEL_PASS: f64 = 0.135;
+const SECONDS_PER_TEXEL_PASS: f64 = 0.12;
 /// A tree's own cube maps cost a base and a share per neighbour drawn into them (every
 /// tree within [`vcm::TREE_RANGE`]): 5.5 ms a tree with the default forest's 183
 /// neighbours, 118 ms with the example forest's 7,118 (600 trees per hectare; 8.5 trees a
@@ -278,8 +278,8 @@ mod tests {
         assert_eq!(p.tree_vcm_objects, 1000);
         assert!(p.tree_vcm_bytes >= 1000 * 49_152);
         assert!(e.memory_bytes > VIEWER_BASE_BYTES + e.file_bytes);
-        // Measured: 110 s (lavapipe, 2 cores).
-        assert!(e.seconds > 80.0 && e.seconds < 160.0, "{}", e.seconds);
+        // Measured: 65 s (lavapipe, 2 cores).
+        assert!(e.seconds > 40.0 && e.seconds < 100.0, "{}", e.seconds);
         assert!(available_memory().is_some_and(|m| m > 0));
     }
 

@@ -104,6 +104,11 @@ pub struct Renderer {
     voxel_pipeline: Option<voxelize::VoxelPipeline>,
     /// The reference's per-tree sun maps, once a reference frame used them.
     self_shadow: Option<self_shadow::SelfShadow>,
+    /// What the cascade maps hold when the last frame drew them in the studio (its
+    /// matrices, map size and casters, as bytes): a studio frame with the same key keeps
+    /// them (the bake takes every view under one light in a row). None after any other
+    /// frame, which clears or redraws them.
+    studio_cascades: Option<Vec<u8>>,
     /// Unique among the renderers of this process (see [`Self::id`]).
     id: u64,
 }
@@ -149,6 +154,7 @@ impl Renderer {
             texel_problem: None,
             voxel_pipeline: None,
             self_shadow: None,
+            studio_cascades: None,
             id: NEXT_RENDERER_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         })
     }
@@ -713,17 +719,26 @@ impl Renderer {
         };
         let geometry_casts_terrain = matches!(prepared, Prepared::Geometry(_)) && !studio;
         let self_shadow = self.self_shadow.as_ref().filter(|_| self_batches.is_some());
+        let studio_key = match &prepared {
+            Prepared::Geometry(g) if studio && g.shadows_on && self_shadow.is_none() => Some(
+                studio_cascades_key(&cascades, frame.shadows.map_size, &runs[1..], &g.lists),
+            ),
+            _ => None,
+        };
+        let keep = studio_key.is_some() && self.studio_cascades == studio_key;
         encode_cascades(
             &mut encoder,
             bindings,
             &self.geometry,
             &self.world,
-            casters,
+            casters.filter(|_| !keep),
             geometry_casts_terrain,
             self_shadow,
+            keep,
             queries.as_ref(),
             &mut stats,
         );
+        self.studio_cascades = studio_key;
         // The reference's trees are drawn after the main pass, batch by batch, which then
         // ends the frame's timing.
         let batches = self_batches.as_deref().unwrap_or(&[]);
@@ -957,9 +972,11 @@ impl Renderer {
             casters,
             !studio,
             None,
+            false,
             None,
             &mut stats,
         );
+        self.studio_cascades = None;
         target.clear(&mut encoder);
         {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -1020,9 +1037,33 @@ impl Renderer {
     }
 }
 
+/// The key of a studio frame's cascade maps: its matrices, their size and the trees drawn
+/// into them (each cascade's runs and the tree lists they were uploaded from).
+fn studio_cascades_key(
+    cascades: &Cascades,
+    map_size: u32,
+    runs: &[Vec<world_gpu::TreeRun>],
+    lists: &[Vec<Vec<u32>>],
+) -> Vec<u8> {
+    let mut key: Vec<u8> =
+        bytemuck::cast_slice(&cascades.matrices.map(|m| m.to_cols_array())).to_vec();
+    key.extend_from_slice(&map_size.to_le_bytes());
+    for run in runs.iter().flatten() {
+        key.extend_from_slice(&(run.species as u64).to_le_bytes());
+        key.extend_from_slice(&run.first.to_le_bytes());
+        key.extend_from_slice(&run.count.to_le_bytes());
+    }
+    for list in lists.iter().flatten() {
+        key.extend_from_slice(&(list.len() as u64).to_le_bytes());
+        key.extend_from_slice(bytemuck::cast_slice(list));
+    }
+    key
+}
+
 /// The sun cascades' passes: each map cleared (even when off, so a stale map never shades a
-/// frame) and, when `casters` holds each cascade's tree runs, drawn. The first pass opens
-/// the frame's GPU timer when there is one.
+/// frame) and, when `casters` holds each cascade's tree runs, drawn; with `keep`, loaded
+/// as the last frame left them instead (nothing drawn). The first pass opens the frame's
+/// GPU timer when there is one.
 #[allow(clippy::too_many_arguments)]
 fn encode_cascades(
     encoder: &mut wgpu::CommandEncoder,
@@ -1032,6 +1073,7 @@ fn encode_cascades(
     casters: Option<&[Vec<world_gpu::TreeRun>]>,
     terrain: bool,
     keys: Option<&self_shadow::SelfShadow>,
+    keep: bool,
     queries: Option<&wgpu::QuerySet>,
     stats: &mut FrameStats,
 ) {
@@ -1065,7 +1107,11 @@ fn encode_cascades(
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &bindings.cascades.layer_views[c],
                 depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
+                    load: if keep {
+                        wgpu::LoadOp::Load
+                    } else {
+                        wgpu::LoadOp::Clear(1.0)
+                    },
                     store: wgpu::StoreOp::Store,
                 }),
                 stencil_ops: None,

@@ -119,13 +119,6 @@ pub struct SelfShadow {
     keyed_pipeline: wgpu::RenderPipeline,
     /// The main passes' pipelines of the reference's trees, per colour format.
     color: HashMap<wgpu::TextureFormat, (wgpu::RenderPipeline, wgpu::RenderPipeline)>,
-    /// What the maps hold, when one batch held every tree: its runs, the trees in them and
-    /// their light matrices, as bytes. A frame whose one batch is the same (the same trees
-    /// under the same sun: the bake's studio, one light through every view) draws no maps.
-    drawn: std::cell::RefCell<Option<Vec<u8>>>,
-    /// The same key for the frame [`Self::write_lights`] last prepared (None: several
-    /// batches, whose maps overwrite each other).
-    pending: Option<Vec<u8>>,
 }
 
 impl SelfShadow {
@@ -236,8 +229,6 @@ impl SelfShadow {
             map_pipeline,
             keyed_pipeline,
             color: HashMap::new(),
-            drawn: std::cell::RefCell::new(None),
-            pending: None,
         })
     }
 
@@ -292,7 +283,7 @@ impl SelfShadow {
     /// buffer, `trees` the world's tree index of each, per species as uploaded) seen from
     /// `to_sun`, each in the layer of its batch; the batches.
     pub fn write_lights(
-        &mut self,
+        &self,
         ctx: &GpuContext,
         world: &WorldGpu,
         runs: &[TreeRun],
@@ -326,20 +317,7 @@ impl SelfShadow {
             ctx.queue
                 .write_buffer(&self.lights, 0, bytemuck::cast_slice(&lights));
         }
-        let batches = batches(runs, self.layers);
-        self.pending = (fits && batches.len() == 1).then(|| {
-            let mut key: Vec<u8> = bytemuck::cast_slice(&lights).to_vec();
-            for run in runs {
-                key.extend_from_slice(&(run.species as u64).to_le_bytes());
-                key.extend_from_slice(&run.first.to_le_bytes());
-                key.extend_from_slice(&run.count.to_le_bytes());
-                let list = trees.get(run.species).map_or(&[][..], |l| &l[..]);
-                let n = list.len().min(run.count as usize);
-                key.extend_from_slice(bytemuck::cast_slice(&list[..n]));
-            }
-            key
-        });
-        batches
+        batches(runs, self.layers)
     }
 
     /// Draws the maps of `batch`'s trees, one layer each in order.
@@ -408,14 +386,8 @@ impl SelfShadow {
                 "the reference's tree pipelines were not built".into(),
             ));
         };
-        // The maps of a lone batch stay in their layers after the frame: drawn again only
-        // when the batch or its lights changed.
-        let reuse =
-            batches.len() == 1 && self.pending.is_some() && *self.drawn.borrow() == self.pending;
         for (i, batch) in batches.iter().enumerate() {
-            if !reuse {
-                stats.shadow_triangles += self.encode_maps(encoder, world, batch);
-            }
+            stats.shadow_triangles += self.encode_maps(encoder, world, batch);
             let last = i + 1 == batches.len();
             let mut pass = depth.colour_pass(
                 encoder,
@@ -439,11 +411,6 @@ impl SelfShadow {
             stats.trees_drawn += drawn;
             stats.draw_calls += calls;
         }
-        *self.drawn.borrow_mut() = if batches.len() == 1 {
-            self.pending.clone()
-        } else {
-            None
-        };
         Ok(())
     }
 
