@@ -419,6 +419,14 @@ fn level_from_tag(tag: u8) -> Option<Level> {
 }
 
 impl BakeSettings {
+    /// View directions of the image sets of `level`: the tree level has its own count.
+    pub fn views_of(&self, level: Level) -> u32 {
+        match level {
+            Level::Tree => self.tree_views,
+            Level::Twig | Level::Branch => self.views,
+        }
+    }
+
     /// Checks every field against its allowed values.
     pub fn validate(&self) -> Result<(), FormatError> {
         let bad = |field, value, allowed| {

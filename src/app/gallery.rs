@@ -41,7 +41,7 @@ impl PrototypeInfo {
             .iter()
             .map(|&l| {
                 crate::format::btf_record_bytes(
-                    crate::bake::views_of(settings, l),
+                    settings.views_of(l),
                     settings.lights,
                     settings.resolution,
                 )

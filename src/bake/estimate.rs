@@ -5,7 +5,7 @@
 
 use serde::Serialize;
 
-use super::{texel, vcm, views_of};
+use super::{texel, vcm};
 use crate::format::{self, BakeSettings};
 use crate::model::{Level, World};
 use crate::{Error, Result};
@@ -125,7 +125,7 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
         .flat_map(|_| Level::ALL)
         .map(|level| {
             format::btf_record_bytes(
-                views_of(settings, level),
+                settings.views_of(level),
                 settings.lights,
                 settings.resolution,
             )
@@ -173,7 +173,7 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
                     Level::Branch => tris.branch,
                     Level::Tree => tris.tree,
                 };
-                f64::from(views_of(settings, l))
+                f64::from(settings.views_of(l))
                     * per_view
                     * (SECONDS_PER_IMAGE + SECONDS_PER_IMAGE_TRIANGLE * tris as f64)
             })

@@ -71,20 +71,12 @@ pub struct Progress {
     pub what: String,
 }
 
-/// View directions of the image sets of `level`: the tree level has its own count.
-pub fn views_of(settings: &BakeSettings, level: Level) -> u32 {
-    match level {
-        Level::Tree => settings.tree_views,
-        Level::Twig | Level::Branch => settings.views,
-    }
-}
-
 /// Number of images the bake renders for `species` species.
 pub fn image_count(settings: &BakeSettings, species: usize) -> u64 {
     let per_view = u64::from(settings.lights) + u64::from(crate::format::AMBIENT_IMAGES_PER_VIEW);
     let views: u64 = Level::ALL
         .iter()
-        .map(|&l| u64::from(views_of(settings, l)))
+        .map(|&l| u64::from(settings.views_of(l)))
         .sum();
     per_view * views * species as u64
 }
@@ -218,17 +210,10 @@ pub fn bake_btf(
     scene_hash: u64,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Baked> {
-    let view_sets = crate::model::PerLevel {
-        twig: settings.views,
-        branch: settings.views,
-        tree: settings.tree_views,
-    }
-    .map(|n| DirectionSet::with_count(n as usize).map_err(|e| Error::BadInput(e.to_string())));
-    let view_sets = crate::model::PerLevel {
-        twig: view_sets.twig?,
-        branch: view_sets.branch?,
-        tree: view_sets.tree?,
-    };
+    let view_sets = crate::model::PerLevel::try_from_fn(|l| {
+        DirectionSet::with_count(settings.views_of(l) as usize)
+            .map_err(|e| Error::BadInput(e.to_string()))
+    })?;
     let lights = DirectionSet::with_count(settings.lights as usize)
         .map_err(|e| Error::BadInput(e.to_string()))?;
     let total = image_count(settings, world.species.len());
@@ -259,7 +244,7 @@ pub fn bake_btf(
             // the same from every view, and the renderer draws it once for them all. The
             // images are stored view-major: the direct image (v, l) at v * lights + l.
             let shots = studio_shots(&lights);
-            let (suns, sky) = shots.split_at(lights.len());
+            let (suns, ambient_shots) = shots.split_at(lights.len());
             let mut direct = vec![0u8; views.len() * lights.len() * image_bytes];
             for (l, &(sun, sky)) in suns.iter().enumerate() {
                 for (v, &camera) in cameras.iter().enumerate() {
@@ -267,10 +252,13 @@ pub fn bake_btf(
                     let (img, _) =
                         renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
                     let at = (v * lights.len() + l) * image_bytes;
-                    let dest = direct.get_mut(at..at + image_bytes).ok_or_else(|| {
-                        Error::Gpu(format!("image ({v}, {l}) came back the wrong size"))
-                    })?;
-                    dest.copy_from_slice(img.as_raw().get(..image_bytes).unwrap_or(&[]));
+                    let wrong_size =
+                        || Error::Gpu(format!("image ({v}, {l}) came back the wrong size"));
+                    let src = img.as_raw().get(..image_bytes).ok_or_else(wrong_size)?;
+                    direct
+                        .get_mut(at..at + image_bytes)
+                        .ok_or_else(wrong_size)?
+                        .copy_from_slice(src);
                     done += 1;
                     progress(&Progress {
                         done,
@@ -285,14 +273,14 @@ pub fn bake_btf(
             let mut ambient = Vec::with_capacity(2 * views.len() * image_bytes);
             let mut ground = Vec::with_capacity(views.len() * image_bytes);
             for &camera in &cameras {
-                let frames = sky
+                let frames = ambient_shots
                     .iter()
                     .map(|&(sun, sky)| studio_frame(camera, sun, sky, shadow_map))
                     .chain(std::iter::once(studio_ground_frame(camera, shadow_map)));
                 for (k, frame) in frames.enumerate() {
                     let (img, _) =
                         renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
-                    let dest = if k < sky.len() {
+                    let dest = if k < ambient_shots.len() {
                         &mut ambient
                     } else {
                         &mut ground

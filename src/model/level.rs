@@ -66,6 +66,15 @@ impl<T> PerLevel<T> {
         }
     }
 
+    /// The value of every level from `f(level)`, or the first error.
+    pub fn try_from_fn<E>(mut f: impl FnMut(Level) -> Result<T, E>) -> Result<Self, E> {
+        Ok(PerLevel {
+            twig: f(Level::Twig)?,
+            branch: f(Level::Branch)?,
+            tree: f(Level::Tree)?,
+        })
+    }
+
     /// Every value mapped by `f`.
     pub fn map<U>(self, mut f: impl FnMut(T) -> U) -> PerLevel<U> {
         PerLevel {

@@ -721,7 +721,7 @@ impl Renderer {
         let self_shadow = self.self_shadow.as_ref().filter(|_| self_batches.is_some());
         let studio_key = match &prepared {
             Prepared::Geometry(g) if studio && g.shadows_on && self_shadow.is_none() => Some(
-                studio_cascades_key(&cascades, frame.shadows.map_size, &runs[1..], &g.lists),
+                studio_cascades_key(&cascades, frame.shadows.map_size, &g.lists[1..]),
             ),
             _ => None,
         };
@@ -1038,22 +1038,12 @@ impl Renderer {
 }
 
 /// The key of a studio frame's cascade maps: its matrices, their size and the trees drawn
-/// into them (each cascade's runs and the tree lists they were uploaded from).
-fn studio_cascades_key(
-    cascades: &Cascades,
-    map_size: u32,
-    runs: &[Vec<world_gpu::TreeRun>],
-    lists: &[Vec<Vec<u32>>],
-) -> Vec<u8> {
+/// into them (each cascade's tree lists, per species; the runs are uploaded from them).
+fn studio_cascades_key(cascades: &Cascades, map_size: u32, casters: &[Vec<Vec<u32>>]) -> Vec<u8> {
     let mut key: Vec<u8> =
         bytemuck::cast_slice(&cascades.matrices.map(|m| m.to_cols_array())).to_vec();
     key.extend_from_slice(&map_size.to_le_bytes());
-    for run in runs.iter().flatten() {
-        key.extend_from_slice(&(run.species as u64).to_le_bytes());
-        key.extend_from_slice(&run.first.to_le_bytes());
-        key.extend_from_slice(&run.count.to_le_bytes());
-    }
-    for list in lists.iter().flatten() {
+    for list in casters.iter().flatten() {
         key.extend_from_slice(&(list.len() as u64).to_le_bytes());
         key.extend_from_slice(bytemuck::cast_slice(list));
     }

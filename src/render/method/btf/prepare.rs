@@ -155,15 +155,10 @@ impl BtfScene {
             ))
         };
         let s = &baked.settings;
-        let views = PerLevel {
-            twig: s.views,
-            branch: s.views,
-            tree: s.tree_views,
-        };
         let lights = DirectionSet::with_count(s.lights as usize).map_err(|e| bad(e.to_string()))?;
         let mut index: HashMap<(u32, Level), usize> = HashMap::new();
         for (i, set) in baked.btf.iter().enumerate() {
-            if set.views != views[set.level]
+            if set.views != s.views_of(set.level)
                 || set.lights != s.lights
                 || set.resolution != s.resolution
             {
@@ -173,16 +168,9 @@ impl BtfScene {
             }
             index.insert((set.species, set.level), i);
         }
-        let views = PerLevel {
-            twig: DirectionSet::with_count(views.twig as usize),
-            branch: DirectionSet::with_count(views.branch as usize),
-            tree: DirectionSet::with_count(views.tree as usize),
-        };
-        let views = PerLevel {
-            twig: views.twig.map_err(|e| bad(e.to_string()))?,
-            branch: views.branch.map_err(|e| bad(e.to_string()))?,
-            tree: views.tree.map_err(|e| bad(e.to_string()))?,
-        };
+        let views = PerLevel::try_from_fn(|l| {
+            DirectionSet::with_count(s.views_of(l) as usize).map_err(|e| bad(e.to_string()))
+        })?;
         let per_view = s.lights + crate::format::AMBIENT_IMAGES_PER_VIEW;
         let mut layers = 0u32;
         let mut bases = Vec::new();
