@@ -281,6 +281,11 @@ struct RenderArgs {
     /// 0..1: 0 = the plain blend, 1 = the whole gain (default: 0.5)
     #[arg(long, value_parser = parse_unit)]
     light_gain: Option<f32>,
+    /// btf, hybrid: build the billboards of the trees far enough to be one tree-level
+    /// billboard each on the GPU (compute passes), the CPU preparing only the near trees:
+    /// on or off.
+    #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+    gpu_far: bool,
     /// btf: draw the VCM sun factor alone, in grey (white = fully lit).
     #[arg(long)]
     show_shadow: bool,
@@ -567,6 +572,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         show_shadow: args.show_shadow,
         vcm_sky: args.vcm_sky,
         light_gain: args.light_gain.unwrap_or(start.light_gain),
+        gpu_far: args.gpu_far,
     };
     frame.texel = TexelSettings {
         mode: args.texel_mode,

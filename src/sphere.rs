@@ -293,6 +293,31 @@ impl DirectionSet {
         best
     }
 
+    /// The tables of [`Self::blend`] and [`Self::light_gain`] as rows of 4 words, for a copy
+    /// on the GPU: the descent's split matrices (3 rows of float bits each, the levels one
+    /// after the other), the finest triangles' barycentric matrices (3 rows each), the
+    /// triangles (one row of indices each) and the directions (one row each; `w` unused).
+    pub fn gpu_rows(&self) -> DirectionRows {
+        let mat = |m: &Mat3A| {
+            let t = m.transpose();
+            [t.x_axis, t.y_axis, t.z_axis].map(|r| [r.x, r.y, r.z, 0.0].map(f32::to_bits))
+        };
+        DirectionRows {
+            splits: self.splits.iter().flat_map(mat).collect(),
+            bary: self.bary.iter().flat_map(mat).collect(),
+            triangles: self
+                .triangles
+                .iter()
+                .map(|t| [t[0], t[1], t[2], 0])
+                .collect(),
+            directions: self
+                .directions
+                .iter()
+                .map(|d| [d.x, d.y, d.z, 0.0].map(f32::to_bits))
+                .collect(),
+        }
+    }
+
     /// Descent for finite, non-zero directions, `N` at a time: the `N` dependency chains are
     /// interleaved so that the CPU can overlap them.
     #[inline]
@@ -317,6 +342,15 @@ impl DirectionSet {
         }
         t
     }
+}
+
+/// A [`DirectionSet`]'s tables as rows of 4 words ([`DirectionSet::gpu_rows`]).
+#[derive(Clone, Debug, Default)]
+pub struct DirectionRows {
+    pub splits: Vec<[u32; 4]>,
+    pub bary: Vec<[u32; 4]>,
+    pub triangles: Vec<[u32; 4]>,
+    pub directions: Vec<[u32; 4]>,
 }
 
 /// Image axes of the billboard seen from `view` (a unit vector from the object towards the

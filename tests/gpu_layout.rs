@@ -6,6 +6,7 @@
 use std::mem::{offset_of, size_of};
 
 use canopy::render::btf::BillboardGpu;
+use canopy::render::btf::far::{DirSetGpu, FarParamsGpu, FarShadeGpu, FarTreeGpu, SortStepGpu};
 use canopy::render::frame::FrameUniforms;
 use canopy::render::self_shadow::SelfLightGpu;
 use canopy::render::world_gpu::{PartSetGpu, TreeGpu};
@@ -134,6 +135,7 @@ fn billboard_record_matches_billboard_wgsl() {
     for source in [
         canopy::render::shaders::btf(),
         canopy::render::shaders::ground_map(),
+        canopy::render::shaders::btf_far(),
     ] {
         check("Billboard", wgsl_layout(&source, "Billboard"), rust.clone());
     }
@@ -258,4 +260,71 @@ fn tile_record_matches_texel_wgsl() {
         wgsl_layout(&canopy::render::shaders::texel(), "Tile"),
         rust,
     );
+}
+
+#[test]
+fn far_tree_structs_match_btf_far_wgsl() {
+    let source = canopy::render::shaders::btf_far();
+    check(
+        "FarTree",
+        wgsl_layout(&source, "FarTree"),
+        rust_layout!(FarTreeGpu {
+            model,
+            tint,
+            species,
+            bounds_min,
+            _pad0,
+            bounds_max,
+            _pad1
+        }),
+    );
+    check(
+        "FarShade",
+        wgsl_layout(&source, "FarShade"),
+        rust_layout!(FarShadeGpu { direct, sky }),
+    );
+    check(
+        "DirSet",
+        wgsl_layout(&source, "DirSet"),
+        rust_layout!(DirSetGpu {
+            level,
+            splits,
+            bary,
+            triangles,
+            directions,
+            count,
+            _pad0,
+            _pad1
+        }),
+    );
+    let (size, fields) = rust_layout!(FarParamsGpu {
+        camera,
+        count,
+        forward,
+        plane_count,
+        to_sun,
+        weight_threshold,
+        planes,
+        overlay,
+        mode,
+        light_gain,
+        plane_mode,
+        vcm,
+        species,
+        views,
+        lights,
+        sort_n,
+        near_count,
+        limit,
+        _pad
+    });
+    check(
+        "FarParams",
+        wgsl_layout(&source, "FarParams"),
+        (size, fields),
+    );
+    let (size, mut fields) = rust_layout!(SortStepGpu { k, j, _pad });
+    let pad = fields.pop().expect("the padding").1;
+    fields.extend([("_pad0", pad), ("_pad1", pad + 4)]);
+    check("SortStep", wgsl_layout(&source, "SortStep"), (size, fields));
 }

@@ -79,6 +79,7 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
             images_sampled: 540,
             fetches_saved: 180,
             dropped: 0,
+            gpu_billboards: 0,
             vcm: true,
         }),
         btf_bytes: 16_500_000,

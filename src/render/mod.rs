@@ -473,7 +473,10 @@ impl Renderer {
         let aspect = width as f32 / height as f32;
         let cam = &frame.camera;
         let frustum = cam.frustum(aspect);
-        let visible = if frame.trees {
+        // btf and hybrid find their near trees themselves when the GPU takes the far ones.
+        let btf_culls = matches!(frame.method, Method::Btf | Method::Hybrid)
+            && self.btf.as_ref().is_some_and(|b| b.takes_far(&frame.btf));
+        let visible = if frame.trees && !btf_culls {
             self.world.cull(&frustum)
         } else {
             vec![Vec::new(); self.world.species.len()]
@@ -490,17 +493,21 @@ impl Renderer {
                         sun_update_ms += t0.elapsed().as_secs_f64() * 1e3;
                     }
                 }
-                Prepared::Btf(b.prepare(
+                let (bf, shade_ms) = b.prepare(
                     ctx,
                     &self.world,
-                    &visible,
+                    (!btf_culls).then_some(&visible[..]),
+                    frame.trees,
                     cam,
                     cam.focal_px(height),
                     to_sun,
                     &frustum,
                     &frame.btf,
                     frame.method == Method::Hybrid,
-                ))
+                )?;
+                // The far trees' VCM factors, uploaded after the sun moved.
+                sun_update_ms += shade_ms;
+                Prepared::Btf(bf)
             }
             (Method::Billboard, Some(b)) => Prepared::Billboard(method::billboard::prepare_frame(
                 b,
@@ -726,6 +733,11 @@ impl Renderer {
             _ => None,
         };
         let keep = studio_key.is_some() && self.studio_cascades == studio_key;
+        // The far trees' compute passes open the frame (and its timing) when there are any.
+        let far_first = match (&prepared, &self.btf) {
+            (Prepared::Btf(bf), Some(b)) if bf.far => b.encode_far(&mut encoder, queries.as_ref()),
+            _ => false,
+        };
         encode_cascades(
             &mut encoder,
             bindings,
@@ -735,7 +747,7 @@ impl Renderer {
             geometry_casts_terrain,
             self_shadow,
             keep,
-            queries.as_ref(),
+            queries.as_ref().filter(|_| !far_first),
             &mut stats,
         );
         self.studio_cascades = studio_key;
@@ -832,6 +844,11 @@ impl Renderer {
         if let Some(t) = &mut self.timer {
             t.after_submit();
             stats.gpu_ms = t.collect(ctx, measure_gpu).filter(|_| measure_gpu);
+        }
+        if let (Prepared::Btf(bf), Some(b)) = (&prepared, &self.btf)
+            && bf.far
+        {
+            b.add_far_stats(ctx, measure_gpu, &mut stats);
         }
         if let Some(t) = self.ground.as_mut().and_then(|g| g.timer.as_mut()) {
             t.collect(ctx, measure_gpu);

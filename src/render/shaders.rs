@@ -6,7 +6,9 @@
 
 const FRAME: &str = include_str!("../../shaders/frame.wgsl");
 const INSTANCING: &str = include_str!("../../shaders/instancing.wgsl");
+const BILLBOARD_RECORD: &str = include_str!("../../shaders/billboard_record.wgsl");
 const BILLBOARD: &str = include_str!("../../shaders/billboard.wgsl");
+const BTF_FAR: &str = include_str!("../../shaders/btf_far.wgsl");
 const GEOMETRY: &str = include_str!("../../shaders/geometry.wgsl");
 const SHADOW: &str = include_str!("../../shaders/shadow.wgsl");
 const SKY: &str = include_str!("../../shaders/sky.wgsl");
@@ -29,7 +31,9 @@ fn with_frame(pass: &str) -> String {
 /// record, the pass's file.
 fn with_billboards(pass: &str) -> String {
     let atlas = crate::render::method::btf::ATLAS_SIDE;
-    format!("{FRAME}\nconst BTF_ATLAS_SIDE: u32 = {atlas}u;\n{BILLBOARD}\n{pass}")
+    format!(
+        "{FRAME}\nconst BTF_ATLAS_SIDE: u32 = {atlas}u;\n{BILLBOARD_RECORD}\n{BILLBOARD}\n{pass}"
+    )
 }
 
 /// Every shader module the render core builds, by name, for validation and for pipelines.
@@ -39,6 +43,7 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("shadow", shadow()),
         ("sky", sky()),
         ("btf", btf()),
+        ("btf_far", btf_far()),
         ("ground_map", ground_map()),
         ("texel", texel()),
         ("blit", blit()),
@@ -59,6 +64,12 @@ pub fn sky() -> String {
 
 pub fn btf() -> String {
     with_billboards(BTF)
+}
+
+/// The `btf` method's far trees, built, sorted and gathered in compute passes: the
+/// billboard record, then its file.
+pub fn btf_far() -> String {
+    format!("{BILLBOARD_RECORD}\n{BTF_FAR}")
 }
 
 /// The `texel` method's pass: frame uniforms, then its file.

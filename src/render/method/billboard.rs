@@ -141,6 +141,7 @@ pub fn prepare(
         trunk_and_limbs: vec![Vec::new(); scene.species_count()],
         twigs: vec![Vec::new(); scene.species_count()],
         billboards: records.len() as u32,
+        far: false,
         records,
         stats,
     }

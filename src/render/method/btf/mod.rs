@@ -7,6 +7,7 @@
 //! every image set.
 
 mod billboard;
+pub mod far;
 pub mod prepare;
 mod settings;
 pub mod shading;
@@ -48,6 +49,9 @@ pub struct BtfAssets {
     sun_billboards: wgpu::Buffer,
     sun_capacity: usize,
     sun_bind_group: wgpu::BindGroup,
+    /// The far trees' GPU work, made on the first frame that wants it (None after that
+    /// when the GPU cannot hold it).
+    far: Option<Option<far::FarGpu>>,
     /// Bytes of the texture array, mipmaps included.
     pub bytes: u64,
 }
@@ -123,31 +127,7 @@ impl BtfAssets {
                 usage: wgpu::BufferUsages::STORAGE,
             },
         );
-        let layout = ctx
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("btf"),
-                entries: &[
-                    storage_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
-                    storage_entry(1, wgpu::ShaderStages::FRAGMENT),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 2,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                            view_dimension: wgpu::TextureViewDimension::D2Array,
-                            multisampled: false,
-                        },
-                        count: None,
-                    },
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 3,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                        count: None,
-                    },
-                ],
-            });
+        let layout = btf_layout(&ctx.device);
         let stride = std::mem::size_of::<BillboardGpu>();
         let limits = ctx.device.limits();
         let max_capacity = (limits
@@ -190,6 +170,7 @@ impl BtfAssets {
             sun_billboards,
             sun_capacity,
             sun_bind_group,
+            far: None,
             bytes,
         })
     }
@@ -215,25 +196,96 @@ impl BtfAssets {
     }
 
     /// Chooses levels, builds and sorts the billboards ([`BtfScene::prepare`]) and uploads
-    /// them.
+    /// them. With [`BtfSettings::gpu_far`], only the near trees are prepared here: those
+    /// far enough to be one tree-level billboard each are left to the GPU ([`far`]; their
+    /// records are built in [`Self::encode_far`]) and `visible` is not needed (None: the
+    /// renderer skips its cull). Returns the frame and the milliseconds spent uploading the
+    /// trees' VCM factors after the sun moved.
     #[allow(clippy::too_many_arguments)]
     pub fn prepare(
         &mut self,
         ctx: &GpuContext,
         world: &WorldGpu,
-        visible: &[Vec<u32>],
+        visible: Option<&[Vec<u32>]>,
+        trees_on: bool,
         camera: &crate::render::Camera,
         focal_px: f32,
         to_sun: Vec3,
         frustum: &Frustum,
         settings: &BtfSettings,
         hybrid: bool,
-    ) -> BtfFrame {
+    ) -> Result<(BtfFrame, f64)> {
         let view = PrepareView {
             camera,
             focal_px,
             to_sun,
             frustum,
+        };
+        if settings.gpu_far && self.far.is_none() {
+            self.far = Some(far::FarGpu::new(
+                ctx,
+                &self.scene,
+                &world.tree_data,
+                &world.tree_species,
+                &world.tree_bounds,
+                &self.layout,
+                (&self.view_axes, &self.texture_view, &self.sampler),
+            )?);
+        }
+        let far = self
+            .far
+            .as_mut()
+            .and_then(Option::as_mut)
+            .filter(|_| settings.gpu_far);
+        if let Some(f) = far {
+            let (near, shade_ms) = f.prepare(
+                ctx,
+                &self.scene,
+                &world.tree_data,
+                &world.tree_bounds,
+                &view,
+                settings,
+                trees_on,
+            );
+            // Unsorted: the GPU sorts them with the far trees' billboards.
+            let (mut out, records) =
+                self.scene
+                    .prepare_sorted(&world.tree_data, &near, &view, settings, 0, hybrid);
+            if f.upload_near(ctx, &records)? {
+                out.far = true;
+                return Ok((out, shade_ms));
+            }
+            if !trees_on {
+                return Ok((out, shade_ms));
+            }
+            // Too many near billboards for one binding with the trees' slots: this frame
+            // is the CPU's alone, which keeps the nearest.
+            let all = world.cull(frustum);
+            let (out, sorted) = self.scene.prepare_sorted(
+                &world.tree_data,
+                &all,
+                &view,
+                settings,
+                self.max_capacity,
+                hybrid,
+            );
+            self.upload_sorted(ctx, &sorted);
+            return Ok((out, shade_ms));
+        }
+        if let Some(Some(f)) = self.far.as_mut() {
+            f.clear();
+        }
+        let culled;
+        let visible = match visible {
+            Some(v) => v,
+            None => {
+                culled = if trees_on {
+                    world.cull(frustum)
+                } else {
+                    vec![Vec::new(); world.species.len()]
+                };
+                &culled[..]
+            }
         };
         let (out, sorted) = self.scene.prepare_sorted(
             &world.tree_data,
@@ -244,7 +296,65 @@ impl BtfAssets {
             hybrid,
         );
         self.upload_sorted(ctx, &sorted);
-        out
+        Ok((out, 0.0))
+    }
+
+    /// Whether this frame's far trees go to the GPU (the renderer then needs no cull).
+    pub fn takes_far(&self, settings: &BtfSettings) -> bool {
+        settings.gpu_far && !matches!(self.far, Some(None))
+    }
+
+    /// After the frame's submission: adds the far billboards drawn (the latest count read
+    /// back; this frame's when `wait`) to `stats`.
+    pub fn add_far_stats(&self, ctx: &GpuContext, wait: bool, stats: &mut FrameStats) {
+        let Some(Some(f)) = &self.far else {
+            return;
+        };
+        if !f.has_frame() {
+            return;
+        }
+        let Some(n) = f.drawn(ctx, wait) else {
+            return;
+        };
+        if let Some(b) = stats.btf.as_mut() {
+            b.trees_per_level[crate::model::Level::Tree] += n;
+            b.billboards[crate::model::Level::Tree] += n;
+            b.gpu_billboards += n;
+        }
+        stats.trees_drawn += n;
+        stats.triangles += 2 * u64::from(n);
+    }
+
+    /// The far trees' compute passes of the frame last prepared (timed from their start
+    /// when `timestamp` is given); false when there were none.
+    pub fn encode_far(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        timestamp: Option<&wgpu::QuerySet>,
+    ) -> bool {
+        match self.far.as_ref().and_then(Option::as_ref) {
+            Some(f) if f.has_frame() => {
+                f.encode(encoder, timestamp);
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// The far trees' sorted records of the last frame, read back (tests).
+    pub fn read_far(&self, ctx: &GpuContext) -> Result<Vec<BillboardGpu>> {
+        match self.far.as_ref().and_then(Option::as_ref) {
+            Some(f) => f.read_sorted(ctx),
+            None => Ok(Vec::new()),
+        }
+    }
+
+    /// GPU bytes of the far trees' buffers (0 until used).
+    pub fn far_bytes(&self) -> u64 {
+        self.far
+            .as_ref()
+            .and_then(Option::as_ref)
+            .map_or(0, far::FarGpu::bytes)
     }
 
     /// Uploads a frame's billboards, copied from their chunks straight into the upload
@@ -321,7 +431,16 @@ impl BtfAssets {
         stats.triangles = t0 + t1 + t2 + 2 * u64::from(bf.billboards);
         stats.trees_drawn = bf.stats.trees_per_level.iter().sum::<u32>() + bf.stats.geometry_trees;
         stats.draw_calls += c0 + c1 + c2;
+        // Sorted on the GPU with the far trees' billboards, or on the CPU.
         if let Some(pipeline) = pipeline
+            && bf.far
+            && let Some(Some(f)) = &self.far
+        {
+            pass.set_pipeline(pipeline);
+            if f.draw(pass) {
+                stats.draw_calls += 1;
+            }
+        } else if let Some(pipeline) = pipeline
             && bf.billboards > 0
         {
             pass.set_pipeline(pipeline);
@@ -405,6 +524,33 @@ impl BtfAssets {
     pub fn texel_sizes(&self, species: usize) -> Option<LevelTexels> {
         self.scene.texel_sizes(species)
     }
+}
+
+/// The btf pass's bind group: billboards, view axes, the image atlas and its sampler.
+pub(super) fn btf_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("btf"),
+        entries: &[
+            storage_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
+            storage_entry(1, wgpu::ShaderStages::FRAGMENT),
+            wgpu::BindGroupLayoutEntry {
+                binding: 2,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                    view_dimension: wgpu::TextureViewDimension::D2Array,
+                    multisampled: false,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 3,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            },
+        ],
+    })
 }
 
 fn storage_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {

@@ -79,6 +79,10 @@ pub struct BtfFrame {
     pub records: Vec<BillboardGpu>,
     /// Billboards drawn (`records.len()` until the records are handed to the GPU).
     pub billboards: u32,
+    /// The GPU builds the far trees' tree-level billboards ([`super::far`]) and sorts
+    /// them with these, drawing them all (the far ones are not counted in `billboards` nor
+    /// `stats` until read back).
+    pub far: bool,
     pub stats: BtfStats,
 }
 
@@ -292,6 +296,86 @@ impl BtfScene {
         Some((shade, parts.frames.tree.bounds))
     }
 
+    /// The bound below which a tree's tree-level texels must project for the tree to be
+    /// "far": drawn at the tree level alone, with no finer level fading in, which the GPU
+    /// can build ([`super::far`]). It is the start of the fade band (the level's bound with
+    /// no band), less 0.1 %, so that the CPU's own choice for a far tree would be the same.
+    /// 0 (no tree is far) when the band covers the whole level.
+    pub fn far_bound(settings: &BtfSettings) -> f32 {
+        let fade = settings.lod_fade.clamp(0.0, 1.0);
+        let bound = if settings.lod_fade > 0.0 {
+            settings.lod_scale * (1.0 - fade)
+        } else {
+            settings.lod_scale
+        } * 0.999;
+        if bound > 0.0 && bound.is_finite() {
+            bound
+        } else {
+            0.0
+        }
+    }
+
+    /// Whether tree `data` of species `sp` is near: not far by [`Self::far_bound`] `bound`
+    /// (also any tree of a species the scene lacks, or of no valid scale).
+    pub fn is_near(&self, sp: usize, data: &TreeGpu, view: &PrepareView, bound: f32) -> bool {
+        let Some(parts) = self.species.get(sp) else {
+            return true;
+        };
+        let m = Mat4::from_cols_array_2d(&data.model);
+        let scale = m.x_axis.truncate().length();
+        let z = (m.transform_point3(parts.bounds.center()) - view.camera.position).length();
+        !(bound > 0.0
+            && scale > 0.0
+            && lod::projected_px(parts.texels.tree * scale, view.focal_px, z) < bound)
+    }
+
+    /// The distance within which a tree of scale up to `max_scale` may be near (every tree
+    /// farther away is far), measured to its bounds' centre; infinite when none is far.
+    pub fn near_radius(&self, focal_px: f32, bound: f32, max_scale: f32) -> f32 {
+        let texel = self
+            .species
+            .iter()
+            .map(|p| p.texels.tree)
+            .fold(0.0f32, f32::max);
+        let r = texel * max_scale * focal_px / bound;
+        if bound > 0.0 && r.is_finite() {
+            // Past the bound's own rounding.
+            r * 1.001 + 1e-3
+        } else {
+            f32::INFINITY
+        }
+    }
+
+    /// The centre of tree `data`'s bounds (species `sp`) in the world, for the near search.
+    pub fn tree_centre(&self, sp: usize, data: &TreeGpu) -> Option<Vec3> {
+        let parts = self.species.get(sp)?;
+        Some(Mat4::from_cols_array_2d(&data.model).transform_point3(parts.bounds.center()))
+    }
+
+    /// What the GPU needs to build far trees' records ([`super::far`]): per species 3 rows
+    /// of 4 words (the tree set's centre and radius; its VCM box origin and first layer;
+    /// its VCM box scale), and the tree level's view set and the light set.
+    pub(super) fn far_tables(&self) -> (Vec<[u32; 4]>, &DirectionSet, &DirectionSet) {
+        let bits = |v: Vec3, w: f32| [v.x, v.y, v.z, w].map(f32::to_bits);
+        let mut rows = Vec::with_capacity(3 * self.species.len());
+        for parts in &self.species {
+            let set = &parts.sets.tree;
+            // As `BillboardGpu::shade` places the billboard in its box.
+            let record = BillboardGpu::UNSHADED.shade(&Shade::NONE, set);
+            rows.push(bits(set.center, set.radius));
+            let mut origin = bits(Vec3::from(record.vcm_box_origin), 0.0);
+            origin[3] = set.layer_base;
+            rows.push(origin);
+            rows.push(bits(Vec3::from(record.vcm_box_scale), 0.0));
+        }
+        (rows, &self.views.tree, &self.lights)
+    }
+
+    /// The cube maps, when the bake has them.
+    pub(super) fn vcm(&self) -> Option<&VcmShading> {
+        self.vcm.as_ref()
+    }
+
     /// Reads every tree's cube maps in the sun's direction if it moved; true if it did.
     pub fn update_sun(&mut self, to_sun: Vec3) -> bool {
         self.vcm.as_mut().is_some_and(|v| v.set_sun(to_sun))
@@ -332,7 +416,8 @@ impl BtfScene {
 
     /// [`Self::prepare`], the records left in their chunks with their back-to-front order
     /// (`BtfFrame::records` empty, `billboards` their count): the GPU path copies them
-    /// once, straight into the upload.
+    /// once, straight into the upload. With `max_billboards` 0 they are neither sorted nor
+    /// dropped (the GPU sorts them with the far trees': [`super::far`]).
     pub fn prepare_sorted(
         &self,
         trees: &[TreeGpu],
@@ -396,7 +481,28 @@ impl BtfScene {
         }
         // Back to front (ties in the order made); keep the nearest ones when there are too
         // many: they matter most. The keys are sorted, not the 208-byte records, which are
-        // then copied once, from their chunks.
+        // then copied once, from their chunks. (Unless the GPU sorts them: `max_billboards`
+        // 0 leaves them in the order made, all of them.)
+        if max_billboards == 0 {
+            let frame = BtfFrame {
+                trunk_only,
+                trunk_and_limbs,
+                twigs,
+                billboards: keys.len() as u32,
+                far: false,
+                records: Vec::new(),
+                stats,
+            };
+            let records = parts.into_iter().map(|p| p.records).collect();
+            return (
+                frame,
+                SortedBillboards {
+                    records,
+                    starts,
+                    keys,
+                },
+            );
+        }
         keys.par_sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
         if keys.len() > max_billboards {
             stats.dropped = (keys.len() - max_billboards) as u32;
@@ -407,6 +513,7 @@ impl BtfScene {
             trunk_and_limbs,
             twigs,
             billboards: keys.len() as u32,
+            far: false,
             records: Vec::new(),
             stats,
         };
@@ -577,6 +684,23 @@ impl SortedBillboards {
             .into_par_iter()
             .map(|k| *self.get(k))
             .collect()
+    }
+
+    /// Writes the records in the order made (chunk by chunk) into `out` as bytes, as many
+    /// as it holds.
+    pub fn write_unsorted(&self, mut out: wgpu::WriteOnly<'_, [u8]>) {
+        const SIZE: usize = std::mem::size_of::<BillboardGpu>();
+        let mut at = 0;
+        for chunk in &self.records {
+            let bytes: &[u8] = bytemuck::cast_slice(chunk);
+            let n = bytes.len().min(out.len() - at);
+            if n == 0 {
+                break;
+            }
+            out.slice(at..at + n).copy_from_slice(&bytes[..n]);
+            at += n;
+        }
+        debug_assert_eq!(at % SIZE, 0);
     }
 
     /// Writes the records back to front into `out` as bytes (as many as it holds).
@@ -1221,6 +1345,227 @@ pub(crate) mod tests {
         for r in &f.records {
             assert_eq!(r.mode, BillboardMode::Tint as u32);
             assert_eq!(r.tint, LOD_COLOURS[Level::Branch]);
+        }
+    }
+
+    /// The far trees' records as the GPU builds and sorts them, read back.
+    fn gpu_far_records(
+        scene: &BtfScene,
+        trees: &[TreeGpu],
+        view: &PrepareView,
+        settings: &BtfSettings,
+    ) -> Vec<BillboardGpu> {
+        use crate::render::{AdapterPreference, GpuContext};
+        let ctx = GpuContext::headless(AdapterPreference::Cpu).expect("a Vulkan adapter");
+        let layout = super::super::btf_layout(&ctx.device);
+        let axes = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: 16,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: None,
+            size: wgpu::Extent3d {
+                width: 1,
+                height: 1,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8UnormSrgb,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let texture_view = texture.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let sampler = ctx
+            .device
+            .create_sampler(&wgpu::SamplerDescriptor::default());
+        let species = vec![0u32; trees.len()];
+        let bounds: Vec<Aabb> = trees
+            .iter()
+            .map(|t| {
+                scene.species[0]
+                    .bounds
+                    .transformed(Mat4::from_cols_array_2d(&t.model))
+            })
+            .collect();
+        let mut gpu = super::super::far::FarGpu::new(
+            &ctx,
+            scene,
+            trees,
+            &species,
+            &bounds,
+            &layout,
+            (&axes, &texture_view, &sampler),
+        )
+        .unwrap()
+        .expect("the far trees fit");
+        let (near, _) = gpu.prepare(&ctx, scene, trees, &bounds, view, settings, true);
+        let (_, records) = scene.prepare_sorted(trees, &near, view, settings, 0, false);
+        assert!(gpu.upload_near(&ctx, &records).unwrap());
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        gpu.encode(&mut encoder, None);
+        ctx.queue.submit([encoder.finish()]);
+        gpu.read_sorted(&ctx).unwrap()
+    }
+
+    /// The weight of sample `i` in slots (`index`, `weight`).
+    fn weight_of(index: [u32; 3], weight: [f32; 3], i: u32) -> f32 {
+        (0..3).filter(|&k| index[k] == i).map(|k| weight[k]).sum()
+    }
+
+    #[test]
+    fn the_gpu_builds_the_far_trees_records_the_cpu_would_back_to_front() {
+        // A crowd 90 to 400 m away: every tree past the tree level's fade band.
+        gpu_against_cpu(90.0, false);
+    }
+
+    #[test]
+    fn near_trees_made_on_the_cpu_are_sorted_with_the_far_ones() {
+        // From 4 m: trees at every level, fading, the near ones' billboards made on the
+        // CPU and sorted with the far ones' on the GPU.
+        gpu_against_cpu(4.0, true);
+    }
+
+    /// Trees from `z_min` to 400 m ahead; the GPU's billboards, back to front, are the
+    /// CPU's (`near`: some trees are near).
+    fn gpu_against_cpu(z_min: f32, near: bool) {
+        // The tree level at 66 views and 6 lights, as the default bake; trees of mixed yaw
+        // and scale.
+        let mut scene = scene();
+        scene.views.tree = DirectionSet::with_count(66).unwrap();
+        scene.lights = DirectionSet::with_count(6).unwrap();
+        let mut trees = Vec::new();
+        let mut rng = 7u32;
+        let mut next = || {
+            rng = rng.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (rng >> 8) as f32 / (1u32 << 24) as f32
+        };
+        while trees.len() < 300 {
+            // Denser near the camera.
+            let z = next().powi(2) * (400.0 - z_min) + z_min;
+            let x = (next() * 2.6 - 1.3) * (z + 10.0);
+            let s = 0.8 + 0.4 * next();
+            let m = Mat4::from_translation(Vec3::new(x, 3.0 * next(), z))
+                * Mat4::from_rotation_y(next() * std::f32::consts::TAU)
+                * Mat4::from_scale(Vec3::splat(s));
+            trees.push(TreeGpu {
+                model: m.to_cols_array_2d(),
+                tint: [next(), next(), next(), 1.0],
+            });
+        }
+        let camera = Camera::look_at(Vec3::new(0.0, 6.0, -2.0), Vec3::new(0.0, 0.0, 200.0), 60.0);
+        let frustum = camera.frustum(16.0 / 9.0);
+        let view = PrepareView {
+            camera: &camera,
+            focal_px: FOCAL,
+            to_sun: Vec3::new(0.3, 0.5, -0.6).normalize(),
+            frustum: &frustum,
+        };
+        let settings = BtfSettings {
+            weight_threshold: 0.15,
+            ..BtfSettings::default()
+        };
+        // The trees in view by their bounds, as the renderer culls (the billboard's own
+        // test then drops a few more).
+        let visible = vec![
+            (0..trees.len() as u32)
+                .filter(|&t| {
+                    let m = Mat4::from_cols_array_2d(&trees[t as usize].model);
+                    frustum.intersects(&scene.species[0].bounds.transformed(m))
+                })
+                .collect::<Vec<_>>(),
+        ];
+        assert!(visible[0].len() < trees.len(), "some trees are out of view");
+        let bound = BtfScene::far_bound(&settings);
+        let near_trees = trees
+            .iter()
+            .filter(|t| scene.is_near(0, t, &view, bound))
+            .count();
+        assert_eq!(near_trees > 0, near, "{near_trees} near trees");
+        let cpu_frame = scene.prepare(&trees, &visible, &view, &settings, usize::MAX, false);
+        if near {
+            let levels = cpu_frame.stats.trees_per_level;
+            assert!(
+                levels[Level::Twig] > 0 && levels[Level::Branch] > 0,
+                "{levels:?}"
+            );
+            assert!(cpu_frame.stats.faded_trees > 0);
+        }
+        let mut cpu = cpu_frame.records;
+        assert!(cpu.len() > 100, "{} billboards in view", cpu.len());
+        let gpu = gpu_far_records(&scene, &trees, &view, &settings);
+        assert_eq!(gpu.len(), cpu.len(), "as many billboards");
+        let forward = camera.forward();
+        let depth = |r: &BillboardGpu| (Vec3::from(r.center) - camera.position).dot(forward);
+        for (k, pair) in gpu.windows(2).enumerate() {
+            assert!(
+                depth(&pair[0]) >= depth(&pair[1]) - 1e-3,
+                "record {k} is nearer than the next"
+            );
+        }
+        let close = |a: [f32; 3], b: [f32; 3], tol: f32| {
+            (Vec3::from(a) - Vec3::from(b)).abs().max_element() <= tol
+        };
+        for (k, g) in gpu.iter().enumerate() {
+            // Its match among the CPU's records (the same object seen the same way).
+            let m = cpu
+                .iter()
+                .position(|c| {
+                    (c.layer_base, c.opacity) == (g.layer_base, g.opacity)
+                        && (c.radius - g.radius).abs() < 1e-4
+                        && close(g.center, c.center, 1e-3)
+                        && close(g.obj_right, c.obj_right, 1e-3)
+                })
+                .unwrap_or_else(|| panic!("record {k} is not the CPU's: {g:?}"));
+            let c = cpu.swap_remove(m);
+            assert!(
+                close(g.center, c.center, 1e-3),
+                "record {k}: centre {g:?} against {c:?}"
+            );
+            assert!((g.radius - c.radius).abs() < 1e-4);
+            assert!(
+                close(g.plane_right, c.plane_right, 1e-4),
+                "record {k}: {g:?} against {c:?}"
+            );
+            assert!(close(g.plane_up, c.plane_up, 1e-4));
+            assert!(close(g.obj_right, c.obj_right, 1e-4));
+            assert!(close(g.obj_up, c.obj_up, 1e-4));
+            for i in 0..66 {
+                let (wg, wc) = (
+                    weight_of(g.view_index, g.view_weight, i),
+                    weight_of(c.view_index, c.view_weight, i),
+                );
+                assert!(
+                    (wg - wc).abs() < 1e-3,
+                    "record {k} view {i}: {wg} against {wc}"
+                );
+            }
+            for i in 0..6 {
+                let (wg, wc) = (
+                    weight_of(g.light_index, g.light_weight, i),
+                    weight_of(c.light_index, c.light_weight, i),
+                );
+                assert!(
+                    (wg - wc).abs() < 1e-3,
+                    "record {k} light {i}: {wg} against {wc}"
+                );
+            }
+            assert_eq!(
+                (g.layer_base, g.view_count, g.light_count, g.planes, g.mode),
+                (c.layer_base, c.view_count, c.light_count, c.planes, c.mode)
+            );
+            assert_eq!((g.opacity, g.tint), (c.opacity, c.tint));
+            assert!(close(g.vcm_box_origin, c.vcm_box_origin, 1e-5));
+            assert!(close(g.vcm_box_scale, c.vcm_box_scale, 1e-5));
+            assert_eq!((g.vcm_direct, g.vcm_sky), (c.vcm_direct, c.vcm_sky));
         }
     }
 }

@@ -58,6 +58,9 @@ pub struct BtfSettings {
     /// lit linearly in the light direction but too bright in dense stands; the default
     /// [`LIGHT_GAIN`] is the measured compromise.
     pub light_gain: f32,
+    /// Build the billboards of the trees drawn at the tree level alone on the GPU (compute
+    /// passes), leaving the CPU the near trees only; off: the CPU prepares every tree.
+    pub gpu_far: bool,
 }
 
 /// The default [`BtfSettings::light_gain`]. Bench, 320x180, 3 frames, mean FLIP against
@@ -78,6 +81,7 @@ impl Default for BtfSettings {
             show_shadow: false,
             vcm_sky: true,
             light_gain: LIGHT_GAIN,
+            gpu_far: true,
         }
     }
 }
@@ -104,6 +108,9 @@ pub struct BtfStats {
     pub fetches_saved: u64,
     /// Billboards left out because the instance buffer would pass the GPU's limit.
     pub dropped: u32,
+    /// Of `billboards`, those built on the GPU (far trees at the tree level); their image
+    /// fetches are not in `images_sampled` nor `fetches_saved`.
+    pub gpu_billboards: u32,
     /// The billboards were shaded by visibility cube maps.
     pub vcm: bool,
 }
@@ -120,6 +127,7 @@ impl BtfStats {
         self.images_sampled += o.images_sampled;
         self.fetches_saved += o.fetches_saved;
         self.dropped += o.dropped;
+        self.gpu_billboards += o.gpu_billboards;
         self.vcm |= o.vcm;
     }
 
@@ -127,9 +135,9 @@ impl BtfStats {
         self.billboards.iter().sum()
     }
 
-    /// Images sampled per billboard, on average.
+    /// Images sampled per billboard, on average, over the billboards made on the CPU.
     pub fn images_per_billboard(&self) -> f64 {
-        let n = self.total_billboards();
+        let n = self.total_billboards().saturating_sub(self.gpu_billboards);
         if n == 0 {
             0.0
         } else {

@@ -226,7 +226,7 @@ impl Shade {
 }
 
 /// A level's factors at one point: (sun, sky).
-type Factors = ([f32; CORNERS], [f32; CORNERS]);
+pub type Factors = ([f32; CORNERS], [f32; CORNERS]);
 
 fn at(f: &Factors, bounds: &Aabb, p: Vec3) -> (f32, f32) {
     let u = vcm::box_coords(bounds, p);
@@ -462,6 +462,18 @@ impl VcmShading {
             (Some(d), Some(sky)) => (*d, *sky),
             _ => ([1.0; CORNERS], [1.0; CORNERS]),
         }
+    }
+
+    /// Every tree instance's tree-level factors (sun, sky) at its box corners, for the sun
+    /// of the last [`Self::set_sun`], in instance order (`count` of them; 1 for an instance
+    /// the cube maps do not cover).
+    pub fn tree_factors(&self, count: usize) -> impl Iterator<Item = Factors> + '_ {
+        (0..count).map(|t| self.tree(t))
+    }
+
+    /// The sun the cube maps were last read for.
+    pub fn sun(&self) -> Option<Vec3> {
+        self.sun
     }
 
     /// The shading of every billboard of one tree instance, at each level.

@@ -1,0 +1,1043 @@
+//! The `btf` method's far trees on the GPU (issue 13's per-frame work at scale). Most trees
+//! of a large forest are far enough to be one tree-level billboard each, and preparing
+//! those on the CPU (level choice, view and light blends, VCM factors, the sort back to
+//! front) costs tens of milliseconds per 100,000 trees. Here the CPU only finds the near
+//! trees, through a grid over the forest: those within the distance where a tree may not
+//! yet be at the tree level alone ([`BtfScene::near_radius`], [`BtfScene::is_near`]). It
+//! prepares them itself (unsorted) and uploads their records after one slot per tree, and
+//! one bit per tree marking them. Compute passes (`shaders/btf_far.wgsl`) take every other
+//! tree: cull it as the CPU would and build its record as the CPU would; then sort all the
+//! records, far and near, back to front (bitonic, on (depth, slot) keys, so the order is
+//! the same every run) and gather them for one indirect draw. The per-tree VCM factors are
+//! uploaded when the sun moves.
+//! How many far billboards were drawn comes back a frame or two later (at once when the
+//! frame is measured).
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, AtomicU32, Ordering};
+
+use glam::Vec3;
+
+use super::billboard::{BillboardGpu, BillboardMode};
+use super::prepare::{BtfScene, PrepareView, SortedBillboards};
+use super::settings::{BtfSettings, LOD_COLOURS, PlaneMode};
+use crate::Result;
+use crate::model::Level;
+use crate::model::mesh::Aabb;
+use crate::render::GpuContext;
+use crate::render::world_gpu::TreeGpu;
+use crate::sphere::{DirectionRows, DirectionSet};
+
+/// One tree instance as the build pass reads it (`FarTree` in `btf_far.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct FarTreeGpu {
+    pub model: [[f32; 4]; 4],
+    pub tint: [f32; 3],
+    pub species: u32,
+    pub bounds_min: [f32; 3],
+    pub _pad0: f32,
+    pub bounds_max: [f32; 3],
+    pub _pad1: f32,
+}
+
+/// One tree's tree-level VCM factors (`FarShade`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct FarShadeGpu {
+    pub direct: [[f32; 4]; 2],
+    pub sky: [[f32; 4]; 2],
+}
+
+/// Where a direction set's tables start in the tables buffer (`DirSet`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct DirSetGpu {
+    pub level: u32,
+    pub splits: u32,
+    pub bary: u32,
+    pub triangles: u32,
+    pub directions: u32,
+    pub count: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+
+/// The build pass's uniforms (`FarParams`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct FarParamsGpu {
+    pub camera: [f32; 3],
+    pub count: u32,
+    pub forward: [f32; 3],
+    pub plane_count: u32,
+    pub to_sun: [f32; 3],
+    pub weight_threshold: f32,
+    pub planes: [[f32; 4]; 6],
+    pub overlay: [f32; 3],
+    pub mode: u32,
+    pub light_gain: f32,
+    pub plane_mode: u32,
+    pub vcm: u32,
+    pub species: u32,
+    pub views: DirSetGpu,
+    pub lights: DirSetGpu,
+    pub sort_n: u32,
+    pub near_count: u32,
+    pub limit: u32,
+    pub _pad: u32,
+}
+
+/// One step of the bitonic sort (`SortStep`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct SortStepGpu {
+    pub k: u32,
+    pub j: u32,
+    pub _pad: [u32; 2],
+}
+
+const WORKGROUP: u32 = 64;
+
+/// Words of the draw-arguments buffer: the indirect draw's 4, then the far billboards made.
+const DRAW_WORDS: u64 = 8;
+
+/// The far trees' buffers and compute pipelines.
+pub struct FarGpu {
+    /// Bound in `bind_group` (kept alive with it).
+    trees: wgpu::Buffer,
+    shades: wgpu::Buffer,
+    /// The sun the shades were read for (None: not uploaded yet).
+    shade_sun: Option<Vec3>,
+    tree_count: usize,
+    /// Each tree's species.
+    species: Vec<u32>,
+    grid: Grid,
+    /// The largest scale of any tree.
+    max_scale: f32,
+    tables: wgpu::Buffer,
+    params: wgpu::Buffer,
+    base: FarParamsGpu,
+    near_bits: wgpu::Buffer,
+    draw_args: wgpu::Buffer,
+    /// Records: one slot per tree, then the near trees' billboards.
+    records: wgpu::Buffer,
+    record_slots: u64,
+    /// Sort keys, a power of two of them.
+    keys: wgpu::Buffer,
+    key_slots: u32,
+    /// The records back to front, at most `limit` of them.
+    sorted: wgpu::Buffer,
+    sorted_slots: u64,
+    /// Most records one storage binding holds.
+    limit: u64,
+    /// Sort steps for `key_slots` keys, at `step_stride` bytes: (k, j) with k = 2, 4, ..
+    step_stride: u64,
+    steps: wgpu::Buffer,
+    layouts: [wgpu::BindGroupLayout; 2],
+    /// The btf pass's layout and its bindings 1..4.
+    draw_layout: wgpu::BindGroupLayout,
+    draw_resources: (wgpu::Buffer, wgpu::TextureView, wgpu::Sampler),
+    bind_group: wgpu::BindGroup,
+    step_bind_group: wgpu::BindGroup,
+    /// The sorted records, bound as the btf pass's billboards.
+    draw_bind_group: wgpu::BindGroup,
+    build: wgpu::ComputePipeline,
+    near_keys: wgpu::ComputePipeline,
+    sort: wgpu::ComputePipeline,
+    gather: wgpu::ComputePipeline,
+    finish: wgpu::ComputePipeline,
+    /// The frame's uniforms once its near trees are found, before their records come.
+    pending: Option<FarParamsGpu>,
+    /// The frame's key count and records to sort (set by [`Self::upload_near`]).
+    frame: Option<(u32, u32)>,
+    /// The far billboards made, read back from the build pass's counter.
+    count: CountReadback,
+}
+
+/// The sort steps for `n` keys (a power of two): (k, j) in the order they run.
+fn sort_steps(n: u32) -> Vec<(u32, u32)> {
+    let mut out = Vec::new();
+    let mut k = 2;
+    while k <= n {
+        let mut j = k / 2;
+        while j > 0 {
+            out.push((k, j));
+            j /= 2;
+        }
+        k *= 2;
+    }
+    out
+}
+
+fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: b.as_entire_binding(),
+    }
+}
+
+impl FarGpu {
+    /// The buffers for every tree of `trees` (`species[i]` the species of tree `i`,
+    /// `bounds[i]` its bounds in the world), the tables of `scene`, and the btf pass's
+    /// `layout` with its bindings 1..4 (`draw`): None when the GPU cannot hold them (the
+    /// CPU then prepares every tree).
+    pub fn new(
+        ctx: &GpuContext,
+        scene: &BtfScene,
+        trees: &[TreeGpu],
+        species: &[u32],
+        bounds: &[Aabb],
+        layout: &wgpu::BindGroupLayout,
+        draw: (&wgpu::Buffer, &wgpu::TextureView, &wgpu::Sampler),
+    ) -> Result<Option<Self>> {
+        let n = trees.len().min(species.len()).min(bounds.len());
+        let limits = ctx.device.limits();
+        let record = std::mem::size_of::<BillboardGpu>() as u64;
+        let limit = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size)
+            / record;
+        let Some(keys) = u32::try_from(n.max(2))
+            .ok()
+            .and_then(u32::checked_next_power_of_two)
+        else {
+            return Ok(None);
+        };
+        if keys.div_ceil(WORKGROUP) > limits.max_compute_workgroups_per_dimension
+            || n as u64 >= limit
+            || u64::from(keys) * 8 > limits.max_storage_buffer_binding_size
+            || limits.max_storage_buffers_per_shader_stage < 8
+        {
+            return Ok(None);
+        }
+        let far_trees: Vec<FarTreeGpu> = trees
+            .iter()
+            .zip(species)
+            .zip(bounds)
+            .map(|((t, &sp), b)| FarTreeGpu {
+                model: t.model,
+                tint: [t.tint[0], t.tint[1], t.tint[2]],
+                species: sp,
+                bounds_min: b.min.to_array(),
+                _pad0: 0.0,
+                bounds_max: b.max.to_array(),
+                _pad1: 0.0,
+            })
+            .collect();
+        let centres: Vec<Option<Vec3>> = trees
+            .iter()
+            .zip(species)
+            .map(|(t, &sp)| scene.tree_centre(sp as usize, t))
+            .collect();
+        let grid = Grid::new(&centres);
+        let max_scale = trees
+            .iter()
+            .map(|t| Vec3::from_slice(&t.model[0][..3]).length())
+            .filter(|s| s.is_finite())
+            .fold(0.0f32, f32::max);
+        let (species_rows, views, lights) = scene.far_tables();
+        let mut tables = species_rows;
+        let views = push_set(&mut tables, views);
+        let lights = push_set(&mut tables, lights);
+        let base = FarParamsGpu {
+            camera: [0.0; 3],
+            count: 0,
+            forward: [0.0; 3],
+            plane_count: 0,
+            to_sun: [0.0, 1.0, 0.0],
+            weight_threshold: 0.0,
+            planes: [[0.0; 4]; 6],
+            overlay: [1.0; 3],
+            mode: BillboardMode::Images as u32,
+            light_gain: 0.0,
+            plane_mode: 1,
+            vcm: 0,
+            species: 0,
+            views,
+            lights,
+            sort_n: 2,
+            near_count: 0,
+            limit: limit.min(u64::from(u32::MAX)) as u32,
+            _pad: 0,
+        };
+        let init = |label: &str, contents: &[u8]| {
+            wgpu::util::DeviceExt::create_buffer_init(
+                &ctx.device,
+                &wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents,
+                    usage: wgpu::BufferUsages::STORAGE,
+                },
+            )
+        };
+        use wgpu::BufferUsages as U;
+        let shade_bytes = (n.max(1) * std::mem::size_of::<FarShadeGpu>()) as u64;
+        let bufs = ctx.checked("allocating the far trees' GPU buffers", || {
+            (
+                init("far trees", bytemuck::cast_slice(&far_trees)),
+                buffer(
+                    ctx,
+                    "far tree shades",
+                    shade_bytes,
+                    U::STORAGE | U::COPY_DST,
+                ),
+                init("far tables", bytemuck::cast_slice(&tables)),
+                buffer(
+                    ctx,
+                    "far params",
+                    std::mem::size_of::<FarParamsGpu>() as u64,
+                    U::UNIFORM | U::COPY_DST,
+                ),
+                buffer(
+                    ctx,
+                    "far near bits",
+                    (n.div_ceil(32).max(1) * 4) as u64,
+                    U::STORAGE | U::COPY_DST,
+                ),
+                buffer(
+                    ctx,
+                    "far draw",
+                    DRAW_WORDS * 4,
+                    U::STORAGE | U::INDIRECT | U::COPY_DST | U::COPY_SRC,
+                ),
+            )
+        })?;
+        let (trees_buf, shades, tables_buf, params, near_bits, draw_args) = bufs;
+        let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let uniform = |binding: u32, dynamic: bool| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: dynamic,
+                min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<SortStepGpu>() as u64)
+                    .filter(|_| dynamic),
+            },
+            count: None,
+        };
+        let layout0 = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("btf far"),
+                entries: &[
+                    uniform(0, false),
+                    storage(1, true),
+                    storage(2, true),
+                    storage(3, true),
+                    storage(4, true),
+                    storage(5, false),
+                    storage(6, false),
+                    storage(7, false),
+                    storage(8, false),
+                ],
+            });
+        let layout1 = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("btf far sort step"),
+                entries: &[uniform(0, true)],
+            });
+        let pipelines = ctx.checked("building the far trees' compute pipelines", || {
+            let module = ctx
+                .device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("btf_far.wgsl"),
+                    source: wgpu::ShaderSource::Wgsl(crate::render::shaders::btf_far().into()),
+                });
+            let pl = ctx
+                .device
+                .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("btf far"),
+                    bind_group_layouts: &[Some(&layout0), Some(&layout1)],
+                    immediate_size: 0,
+                });
+            let pipeline = |entry: &str| {
+                ctx.device
+                    .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some(entry),
+                        layout: Some(&pl),
+                        module: &module,
+                        entry_point: Some(entry),
+                        compilation_options: Default::default(),
+                        cache: None,
+                    })
+            };
+            [
+                pipeline("build"),
+                pipeline("near_keys"),
+                pipeline("sort_step"),
+                pipeline("gather"),
+                pipeline("finish"),
+            ]
+        })?;
+        let [build, near_keys, sort, gather, finish] = pipelines;
+        let step_stride = u64::from(limits.min_uniform_buffer_offset_alignment)
+            .max(std::mem::size_of::<SortStepGpu>() as u64);
+        // Placeholders until the first frame sizes them.
+        let small = |label| buffer(ctx, label, 16, U::STORAGE);
+        let (records, keys_buf, sorted) =
+            (small("far records"), small("far keys"), small("far sorted"));
+        let steps = buffer(ctx, "far sort steps", step_stride, U::UNIFORM);
+        let draw_resources = (draw.0.clone(), draw.1.clone(), draw.2.clone());
+        let (bind_group, step_bind_group, draw_bind_group) = bind_groups(
+            ctx,
+            [&layout0, &layout1, layout],
+            [&params, &trees_buf, &shades, &tables_buf, &near_bits],
+            [&records, &keys_buf, &draw_args, &sorted],
+            &steps,
+            &draw_resources,
+        );
+        let mut far = Self {
+            trees: trees_buf,
+            shades,
+            shade_sun: None,
+            tree_count: n,
+            species: species[..n].to_vec(),
+            grid,
+            max_scale,
+            tables: tables_buf,
+            params,
+            base,
+            near_bits,
+            draw_args,
+            records,
+            record_slots: 0,
+            keys: keys_buf,
+            key_slots: 0,
+            sorted,
+            sorted_slots: 0,
+            limit,
+            step_stride,
+            steps,
+            layouts: [layout0, layout1],
+            draw_layout: layout.clone(),
+            draw_resources,
+            bind_group,
+            step_bind_group,
+            draw_bind_group,
+            build,
+            near_keys,
+            sort,
+            gather,
+            finish,
+            pending: None,
+            frame: None,
+            count: CountReadback::new(ctx),
+        };
+        far.reserve(ctx, 0)?;
+        Ok(Some(far))
+    }
+
+    /// GPU bytes of the buffers.
+    pub fn bytes(&self) -> u64 {
+        [
+            &self.trees,
+            &self.shades,
+            &self.tables,
+            &self.near_bits,
+            &self.records,
+            &self.keys,
+            &self.sorted,
+            &self.steps,
+        ]
+        .iter()
+        .map(|b| b.size())
+        .sum()
+    }
+
+    /// Grows the record, key and sorted buffers to take `near` records after the trees'
+    /// slots (and the sort steps to the keys), rebinding them.
+    fn reserve(&mut self, ctx: &GpuContext, near: u64) -> Result<()> {
+        let record = std::mem::size_of::<BillboardGpu>() as u64;
+        let slots = self.tree_count as u64 + near;
+        let keys = u32::try_from(slots.max(2))
+            .ok()
+            .and_then(u32::checked_next_power_of_two)
+            .ok_or_else(|| crate::Error::Gpu("too many billboards to sort".into()))?;
+        let sorted = slots.min(self.limit);
+        if slots <= self.record_slots && keys <= self.key_slots && sorted <= self.sorted_slots {
+            return Ok(());
+        }
+        use wgpu::BufferUsages as U;
+        // Half as much again, so that a growing frame does not rebind every time.
+        let grow = |n: u64| (n + n / 2).max(1024);
+        let record_slots = grow(slots).min(self.limit.max(slots));
+        let sorted_slots = grow(sorted).min(self.limit);
+        let steps_list = sort_steps(keys);
+        let mut step_bytes =
+            vec![0u8; (steps_list.len().max(1) as u64 * self.step_stride) as usize];
+        for (i, &(k, j)) in steps_list.iter().enumerate() {
+            let at = i * self.step_stride as usize;
+            let s = SortStepGpu { k, j, _pad: [0; 2] };
+            step_bytes[at..at + std::mem::size_of::<SortStepGpu>()]
+                .copy_from_slice(bytemuck::bytes_of(&s));
+        }
+        let (records, keys_buf, sorted_buf, steps) =
+            ctx.checked("allocating the billboards' sort buffers", || {
+                (
+                    buffer(
+                        ctx,
+                        "far records",
+                        record_slots * record,
+                        U::STORAGE | U::COPY_DST,
+                    ),
+                    buffer(
+                        ctx,
+                        "far keys",
+                        u64::from(keys) * 8,
+                        U::STORAGE | U::COPY_DST,
+                    ),
+                    buffer(
+                        ctx,
+                        "far sorted",
+                        sorted_slots * record,
+                        U::STORAGE | U::COPY_SRC,
+                    ),
+                    wgpu::util::DeviceExt::create_buffer_init(
+                        &ctx.device,
+                        &wgpu::util::BufferInitDescriptor {
+                            label: Some("far sort steps"),
+                            contents: &step_bytes,
+                            usage: U::UNIFORM,
+                        },
+                    ),
+                )
+            })?;
+        let (bind_group, step_bind_group, draw_bind_group) = bind_groups(
+            ctx,
+            [&self.layouts[0], &self.layouts[1], &self.draw_layout],
+            [
+                &self.params,
+                &self.trees,
+                &self.shades,
+                &self.tables,
+                &self.near_bits,
+            ],
+            [&records, &keys_buf, &self.draw_args, &sorted_buf],
+            &steps,
+            &self.draw_resources,
+        );
+        self.records = records;
+        self.keys = keys_buf;
+        self.sorted = sorted_buf;
+        self.steps = steps;
+        self.record_slots = record_slots;
+        self.key_slots = keys;
+        self.sorted_slots = sorted_slots;
+        self.bind_group = bind_group;
+        self.step_bind_group = step_bind_group;
+        self.draw_bind_group = draw_bind_group;
+        Ok(())
+    }
+
+    /// The frame's near trees in view, per species in tree order, for the CPU to prepare;
+    /// every other tree is left to the GPU. Uploads the near trees' bits, and the trees'
+    /// VCM factors when the sun moved since the last upload (the milliseconds spent on
+    /// those are returned too: the sun update's share). With `trees_on` false there are no
+    /// trees at all. [`Self::upload_near`] then takes the near trees' records.
+    #[allow(clippy::too_many_arguments)]
+    pub fn prepare(
+        &mut self,
+        ctx: &GpuContext,
+        scene: &BtfScene,
+        trees: &[TreeGpu],
+        bounds: &[Aabb],
+        view: &PrepareView,
+        settings: &BtfSettings,
+        trees_on: bool,
+    ) -> (Vec<Vec<u32>>, f64) {
+        self.frame = None;
+        self.pending = None;
+        let mut near = vec![Vec::new(); scene.species_count()];
+        let count = self.tree_count as u32;
+        if !trees_on || count == 0 {
+            return (near, 0.0);
+        }
+        // The near trees: those in the grid's cells within the near radius, by the exact
+        // test; their bits are set whether in view or not (the GPU skips them all).
+        let bound = BtfScene::far_bound(settings);
+        let radius = scene.near_radius(view.focal_px, bound, self.max_scale);
+        let mut bits = vec![0u32; self.tree_count.div_ceil(32).max(1)];
+        let cam = view.camera.position;
+        self.grid.for_each_near(cam, radius, |t| {
+            let i = t as usize;
+            let (Some(&sp), Some(data)) = (self.species.get(i), trees.get(i)) else {
+                return;
+            };
+            if scene.is_near(sp as usize, data, view, bound) {
+                bits[i / 32] |= 1 << (i % 32);
+                if let (Some(list), Some(b)) = (near.get_mut(sp as usize), bounds.get(i))
+                    && view.frustum.intersects(b)
+                {
+                    list.push(t);
+                }
+            }
+        });
+        for list in &mut near {
+            list.sort_unstable();
+        }
+        let vcm = scene.vcm().filter(|_| settings.vcm);
+        let mut shade_ms = 0.0;
+        if let Some(v) = vcm
+            && (self.shade_sun.is_none() || self.shade_sun != v.sun())
+        {
+            let t0 = std::time::Instant::now();
+            let shades: Vec<FarShadeGpu> = v
+                .tree_factors(self.tree_count)
+                .map(|(d, s)| FarShadeGpu {
+                    direct: [[d[0], d[1], d[2], d[3]], [d[4], d[5], d[6], d[7]]],
+                    sky: [[s[0], s[1], s[2], s[3]], [s[4], s[5], s[6], s[7]]],
+                })
+                .collect();
+            ctx.queue
+                .write_buffer(&self.shades, 0, bytemuck::cast_slice(&shades));
+            self.shade_sun = v.sun();
+            shade_ms = t0.elapsed().as_secs_f64() * 1e3;
+        }
+        let mut planes = [[0.0f32; 4]; 6];
+        for (p, q) in planes.iter_mut().zip(&view.frustum.planes) {
+            *p = q.to_array();
+        }
+        let (overlay, mode) = if settings.show_lod {
+            (LOD_COLOURS[Level::Tree], BillboardMode::Tint)
+        } else if settings.show_shadow {
+            ([1.0; 3], BillboardMode::SunFactor)
+        } else {
+            ([1.0; 3], BillboardMode::Images)
+        };
+        self.pending = Some(FarParamsGpu {
+            camera: cam.to_array(),
+            count,
+            forward: view.camera.forward().to_array(),
+            plane_count: view.frustum.planes.len().min(6) as u32,
+            to_sun: view.to_sun.to_array(),
+            weight_threshold: settings.weight_threshold,
+            planes,
+            overlay,
+            mode: mode as u32,
+            light_gain: settings.light_gain,
+            plane_mode: match settings.planes {
+                PlaneMode::Single => 1,
+                PlaneMode::Crossed => 3,
+            },
+            vcm: match vcm {
+                None => 0,
+                Some(_) if settings.vcm_sky => 1,
+                Some(_) => 2,
+            },
+            ..self.base
+        });
+        ctx.queue
+            .write_buffer(&self.near_bits, 0, bytemuck::cast_slice(&bits));
+        (near, shade_ms)
+    }
+
+    /// Takes the near trees' records (in any order: they are sorted with the far ones) and
+    /// readies the frame's passes; false (and no frame) when they do not fit one storage
+    /// binding with the trees' slots, or [`Self::prepare`] found no trees.
+    pub fn upload_near(&mut self, ctx: &GpuContext, near: &SortedBillboards) -> Result<bool> {
+        let Some(mut params) = self.pending.take() else {
+            return Ok(false);
+        };
+        let near_count = near.len() as u64;
+        if self.tree_count as u64 + near_count > self.limit {
+            return Ok(false);
+        }
+        self.reserve(ctx, near_count)?;
+        let record = std::mem::size_of::<BillboardGpu>() as u64;
+        if let Some(size) = wgpu::BufferSize::new(near_count * record)
+            && let Some(mut view) =
+                ctx.queue
+                    .write_buffer_with(&self.records, self.tree_count as u64 * record, size)
+        {
+            near.write_unsorted(view.slice(..));
+        }
+        let slots = self.tree_count as u64 + near_count;
+        let keys = slots.max(2).next_power_of_two() as u32;
+        params.near_count = near_count as u32;
+        params.sort_n = keys;
+        params.limit = self.sorted_slots.min(self.limit) as u32;
+        ctx.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        ctx.queue.write_buffer(
+            &self.draw_args,
+            0,
+            bytemuck::cast_slice(&[6u32, 0, 0, 0, 0, 0, 0, 0]),
+        );
+        self.frame = Some((keys, slots as u32));
+        Ok(true)
+    }
+
+    /// The frame's compute passes (timed from their start when `timestamp` is given):
+    /// build the far records, key the near ones, sort, gather, set the draw's count.
+    /// Nothing without a frame.
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, timestamp: Option<&wgpu::QuerySet>) {
+        let Some((keys, slots)) = self.frame else {
+            return;
+        };
+        let trees = self.tree_count as u32;
+        encoder.clear_buffer(&self.keys, 0, Some(u64::from(keys) * 8));
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("btf far trees"),
+            timestamp_writes: timestamp.map(|q| wgpu::ComputePassTimestampWrites {
+                query_set: q,
+                beginning_of_pass_write_index: Some(0),
+                end_of_pass_write_index: None,
+            }),
+        });
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_bind_group(1, &self.step_bind_group, &[0]);
+        pass.set_pipeline(&self.build);
+        pass.dispatch_workgroups(trees.div_ceil(WORKGROUP), 1, 1);
+        if slots > trees {
+            pass.set_pipeline(&self.near_keys);
+            pass.dispatch_workgroups((slots - trees).div_ceil(WORKGROUP), 1, 1);
+        }
+        pass.set_pipeline(&self.sort);
+        for (i, _) in sort_steps(keys).iter().enumerate() {
+            let offset = (i as u64 * self.step_stride) as u32;
+            pass.set_bind_group(1, &self.step_bind_group, &[offset]);
+            pass.dispatch_workgroups(keys.div_ceil(WORKGROUP), 1, 1);
+        }
+        pass.set_bind_group(1, &self.step_bind_group, &[0]);
+        pass.set_pipeline(&self.gather);
+        pass.dispatch_workgroups(slots.div_ceil(WORKGROUP), 1, 1);
+        pass.set_pipeline(&self.finish);
+        pass.dispatch_workgroups(1, 1, 1);
+        drop(pass);
+        self.count.copy(encoder, &self.draw_args);
+    }
+
+    /// After the frame's submission: how many far billboards were made, by the latest
+    /// frame read back (this one's when `wait`, blocking); None before any.
+    pub fn drawn(&self, ctx: &GpuContext, wait: bool) -> Option<u32> {
+        self.count.collect(ctx, wait)
+    }
+
+    /// Draws every billboard of the frame, sorted (the btf pipeline already set).
+    pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>) -> bool {
+        if self.frame.is_none() {
+            return false;
+        }
+        pass.set_bind_group(1, &self.draw_bind_group, &[]);
+        pass.draw_indirect(&self.draw_args, 0);
+        true
+    }
+
+    /// Forgets the frame prepared (the CPU prepares every tree).
+    pub fn clear(&mut self) {
+        self.frame = None;
+        self.pending = None;
+    }
+
+    /// Whether the frame has GPU work.
+    pub fn has_frame(&self) -> bool {
+        self.frame.is_some()
+    }
+
+    /// Reads the last frame's sorted records back, back to front (for tests; blocking).
+    pub fn read_sorted(&self, ctx: &GpuContext) -> Result<Vec<BillboardGpu>> {
+        if self.frame.is_none() {
+            return Ok(Vec::new());
+        }
+        let args = read_buffer(ctx, &self.draw_args, 16)?;
+        let made = u64::from(u32::from_le_bytes([args[4], args[5], args[6], args[7]]));
+        let record = std::mem::size_of::<BillboardGpu>() as u64;
+        let bytes = read_buffer(ctx, &self.sorted, made * record)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+}
+
+fn buffer(ctx: &GpuContext, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+    ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(16),
+        usage,
+        mapped_at_creation: false,
+    })
+}
+
+/// The compute bind groups (fixed buffers: params, trees, shades, tables, near bits; sized
+/// ones: records, keys, draw arguments, sorted), the sort step's, and the draw's.
+fn bind_groups(
+    ctx: &GpuContext,
+    layouts: [&wgpu::BindGroupLayout; 3],
+    fixed: [&wgpu::Buffer; 5],
+    sized: [&wgpu::Buffer; 4],
+    steps: &wgpu::Buffer,
+    draw: &(wgpu::Buffer, wgpu::TextureView, wgpu::Sampler),
+) -> (wgpu::BindGroup, wgpu::BindGroup, wgpu::BindGroup) {
+    let compute = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("btf far"),
+        layout: layouts[0],
+        entries: &[
+            entry(0, fixed[0]),
+            entry(1, fixed[1]),
+            entry(2, fixed[2]),
+            entry(3, fixed[3]),
+            entry(4, fixed[4]),
+            entry(5, sized[0]),
+            entry(6, sized[1]),
+            entry(7, sized[2]),
+            entry(8, sized[3]),
+        ],
+    });
+    let step = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("btf far sort step"),
+        layout: layouts[1],
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: steps,
+                offset: 0,
+                size: wgpu::BufferSize::new(std::mem::size_of::<SortStepGpu>() as u64),
+            }),
+        }],
+    });
+    let billboards = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("btf far billboards"),
+        layout: layouts[2],
+        entries: &[
+            entry(0, sized[3]),
+            entry(1, &draw.0),
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::TextureView(&draw.1),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::Sampler(&draw.2),
+            },
+        ],
+    });
+    (compute, step, billboards)
+}
+
+/// Appends a direction set's tables to `tables`; where they start.
+fn push_set(tables: &mut Vec<[u32; 4]>, set: &DirectionSet) -> DirSetGpu {
+    let DirectionRows {
+        splits,
+        bary,
+        triangles,
+        directions,
+    } = set.gpu_rows();
+    let mut at = |rows: Vec<[u32; 4]>| {
+        let start = tables.len() as u32;
+        tables.extend(rows);
+        start
+    };
+    DirSetGpu {
+        level: set.level(),
+        splits: at(splits),
+        bary: at(bary),
+        triangles: at(triangles),
+        directions: at(directions),
+        count: set.len() as u32,
+        _pad0: 0,
+        _pad1: 0,
+    }
+}
+
+/// The first `size` bytes of `buffer` (which allows copies from it), blocking.
+fn read_buffer(ctx: &GpuContext, buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
+    if size == 0 {
+        return Ok(Vec::new());
+    }
+    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("far readback"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("far readback"),
+        });
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+    ctx.queue.submit([encoder.finish()]);
+    crate::render::target::map_read(ctx, &staging)
+}
+
+/// A uniform grid over the trees' centres in x and z, for finding the near trees without
+/// visiting every tree.
+struct Grid {
+    origin: [f32; 2],
+    cell: f32,
+    side: [usize; 2],
+    /// Trees of cell `c`: `trees[start[c]..start[c + 1]]`, ascending.
+    start: Vec<u32>,
+    trees: Vec<u32>,
+    /// Trees with no finite centre, always visited.
+    loose: Vec<u32>,
+}
+
+impl Grid {
+    /// At most this many cells a side.
+    const MAX_SIDE: usize = 256;
+
+    fn new(centres: &[Option<Vec3>]) -> Self {
+        let finite = |c: &Option<Vec3>| c.filter(|c| c.is_finite());
+        let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+        for c in centres.iter().filter_map(finite) {
+            lo = [lo[0].min(c.x), lo[1].min(c.z)];
+            hi = [hi[0].max(c.x), hi[1].max(c.z)];
+        }
+        if lo[0] > hi[0] {
+            lo = [0.0; 2];
+            hi = [0.0; 2];
+        }
+        // About 16 m cells, fewer over a wide forest.
+        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1.0);
+        let cell = (extent / Self::MAX_SIDE as f32).max(16.0);
+        let side = [
+            (((hi[0] - lo[0]) / cell) as usize + 1).min(Self::MAX_SIDE),
+            (((hi[1] - lo[1]) / cell) as usize + 1).min(Self::MAX_SIDE),
+        ];
+        let cell_of = |c: Vec3| {
+            let x = (((c.x - lo[0]) / cell) as usize).min(side[0] - 1);
+            let z = (((c.z - lo[1]) / cell) as usize).min(side[1] - 1);
+            z * side[0] + x
+        };
+        let mut counts = vec![0u32; side[0] * side[1] + 1];
+        let mut loose = Vec::new();
+        for (t, c) in centres.iter().enumerate() {
+            match finite(c) {
+                Some(c) => counts[cell_of(c) + 1] += 1,
+                None => loose.push(t as u32),
+            }
+        }
+        for k in 1..counts.len() {
+            counts[k] += counts[k - 1];
+        }
+        let start = counts.clone();
+        let mut trees = vec![0u32; centres.len() - loose.len()];
+        for (t, c) in centres.iter().enumerate() {
+            if let Some(c) = finite(c) {
+                let k = cell_of(c);
+                trees[counts[k] as usize] = t as u32;
+                counts[k] += 1;
+            }
+        }
+        Self {
+            origin: lo,
+            cell,
+            side,
+            start,
+            trees,
+            loose,
+        }
+    }
+
+    /// Calls `f` with every tree whose cell lies within `radius` of `p` in x and z (and
+    /// the loose ones).
+    fn for_each_near(&self, p: Vec3, radius: f32, mut f: impl FnMut(u32)) {
+        for &t in &self.loose {
+            f(t);
+        }
+        let range = |c: f32, o: f32, n: usize| {
+            let a = ((c - radius - o) / self.cell).floor();
+            let b = ((c + radius - o) / self.cell).floor();
+            if !(a.is_finite() && b.is_finite()) || radius.is_nan() {
+                // An infinite radius, or a camera far out: every cell.
+                return 0..n;
+            }
+            let a = a.clamp(0.0, n as f32) as usize;
+            let b = (b + 1.0).clamp(0.0, n as f32) as usize;
+            a..b
+        };
+        let xs = range(p.x, self.origin[0], self.side[0]);
+        for z in range(p.z, self.origin[1], self.side[1]) {
+            for x in xs.clone() {
+                let c = z * self.side[0] + x;
+                for &t in &self.trees[self.start[c] as usize..self.start[c + 1] as usize] {
+                    f(t);
+                }
+            }
+        }
+    }
+}
+
+const FREE: u8 = 0;
+const COPIED: u8 = 1;
+const PENDING: u8 = 2;
+const MAPPED: u8 = 3;
+
+/// The indirect draw's instance count, copied out after a frame and read when the GPU has
+/// done it, without stalling (as the frame timer's timestamps are).
+struct CountReadback {
+    read: wgpu::Buffer,
+    state: Arc<AtomicU8>,
+    last: AtomicU32,
+    /// Whether `last` holds a count yet.
+    known: std::sync::atomic::AtomicBool,
+}
+
+impl CountReadback {
+    fn new(ctx: &GpuContext) -> Self {
+        Self {
+            read: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("far count read"),
+                size: 4,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            state: Arc::new(AtomicU8::new(FREE)),
+            last: AtomicU32::new(0),
+            known: std::sync::atomic::AtomicBool::new(false),
+        }
+    }
+
+    /// Copies the instance count of `args` when the last copy has been read.
+    fn copy(&self, encoder: &mut wgpu::CommandEncoder, args: &wgpu::Buffer) {
+        if self
+            .state
+            .compare_exchange(FREE, COPIED, Ordering::SeqCst, Ordering::SeqCst)
+            .is_ok()
+        {
+            encoder.copy_buffer_to_buffer(args, 16, &self.read, 0, 4);
+        }
+    }
+
+    /// Maps a copy just submitted; reads a mapped one; with `wait`, blocks until the
+    /// copy is read. The latest count read.
+    fn collect(&self, ctx: &GpuContext, wait: bool) -> Option<u32> {
+        if self
+            .state
+            .compare_exchange(COPIED, PENDING, Ordering::SeqCst, Ordering::SeqCst)
+            .is_ok()
+        {
+            let state = self.state.clone();
+            self.read.map_async(wgpu::MapMode::Read, .., move |r| {
+                state.store(if r.is_ok() { MAPPED } else { FREE }, Ordering::SeqCst);
+            });
+        }
+        if wait && self.state.load(Ordering::SeqCst) == PENDING {
+            let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+        } else {
+            let _ = ctx.device.poll(wgpu::PollType::Poll);
+        }
+        if self.state.load(Ordering::SeqCst) == MAPPED {
+            if let Ok(view) = self.read.get_mapped_range(..) {
+                let n = u32::from_le_bytes([view[0], view[1], view[2], view[3]]);
+                self.last.store(n, Ordering::SeqCst);
+                self.known.store(true, Ordering::SeqCst);
+            }
+            self.read.unmap();
+            self.state.store(FREE, Ordering::SeqCst);
+        }
+        self.known
+            .load(Ordering::SeqCst)
+            .then(|| self.last.load(Ordering::SeqCst))
+    }
+}
