@@ -125,7 +125,7 @@ struct BenchArgs {
     #[arg(long, value_delimiter = ',', value_parser = parse_method, default_value = "geometry,btf,billboard,texel,hybrid")]
     methods: Vec<Method>,
     /// Sweep a knob: KEY=V1,V2,... (btf and hybrid: lod_scale, weight_threshold, lod_fade, planes,
-    /// vcm, light_gain; texel: slice_d0, slice_d1, max_slices, texel_mode, texel_tiles, tile_distance;
+    /// vcm, light_gain, gpu_far; texel: slice_d0, slice_d1, max_slices, texel_mode, texel_tiles, tile_distance;
     /// all three: ground_sky); repeat for a grid.
     #[arg(long, value_parser = parse_sweep)]
     sweep: Vec<canopy::bench::run::Sweep>,

@@ -139,6 +139,7 @@ pub fn controls(
             ui.checkbox(&mut b.vcm_sky, "VCM sky occlusion");
             ui.checkbox(&mut b.show_shadow, "show VCM shadow factor");
         });
+        ui.checkbox(&mut b.gpu_far, "far trees' billboards on the GPU");
         ui.checkbox(
             &mut frame.ground_shadows,
             "ground shadows (alpha map + terrain)",
@@ -167,6 +168,11 @@ pub fn controls(
                 if frame.method == Method::Hybrid {
                     ui.label("trees as geometry");
                     ui.label(s.geometry_trees.to_string());
+                    ui.end_row();
+                }
+                if s.gpu_billboards > 0 {
+                    ui.label("built on the GPU");
+                    ui.label(format_count(u64::from(s.gpu_billboards)));
                     ui.end_row();
                 }
                 ui.label("images per billboard");

@@ -41,10 +41,12 @@ pub enum Knob {
     TileDistance,
     /// btf, hybrid and texel: the ground sees the sky through the trees (on or off).
     GroundSky,
+    /// btf and hybrid: the far trees' billboards built on the GPU (on or off).
+    GpuFar,
 }
 
 impl Knob {
-    pub const ALL: [Knob; 13] = [
+    pub const ALL: [Knob; 14] = [
         Knob::LodScale,
         Knob::WeightThreshold,
         Knob::LodFade,
@@ -58,6 +60,7 @@ impl Knob {
         Knob::TexelTiles,
         Knob::TileDistance,
         Knob::GroundSky,
+        Knob::GpuFar,
     ];
 
     /// The method this knob belongs to.
@@ -98,6 +101,7 @@ impl Knob {
             Knob::TexelTiles => "texel_tiles",
             Knob::TileDistance => "tile_distance",
             Knob::GroundSky => "ground_sky",
+            Knob::GpuFar => "gpu_far",
         }
     }
 
@@ -124,6 +128,7 @@ impl Knob {
             }
             Knob::Vcm => s.vcm = on_off(value).ok_or_else(|| bad("give on or off"))?,
             Knob::LightGain => s.light_gain = number(0.0, 1.0)?,
+            Knob::GpuFar => s.gpu_far = on_off(value).ok_or_else(|| bad("give on or off"))?,
             Knob::TexelTiles => t.tiles = on_off(value).ok_or_else(|| bad("give on or off"))?,
             Knob::TileDistance => t.tile_distance = number(1.0, 100_000.0)?,
             Knob::SliceD0 => t.bounds.d0 = number(0.01, 100.0)?,

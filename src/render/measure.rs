@@ -269,7 +269,11 @@ pub struct BtfReport {
     pub vcm_sky: bool,
     /// How far the light blend was brightened by its gain (0..1).
     pub light_gain: f32,
+    /// The far trees' billboards were built on the GPU.
+    pub gpu_far: bool,
     pub btf_bytes: u64,
+    /// GPU bytes of the far trees' buffers (0 without them).
+    pub far_bytes: u64,
     pub vcm_bytes: u64,
     pub vcm_resolution: Option<u32>,
     #[serde(flatten)]
@@ -298,7 +302,9 @@ impl FrameReport {
             ground_shadows: frame.ground_shadows,
             vcm_sky: stats.vcm && frame.btf.vcm_sky,
             light_gain: frame.btf.light_gain,
+            gpu_far: frame.btf.gpu_far,
             btf_bytes: renderer.btf_bytes(),
+            far_bytes: renderer.far_bytes(),
             vcm_bytes: renderer.vcm_bytes(),
             vcm_resolution: renderer.vcm_resolution(),
             sun_update: m.sun_update.unwrap_or_default(),
@@ -371,6 +377,7 @@ fn btf_counts<S: Serializer>(b: &BtfStats, ser: S) -> Result<S::Ok, S::Error> {
         geometry_trees: u32,
         images_per_billboard: f64,
         fetches_saved: u64,
+        gpu_billboards: u32,
         vcm: bool,
     }
     Counts {
@@ -380,6 +387,7 @@ fn btf_counts<S: Serializer>(b: &BtfStats, ser: S) -> Result<S::Ok, S::Error> {
         geometry_trees: b.geometry_trees,
         images_per_billboard: b.images_per_billboard(),
         fetches_saved: b.fetches_saved,
+        gpu_billboards: b.gpu_billboards,
         vcm: b.vcm,
     }
     .serialize(ser)

@@ -239,6 +239,11 @@ impl Renderer {
         self.btf.as_ref().map_or(0, |b| b.bytes)
     }
 
+    /// GPU bytes of the btf method's far-tree buffers (0 until the GPU builds far trees).
+    pub fn far_bytes(&self) -> u64 {
+        self.btf.as_ref().map_or(0, |b| b.far_bytes())
+    }
+
     /// Bytes of visibility cube maps held in main memory (0 without them).
     pub fn vcm_bytes(&self) -> u64 {
         self.btf.as_ref().map_or(0, |b| b.vcm_bytes())

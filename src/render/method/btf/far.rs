@@ -192,6 +192,9 @@ impl FarGpu {
         draw: (&wgpu::Buffer, &wgpu::TextureView, &wgpu::Sampler),
     ) -> Result<Option<Self>> {
         let n = trees.len().min(species.len()).min(bounds.len());
+        if n == 0 {
+            return Ok(None);
+        }
         let limits = ctx.device.limits();
         let record = std::mem::size_of::<BillboardGpu>() as u64;
         let limit = limits
