@@ -1044,3 +1044,64 @@ impl CountReadback {
             .then(|| self.last.load(Ordering::SeqCst))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_grid_visits_every_tree_within_the_radius_once() {
+        // Trees over 600 m with a cluster, one with no centre; cameras inside and outside.
+        let mut rng = 3u32;
+        let mut next = || {
+            rng = rng.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (rng >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let mut centres: Vec<Option<Vec3>> = (0..2000)
+            .map(|_| {
+                Some(Vec3::new(
+                    next() * 600.0 - 300.0,
+                    next() * 40.0,
+                    next() * 600.0,
+                ))
+            })
+            .collect();
+        centres.extend((0..200).map(|_| Some(Vec3::new(next() * 3.0, 0.0, next() * 3.0))));
+        centres.push(None);
+        centres.push(Some(Vec3::new(f32::NAN, 0.0, 1.0)));
+        let grid = Grid::new(&centres);
+        for (cam, radius) in [
+            (Vec3::new(0.0, 10.0, 100.0), 35.0),
+            (Vec3::new(-290.0, 5.0, 590.0), 80.0),
+            (Vec3::new(2000.0, 5.0, 0.0), 150.0),
+            (Vec3::new(1.0, 2.0, 1.0), 0.5),
+            (Vec3::new(0.0, 0.0, 0.0), f32::INFINITY),
+        ] {
+            let mut seen = vec![0u32; centres.len()];
+            grid.for_each_near(cam, radius, |t| seen[t as usize] += 1);
+            for (t, c) in centres.iter().enumerate() {
+                assert!(seen[t] <= 1, "tree {t} visited twice");
+                let within = match c {
+                    Some(c) if c.is_finite() => {
+                        (c.x - cam.x).abs() <= radius && (c.z - cam.z).abs() <= radius
+                    }
+                    _ => true,
+                };
+                if within {
+                    assert_eq!(
+                        seen[t], 1,
+                        "tree {t} at {c:?} missed from {cam} within {radius}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn sort_steps_are_those_of_a_bitonic_network() {
+        assert_eq!(sort_steps(2), vec![(2, 1)]);
+        assert_eq!(sort_steps(8).len(), 6);
+        assert_eq!(sort_steps(1 << 17).len(), 17 * 18 / 2);
+        assert_eq!(sort_steps(8)[3], (8, 4));
+    }
+}
