@@ -509,7 +509,7 @@ impl Renderer {
                     &frustum,
                     &frame.btf,
                     frame.method == Method::Hybrid,
-                )?;
+                );
                 // The far trees' VCM factors, uploaded after the sun moved.
                 sun_update_ms += shade_ms;
                 Prepared::Btf(bf)

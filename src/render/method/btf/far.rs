@@ -131,6 +131,8 @@ pub struct FarGpu {
     sorted_slots: u64,
     /// Most records one storage binding holds.
     limit: u64,
+    /// Most workgroups one dispatch may have.
+    max_groups: u32,
     /// Sort steps for `key_slots` keys, at `step_stride` bytes: (k, j) with k = 2, 4, ..
     step_stride: u64,
     steps: wgpu::Buffer,
@@ -420,6 +422,7 @@ impl FarGpu {
             sorted,
             sorted_slots: 0,
             limit,
+            max_groups: limits.max_compute_workgroups_per_dimension,
             step_stride,
             steps,
             layouts: [layout0, layout1],
@@ -653,7 +656,13 @@ impl FarGpu {
             return Ok(false);
         };
         let near_count = near.len() as u64;
-        if self.tree_count as u64 + near_count > self.limit {
+        let slots = self.tree_count as u64 + near_count;
+        // One binding's records, and one dispatch's workgroups over the sort's keys.
+        let groups = slots
+            .max(2)
+            .next_power_of_two()
+            .div_ceil(u64::from(WORKGROUP));
+        if slots > self.limit || groups > u64::from(self.max_groups) {
             return Ok(false);
         }
         self.reserve(ctx, near_count)?;
@@ -665,7 +674,6 @@ impl FarGpu {
         {
             near.write_unsorted(view.slice(..));
         }
-        let slots = self.tree_count as u64 + near_count;
         let keys = slots.max(2).next_power_of_two() as u32;
         params.near_count = near_count as u32;
         params.sort_n = keys;

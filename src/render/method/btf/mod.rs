@@ -200,7 +200,9 @@ impl BtfAssets {
     /// far enough to be one tree-level billboard each are left to the GPU ([`far`]; their
     /// records are built in [`Self::encode_far`]) and `visible` is not needed (None: the
     /// renderer skips its cull). Returns the frame and the milliseconds spent uploading the
-    /// trees' VCM factors after the sun moved.
+    /// trees' VCM factors after the sun moved. Where the GPU cannot take the far trees
+    /// (no room for their buffers, too many billboards for one binding), the CPU prepares
+    /// every tree.
     #[allow(clippy::too_many_arguments)]
     pub fn prepare(
         &mut self,
@@ -214,7 +216,7 @@ impl BtfAssets {
         frustum: &Frustum,
         settings: &BtfSettings,
         hybrid: bool,
-    ) -> Result<(BtfFrame, f64)> {
+    ) -> (BtfFrame, f64) {
         let view = PrepareView {
             camera,
             focal_px,
@@ -222,15 +224,22 @@ impl BtfAssets {
             frustum,
         };
         if settings.gpu_far && self.far.is_none() {
-            self.far = Some(far::FarGpu::new(
-                ctx,
-                &self.scene,
-                &world.tree_data,
-                &world.tree_species,
-                &world.tree_bounds,
-                &self.layout,
-                (&self.view_axes, &self.texture_view, &self.sampler),
-            )?);
+            // Without it (no room, no trees, a GPU that cannot) the CPU prepares every tree.
+            self.far = Some(
+                far::FarGpu::new(
+                    ctx,
+                    &self.scene,
+                    &world.tree_data,
+                    &world.tree_species,
+                    &world.tree_bounds,
+                    &self.layout,
+                    (&self.view_axes, &self.texture_view, &self.sampler),
+                )
+                .unwrap_or_else(|e| {
+                    log::warn!("the far trees stay on the CPU: {e}");
+                    None
+                }),
+            );
         }
         let far = self
             .far
@@ -251,15 +260,19 @@ impl BtfAssets {
             let (mut out, records) =
                 self.scene
                     .prepare_sorted(&world.tree_data, &near, &view, settings, 0, hybrid);
-            if f.upload_near(ctx, &records)? {
-                out.far = true;
-                return Ok((out, shade_ms));
+            match f.upload_near(ctx, &records) {
+                Ok(true) => {
+                    out.far = true;
+                    return (out, shade_ms);
+                }
+                Ok(false) => {}
+                Err(e) => log::warn!("this frame's trees stay on the CPU: {e}"),
             }
             if !trees_on {
-                return Ok((out, shade_ms));
+                return (out, shade_ms);
             }
-            // Too many near billboards for one binding with the trees' slots: this frame
-            // is the CPU's alone, which keeps the nearest.
+            // Too many near billboards for one binding (or one dispatch) with the trees'
+            // slots: this frame is the CPU's alone, which keeps the nearest.
             let all = world.cull(frustum);
             let (out, sorted) = self.scene.prepare_sorted(
                 &world.tree_data,
@@ -270,7 +283,7 @@ impl BtfAssets {
                 hybrid,
             );
             self.upload_sorted(ctx, &sorted);
-            return Ok((out, shade_ms));
+            return (out, shade_ms);
         }
         if let Some(Some(f)) = self.far.as_mut() {
             f.clear();
@@ -296,7 +309,7 @@ impl BtfAssets {
             hybrid,
         );
         self.upload_sorted(ctx, &sorted);
-        Ok((out, 0.0))
+        (out, 0.0)
     }
 
     /// Whether this frame's far trees go to the GPU (the renderer then needs no cull).
