@@ -13,18 +13,19 @@
 //! How many far billboards were drawn comes back a frame or two later (at once when the
 //! frame is measured).
 
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU8, AtomicU32, Ordering};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::Vec3;
 
 use super::billboard::{BillboardGpu, BillboardMode};
 use super::prepare::{BtfScene, PrepareView, SortedBillboards};
-use super::settings::{BtfSettings, LOD_COLOURS, PlaneMode};
+use super::settings::{BtfSettings, PlaneMode};
 use crate::Result;
 use crate::model::Level;
 use crate::model::mesh::Aabb;
 use crate::render::GpuContext;
+use crate::render::timing::MappedRead;
 use crate::render::world_gpu::TreeGpu;
 use crate::sphere::{DirectionRows, DirectionSet};
 
@@ -614,13 +615,9 @@ impl FarGpu {
         for (p, q) in planes.iter_mut().zip(&view.frustum.planes) {
             *p = q.to_array();
         }
-        let (overlay, mode) = if settings.show_lod {
-            (LOD_COLOURS[Level::Tree], BillboardMode::Tint)
-        } else if settings.show_shadow {
-            ([1.0; 3], BillboardMode::SunFactor)
-        } else {
-            ([1.0; 3], BillboardMode::Images)
-        };
+        let (overlay, mode) = settings
+            .overlay(Level::Tree)
+            .unwrap_or(([1.0; 3], BillboardMode::Images));
         self.pending = Some(FarParamsGpu {
             camera: cam.to_array(),
             count,
@@ -979,77 +976,52 @@ impl Grid {
     }
 }
 
-const FREE: u8 = 0;
-const COPIED: u8 = 1;
-const PENDING: u8 = 2;
-const MAPPED: u8 = 3;
-
-/// The indirect draw's instance count, copied out after a frame and read when the GPU has
-/// done it, without stalling (as the frame timer's timestamps are).
+/// The build pass's count of far billboards, copied out after a frame and read when the
+/// GPU has done it, without stalling (as the frame timer's timestamps are).
 struct CountReadback {
-    read: wgpu::Buffer,
-    state: Arc<AtomicU8>,
-    last: AtomicU32,
-    /// Whether `last` holds a count yet.
-    known: std::sync::atomic::AtomicBool,
+    read: MappedRead,
+    /// This frame copied into `read`.
+    copied: AtomicBool,
+    /// The latest count read (None before any).
+    last: Mutex<Option<u32>>,
 }
 
 impl CountReadback {
     fn new(ctx: &GpuContext) -> Self {
         Self {
-            read: ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("far count read"),
-                size: 4,
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
-            state: Arc::new(AtomicU8::new(FREE)),
-            last: AtomicU32::new(0),
-            known: std::sync::atomic::AtomicBool::new(false),
+            read: MappedRead::new(ctx, "far count read", 4),
+            copied: AtomicBool::new(false),
+            last: Mutex::new(None),
         }
     }
 
-    /// Copies the instance count of `args` when the last copy has been read.
+    /// Copies the far count of `args` when the last copy has been read.
     fn copy(&self, encoder: &mut wgpu::CommandEncoder, args: &wgpu::Buffer) {
-        if self
-            .state
-            .compare_exchange(FREE, COPIED, Ordering::SeqCst, Ordering::SeqCst)
-            .is_ok()
-        {
-            encoder.copy_buffer_to_buffer(args, 16, &self.read, 0, 4);
+        if self.read.is_free() && !self.copied.swap(true, Ordering::SeqCst) {
+            encoder.copy_buffer_to_buffer(args, 16, self.read.buffer(), 0, 4);
         }
     }
 
     /// Maps a copy just submitted; reads a mapped one; with `wait`, blocks until the
     /// copy is read. The latest count read.
     fn collect(&self, ctx: &GpuContext, wait: bool) -> Option<u32> {
-        if self
-            .state
-            .compare_exchange(COPIED, PENDING, Ordering::SeqCst, Ordering::SeqCst)
-            .is_ok()
-        {
-            let state = self.state.clone();
-            self.read.map_async(wgpu::MapMode::Read, .., move |r| {
-                state.store(if r.is_ok() { MAPPED } else { FREE }, Ordering::SeqCst);
-            });
+        if self.copied.swap(false, Ordering::SeqCst) {
+            self.read.map();
         }
-        if wait && self.state.load(Ordering::SeqCst) == PENDING {
-            let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+        let poll = if wait && self.read.is_pending() {
+            wgpu::PollType::wait_indefinitely()
         } else {
-            let _ = ctx.device.poll(wgpu::PollType::Poll);
+            wgpu::PollType::Poll
+        };
+        let _ = ctx.device.poll(poll);
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(n) = self
+            .read
+            .read(|view| u32::from_le_bytes([view[0], view[1], view[2], view[3]]))
+        {
+            *last = Some(n);
         }
-        if self.state.load(Ordering::SeqCst) == MAPPED {
-            if let Ok(view) = self.read.get_mapped_range(..) {
-                let n = u32::from_le_bytes([view[0], view[1], view[2], view[3]]);
-                self.last.store(n, Ordering::SeqCst);
-                self.known.store(true, Ordering::SeqCst);
-            }
-            self.read.unmap();
-            self.state.store(FREE, Ordering::SeqCst);
-        }
-        self.known
-            .load(Ordering::SeqCst)
-            .then(|| self.last.load(Ordering::SeqCst))
+        *last
     }
 }
 

@@ -354,14 +354,6 @@ impl BtfAssets {
         }
     }
 
-    /// The far trees' sorted records of the last frame, read back (tests).
-    pub fn read_far(&self, ctx: &GpuContext) -> Result<Vec<BillboardGpu>> {
-        match self.far.as_ref().and_then(Option::as_ref) {
-            Some(f) => f.read_sorted(ctx),
-            None => Ok(Vec::new()),
-        }
-    }
-
     /// GPU bytes of the far trees' buffers (0 until used).
     pub fn far_bytes(&self) -> u64 {
         self.far

@@ -12,7 +12,7 @@ use std::collections::HashMap;
 use glam::{Mat3, Mat4, Vec3};
 
 use super::billboard::{BillboardGpu, BillboardMode, SetInfo};
-use super::settings::{BtfSettings, BtfStats, FETCHES_AT_MOST, LOD_COLOURS, PlaneMode};
+use super::settings::{BtfSettings, BtfStats, FETCHES_AT_MOST, PlaneMode};
 use super::shading::{ObjectFrame, Shade, VcmShading};
 use crate::format::{Baked, BtfImageSet};
 use crate::lod::{self, LevelTexels};
@@ -483,30 +483,12 @@ impl BtfScene {
         // many: they matter most. The keys are sorted, not the 208-byte records, which are
         // then copied once, from their chunks. (Unless the GPU sorts them: `max_billboards`
         // 0 leaves them in the order made, all of them.)
-        if max_billboards == 0 {
-            let frame = BtfFrame {
-                trunk_only,
-                trunk_and_limbs,
-                twigs,
-                billboards: keys.len() as u32,
-                far: false,
-                records: Vec::new(),
-                stats,
-            };
-            let records = parts.into_iter().map(|p| p.records).collect();
-            return (
-                frame,
-                SortedBillboards {
-                    records,
-                    starts,
-                    keys,
-                },
-            );
-        }
-        keys.par_sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-        if keys.len() > max_billboards {
-            stats.dropped = (keys.len() - max_billboards) as u32;
-            keys.drain(..keys.len() - max_billboards);
+        if max_billboards > 0 {
+            keys.par_sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+            if keys.len() > max_billboards {
+                stats.dropped = (keys.len() - max_billboards) as u32;
+                keys.drain(..keys.len() - max_billboards);
+            }
         }
         let frame = BtfFrame {
             trunk_only,
@@ -582,10 +564,8 @@ impl BtfScene {
         };
         for (level, opacity) in choice.draws() {
             pusher.opacity = opacity * (1.0 - geometry);
-            if settings.show_lod {
-                pusher.tint = (LOD_COLOURS[level], BillboardMode::Tint);
-            } else if settings.show_shadow {
-                pusher.tint = ([1.0; 3], BillboardMode::SunFactor);
+            if let Some(overlay) = settings.overlay(level) {
+                pusher.tint = overlay;
             }
             expand(&mut pusher, parts, level, m, shading.as_ref());
         }
@@ -891,6 +871,7 @@ impl Pusher<'_, '_> {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::render::btf::LOD_COLOURS;
 
     const BRANCHES: usize = 4;
     const BRANCH_TWIGS: usize = 5;

@@ -1,6 +1,6 @@
 //! The knobs of the `btf` method and what it reports per frame.
 
-use crate::model::PerLevel;
+use crate::model::{Level, PerLevel};
 
 /// How each billboard is drawn.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -82,6 +82,20 @@ impl Default for BtfSettings {
             vcm_sky: true,
             light_gain: LIGHT_GAIN,
             gpu_far: true,
+        }
+    }
+}
+
+impl BtfSettings {
+    /// What a billboard of `level` shows instead of its images, with its colour, when an
+    /// overlay is on (the LOD level before the VCM sun factor); None without one.
+    pub(super) fn overlay(&self, level: Level) -> Option<([f32; 3], super::BillboardMode)> {
+        if self.show_lod {
+            Some((LOD_COLOURS[level], super::BillboardMode::Tint))
+        } else if self.show_shadow {
+            Some(([1.0; 3], super::BillboardMode::SunFactor))
+        } else {
+            None
         }
     }
 }
