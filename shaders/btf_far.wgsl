@@ -63,23 +63,40 @@ struct FarParams {
     near_count: u32,
     // Most records `sorted` takes (the farthest are left out).
     limit: u32,
-    _pad: u32,
+    // Texels on a side of a cube map's face.
+    vcm_res: u32,
+    // The twig and main-branch levels' overlay colours; the near draws expanded here.
+    overlay_twig: vec3<f32>,
+    near_draws: u32,
+    overlay_branch: vec3<f32>,
+    // Slots of the billboards of those draws, after the near records.
+    near_slots: u32,
+    views_twig: DirSet,
+    views_branch: DirSet,
+    // Where the near draws start in `frame_words`, in words.
+    draws_at: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: FarParams;
 @group(0) @binding(1) var<storage, read> trees: array<FarTree>;
 @group(0) @binding(2) var<storage, read> shades: array<FarShade>;
-// Words: float bits, or indices (the triangles; the species' layer bases).
+// Words: float bits, or indices (the triangles; the species' layer bases); then the
+// species' part transforms, their cube maps' objects and the maps' bytes.
 @group(0) @binding(3) var<storage, read> tables: array<vec4<u32>>;
-// One bit per tree: set for the near trees, which the CPU prepares.
-@group(0) @binding(4) var<storage, read> near_bits: array<u32>;
-// One slot per tree (its record when it is far and in view), then the near trees'.
+// One bit per tree: set for the near trees, which the CPU prepares (or expands into
+// `NearDraw`s, at `params.draws_at`).
+@group(0) @binding(4) var<storage, read> frame_words: array<u32>;
+// One slot per tree (its record when it is far and in view), then the near trees' made on
+// the CPU, then those expanded here.
 @group(0) @binding(5) var<storage, read_write> records: array<Billboard>;
 // Per slot of `records` (padded to a power of two): (ordered depth, !slot), 0 for none;
 // sorted in decreasing order, back to front.
 @group(0) @binding(6) var<storage, read_write> keys: array<vec2<u32>>;
 // The indirect draw: vertex count, instance count, first vertex, first instance; then the
-// far billboards made.
+// far billboards made, and the near ones expanded here per level (twig, branch, tree).
 @group(0) @binding(7) var<storage, read_write> draw_args: array<atomic<u32>, 8>;
 @group(0) @binding(8) var<storage, read_write> sorted: array<Billboard>;
 
@@ -248,13 +265,103 @@ fn ordered(f: f32) -> u32 {
     return b | 0x80000000u;
 }
 
+// Rows per species in `tables` from `params.species`: per level (twig, branch, tree) 3
+// rows (the set's centre and radius; its VCM box origin and first layer; its VCM box scale);
+// then (main branches, twigs per main branch, twigs on the trunk, first row of their
+// transforms); (first row of the main branches' cube-map objects, of the twigs'); the
+// tree's and the main branch's VCM boxes (min, max); the main branch's and the twig's
+// billboard centres. A transform takes 4 rows (its columns); an object 3 (the row where its
+// 8 maps' bytes start, or NO_MAP; its sky visibility at the 8 corners).
+const SPECIES_ROWS: u32 = 17u;
+const NO_MAP: u32 = 0xffffffffu;
+const LEVEL_TWIG: u32 = 0u;
+const LEVEL_BRANCH: u32 = 1u;
+const LEVEL_TREE: u32 = 2u;
+
+fn species_row(sp: u32) -> u32 {
+    return params.species + SPECIES_ROWS * sp;
+}
+
+// The first of level `level`'s 3 set rows of species `sp`.
+fn set_row(sp: u32, level: u32) -> u32 {
+    return species_row(sp) + 3u * level;
+}
+
+fn transform(r: u32) -> mat4x4<f32> {
+    return mat4x4<f32>(row(r), row(r + 1u), row(r + 2u), row(r + 3u));
+}
+
+// The record of a billboard of the set at rows `set` placed by `m`, as `Pusher::push`
+// makes it (opacity 1, the tree's tint, no VCM factors); `planes` 0 when it is out of
+// view or `m` has no valid scale.
+fn make_record(m: mat4x4<f32>, set_at: u32, views: DirSet, tint: vec3<f32>) -> Billboard {
+    var r: Billboard;
+    r.planes = 0u;
+    let scale = length(m[0].xyz);
+    if !(scale > 0.0 && scale <= 3.4e38) {
+        return r;
+    }
+    let center = (m * vec4<f32>(row3(set_at), 1.0)).xyz;
+    let radius = row(set_at).w * scale;
+    for (var p = 0u; p < params.plane_count; p++) {
+        let pl = params.planes[p];
+        let corner = select(center - vec3<f32>(radius), center + vec3<f32>(radius), pl.xyz >= vec3<f32>(0.0));
+        if dot(pl.xyz, corner) + pl.w < 0.0 {
+            return r;
+        }
+    }
+    let rot = mat3x3<f32>(m[0].xyz, m[1].xyz, m[2].xyz) * (1.0 / scale);
+    let to_object = transpose(rot);
+    let v_obj = to_object * normalize_or(params.camera - center, vec3<f32>(0.0, 1.0, 0.0));
+    let l_obj = to_object * params.to_sun;
+    let vb = cull(blend(views, v_obj), params.weight_threshold);
+    var lb = cull(blend(params.lights, l_obj), params.weight_threshold);
+    let strength = clamp(params.light_gain, 0.0, 1.0);
+    if strength > 0.0 {
+        lb.weight *= pow(light_gain(params.lights, lb, l_obj), strength);
+    }
+    let axes = billboard_axes(v_obj);
+    r.center = center;
+    r.radius = radius;
+    r.plane_right = normalize_or(rot * axes[0], vec3<f32>(1.0, 0.0, 0.0));
+    r.planes = params.plane_mode;
+    r.plane_up = normalize_or(rot * axes[1], vec3<f32>(0.0, 1.0, 0.0));
+    r.opacity = 1.0;
+    r.obj_right = axes[0];
+    r._pad0 = 0.0;
+    r.obj_up = axes[1];
+    r._pad1 = 0.0;
+    r.view_index = vb.index;
+    r.layer_base = tables[set_at + 1u].w;
+    r.light_index = lb.index;
+    r.light_count = params.lights.count;
+    r.view_weight = vb.weight;
+    r.view_count = views.count;
+    r.light_weight = lb.weight;
+    r._pad2 = 0.0;
+    r.tint = tint;
+    r.mode = params.mode;
+    r.vcm_box_origin = row3(set_at + 1u);
+    r.parent_direct = 1.0;
+    r.vcm_box_scale = row3(set_at + 2u);
+    r.parent_sky = 1.0;
+    r.vcm_direct = array<vec4<f32>, 2>(vec4<f32>(1.0), vec4<f32>(1.0));
+    r.vcm_sky = array<vec4<f32>, 2>(vec4<f32>(1.0), vec4<f32>(1.0));
+    return r;
+}
+
+// The record's key: (ordered depth, !slot).
+fn key_of(r: Billboard, slot: u32) -> vec2<u32> {
+    return vec2<u32>(ordered(dot(r.center - params.camera, params.forward)), ~slot);
+}
+
 @compute @workgroup_size(64)
 fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x;
     if i >= params.count {
         return;
     }
-    if ((near_bits[i / 32u] >> (i % 32u)) & 1u) != 0u {
+    if ((frame_words[i / 32u] >> (i % 32u)) & 1u) != 0u {
         return;
     }
     let tree = trees[i];
@@ -267,64 +374,14 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
             return;
         }
     }
-    let m = tree.model;
-    let scale = length(m[0].xyz);
-    if !(scale > 0.0 && scale <= 3.4e38) {
+    var tint = tree.tint;
+    if params.mode != MODE_IMAGES {
+        tint = params.overlay;
+    }
+    var r = make_record(tree.model, set_row(tree.species, LEVEL_TREE), params.views, tint);
+    if r.planes == 0u {
         return;
     }
-    let s = params.species + 3u * tree.species;
-    let set_center = row3(s);
-    let set_radius = row(s).w;
-    let center = (m * vec4<f32>(set_center, 1.0)).xyz;
-    let radius = set_radius * scale;
-    for (var p = 0u; p < params.plane_count; p++) {
-        let pl = params.planes[p];
-        let corner = select(center - vec3<f32>(radius), center + vec3<f32>(radius), pl.xyz >= vec3<f32>(0.0));
-        if dot(pl.xyz, corner) + pl.w < 0.0 {
-            return;
-        }
-    }
-    let rot = mat3x3<f32>(m[0].xyz, m[1].xyz, m[2].xyz) * (1.0 / scale);
-    let to_object = transpose(rot);
-    let v_obj = to_object * normalize_or(params.camera - center, vec3<f32>(0.0, 1.0, 0.0));
-    let l_obj = to_object * params.to_sun;
-    let vb = cull(blend(params.views, v_obj), params.weight_threshold);
-    var lb = cull(blend(params.lights, l_obj), params.weight_threshold);
-    let strength = clamp(params.light_gain, 0.0, 1.0);
-    if strength > 0.0 {
-        lb.weight *= pow(light_gain(params.lights, lb, l_obj), strength);
-    }
-    let axes = billboard_axes(v_obj);
-    var r: Billboard;
-    r.center = center;
-    r.radius = radius;
-    r.plane_right = normalize_or(rot * axes[0], vec3<f32>(1.0, 0.0, 0.0));
-    r.planes = params.plane_mode;
-    r.plane_up = normalize_or(rot * axes[1], vec3<f32>(0.0, 1.0, 0.0));
-    r.opacity = 1.0;
-    r.obj_right = axes[0];
-    r._pad0 = 0.0;
-    r.obj_up = axes[1];
-    r._pad1 = 0.0;
-    r.view_index = vb.index;
-    r.layer_base = tables[s + 1u].w;
-    r.light_index = lb.index;
-    r.light_count = params.lights.count;
-    r.view_weight = vb.weight;
-    r.view_count = params.views.count;
-    r.light_weight = lb.weight;
-    r._pad2 = 0.0;
-    r.tint = tree.tint;
-    r.mode = params.mode;
-    if params.mode != MODE_IMAGES {
-        r.tint = params.overlay;
-    }
-    r.vcm_box_origin = row3(s + 1u);
-    r.parent_direct = 1.0;
-    r.vcm_box_scale = row3(s + 2u);
-    r.parent_sky = 1.0;
-    r.vcm_direct = array<vec4<f32>, 2>(vec4<f32>(1.0), vec4<f32>(1.0));
-    r.vcm_sky = array<vec4<f32>, 2>(vec4<f32>(1.0), vec4<f32>(1.0));
     if params.vcm != 0u {
         let sh = shades[i];
         r.vcm_direct = sh.direct;
@@ -333,8 +390,265 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     records[i] = r;
-    keys[i] = vec2<u32>(ordered(dot(center - params.camera, params.forward)), ~i);
+    keys[i] = key_of(r, i);
     atomicAdd(&draw_args[4], 1u);
+}
+
+// One byte of the cube-map data starting at row `map`, as opacity.
+fn map_byte(map: u32, byte: u32) -> f32 {
+    let word = byte / 4u;
+    let w = tables[map + word / 4u][word % 4u];
+    return f32((w >> (8u * (byte % 4u))) & 0xffu) / 255.0;
+}
+
+// `vcm::sample`: the opacity of corner `corner`'s cube map (of the maps at row `map`) in
+// direction `dir`, bilinear inside the face, clamped at its edges; 0 for a zero direction.
+fn cube_sample(map: u32, corner: u32, dir: vec3<f32>) -> f32 {
+    let a = abs(dir);
+    var axis = 2u;
+    if a.x >= a.y && a.x >= a.z {
+        axis = 0u;
+    } else if a.y >= a.z {
+        axis = 1u;
+    }
+    let m = a[axis];
+    if !(m > 0.0) {
+        return 0.0;
+    }
+    let face = 2u * axis + select(0u, 1u, dir[axis] < 0.0);
+    let x = dir[(axis + 1u) % 3u] / m;
+    let y = dir[(axis + 2u) % 3u] / m;
+    let res = params.vcm_res;
+    let last = f32(res - 1u);
+    let fx = clamp((x + 1.0) * 0.5 * f32(res) - 0.5, 0.0, last);
+    let fy = clamp((y + 1.0) * 0.5 * f32(res) - 0.5, 0.0, last);
+    let i0 = u32(fx);
+    let j0 = u32(fy);
+    let i1 = min(i0 + 1u, res - 1u);
+    let j1 = min(j0 + 1u, res - 1u);
+    let u = fx - f32(i0);
+    let v = fy - f32(j0);
+    let base = (corner * 6u + face) * res * res;
+    let a00 = map_byte(map, base + j0 * res + i0);
+    let a10 = map_byte(map, base + j0 * res + i1);
+    let a01 = map_byte(map, base + j1 * res + i0);
+    let a11 = map_byte(map, base + j1 * res + i1);
+    let top = a00 + (a10 - a00) * u;
+    let bottom = a01 + (a11 - a01) * u;
+    return top + (bottom - top) * v;
+}
+
+// Sun visibility (1 - opacity) at the 8 corners of the object at row `obj`, towards `dir`
+// in its frame (1 without maps).
+fn object_direct(obj: u32, dir: vec3<f32>) -> array<f32, 8> {
+    var out: array<f32, 8>;
+    let map = tables[obj].x;
+    for (var k = 0u; k < 8u; k++) {
+        out[k] = 1.0;
+        if map != NO_MAP {
+            out[k] = 1.0 - cube_sample(map, k, dir);
+        }
+    }
+    return out;
+}
+
+fn object_sky(obj: u32) -> array<f32, 8> {
+    let a = row(obj + 1u);
+    let b = row(obj + 2u);
+    return array<f32, 8>(a.x, a.y, a.z, a.w, b.x, b.y, b.z, b.w);
+}
+
+fn corners(v: array<vec4<f32>, 2>) -> array<f32, 8> {
+    return array<f32, 8>(v[0].x, v[0].y, v[0].z, v[0].w, v[1].x, v[1].y, v[1].z, v[1].w);
+}
+
+fn pack8(v: array<f32, 8>) -> array<vec4<f32>, 2> {
+    return array<vec4<f32>, 2>(vec4<f32>(v[0], v[1], v[2], v[3]), vec4<f32>(v[4], v[5], v[6], v[7]));
+}
+
+fn lerp1(a: f32, b: f32, t: f32) -> f32 {
+    return a + (b - a) * t;
+}
+
+// `vcm::trilinear` of the corner values at `p` in the box at rows `bounds` (min, max): its
+// box coordinates (`vcm::box_coords`), clamped to the box.
+fn trilinear_at(v: array<f32, 8>, bounds: u32, p: vec3<f32>) -> f32 {
+    let lo = row3(bounds);
+    let hi = row3(bounds + 1u);
+    let u = clamp((p - lo) / max(hi - lo, vec3<f32>(1e-6)), vec3<f32>(0.0), vec3<f32>(1.0));
+    let x00 = lerp1(v[0], v[1], u.x);
+    let x10 = lerp1(v[2], v[3], u.x);
+    let x01 = lerp1(v[4], v[5], u.x);
+    let x11 = lerp1(v[6], v[7], u.x);
+    return lerp1(lerp1(x00, x10, u.y), lerp1(x01, x11, u.y), u.z);
+}
+
+// The unit `d` in the frame of a part whose transform is `m` (`TreeShading`'s frames).
+fn into_frame(m: mat4x4<f32>, d: vec3<f32>) -> vec3<f32> {
+    let scale = max(length(m[0].xyz), 1e-12);
+    let rot = mat3x3<f32>(m[0].xyz, m[1].xyz, m[2].xyz) * (1.0 / scale);
+    return normalize_or(transpose(rot) * d, vec3<f32>(0.0, 1.0, 0.0));
+}
+
+// A near tree's level to expand here: its billboards take the near slots from `first`.
+struct NearDraw {
+    tree: u32,
+    level: u32,
+    opacity: f32,
+    first: u32,
+}
+
+fn near_draw(d: u32) -> NearDraw {
+    let at = params.draws_at + 4u * d;
+    return NearDraw(frame_words[at], frame_words[at + 1u], bitcast<f32>(frame_words[at + 2u]), frame_words[at + 3u]);
+}
+
+// One billboard of a near tree's level, as `expand` and `Pusher::push` make it on the CPU:
+// the level's parts in order (the tree; its main branches, then the trunk's twigs; every
+// main branch's twigs, branch by branch, then the trunk's), shaded as `TreeShading` does.
+@compute @workgroup_size(64)
+fn near_build(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let s = gid.x;
+    if s >= params.near_slots || params.near_draws == 0u {
+        return;
+    }
+    // The last draw starting at or before `s`.
+    var lo = 0u;
+    var hi = params.near_draws;
+    while hi - lo > 1u {
+        let mid = (lo + hi) / 2u;
+        if frame_words[params.draws_at + 4u * mid + 3u] <= s {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let draw = near_draw(lo);
+    if draw.tree >= params.count || s < draw.first {
+        return;
+    }
+    let tree = trees[draw.tree];
+    let sp = tree.species;
+    let h = species_row(sp);
+    let counts = tables[h + 9u];
+    let branches = counts.x;
+    let per_branch = counts.y;
+    let trunk = counts.z;
+    let mats = counts.w;
+    let objects = tables[h + 10u];
+    let k = s - draw.first;
+    // The part: its transform in the tree frame, its set's level, and which it is.
+    var part = mat4x4<f32>(vec4<f32>(1.0, 0.0, 0.0, 0.0), vec4<f32>(0.0, 1.0, 0.0, 0.0), vec4<f32>(0.0, 0.0, 1.0, 0.0), vec4<f32>(0.0, 0.0, 0.0, 1.0));
+    var level = LEVEL_TREE;
+    // The main branch it is (on), or none; the twig object it is, or none.
+    var branch = NO_MAP;
+    var twig = NO_MAP;
+    var trunk_at = NO_MAP;
+    if draw.level == LEVEL_BRANCH {
+        if k < branches {
+            branch = k;
+            level = LEVEL_BRANCH;
+            part = transform(mats + 4u * k);
+        } else {
+            trunk_at = k - branches;
+        }
+    } else if draw.level == LEVEL_TWIG {
+        if k < branches * per_branch {
+            branch = k / per_branch;
+            twig = k % per_branch;
+            level = LEVEL_TWIG;
+            part = transform(mats + 4u * branch) * transform(mats + 4u * (branches + twig));
+        } else {
+            trunk_at = k - branches * per_branch;
+        }
+    } else if k != 0u {
+        return;
+    }
+    if trunk_at != NO_MAP {
+        if trunk_at >= trunk {
+            return;
+        }
+        twig = per_branch + trunk_at;
+        level = LEVEL_TWIG;
+        part = transform(mats + 4u * (branches + per_branch + trunk_at));
+    }
+    var tint = tree.tint;
+    if params.mode != MODE_IMAGES {
+        if level == LEVEL_TWIG {
+            tint = params.overlay_twig;
+        } else if level == LEVEL_BRANCH {
+            tint = params.overlay_branch;
+        } else {
+            tint = params.overlay;
+        }
+    }
+    var views = params.views;
+    if level == LEVEL_TWIG {
+        views = params.views_twig;
+    } else if level == LEVEL_BRANCH {
+        views = params.views_branch;
+    }
+    let set_at = set_row(sp, level);
+    var r = make_record(tree.model * part, set_at, views, tint);
+    if r.planes == 0u {
+        return;
+    }
+    r.opacity = draw.opacity;
+    if params.vcm != 0u {
+        let tree_direct = corners(shades[draw.tree].direct);
+        let tree_sky = corners(shades[draw.tree].sky);
+        var direct = tree_direct;
+        var sky = tree_sky;
+        var parent_direct = 1.0;
+        var parent_sky = 1.0;
+        if level != LEVEL_TREE {
+            let sun_tree = into_frame(tree.model, params.to_sun);
+            let tree_box = h + 11u;
+            let branch_box = h + 13u;
+            let branch_centre = row3(h + 15u);
+            let twig_centre = row3(h + 16u);
+            if branch != NO_MAP && twig == NO_MAP {
+                // A main branch: c per pixel, d at its centre.
+                let obj = objects.x + 3u * branch;
+                direct = object_direct(obj, sun_tree);
+                sky = object_sky(obj);
+                let centre = (part * vec4<f32>(branch_centre, 1.0)).xyz;
+                parent_direct = trilinear_at(tree_direct, tree_box, centre);
+                parent_sky = trilinear_at(tree_sky, tree_box, centre);
+            } else if branch == NO_MAP {
+                // A twig on the trunk: b per pixel, d at its centre.
+                let obj = objects.y + 3u * twig;
+                direct = object_direct(obj, sun_tree);
+                sky = object_sky(obj);
+                let centre = (part * vec4<f32>(twig_centre, 1.0)).xyz;
+                parent_direct = trilinear_at(tree_direct, tree_box, centre);
+                parent_sky = trilinear_at(tree_sky, tree_box, centre);
+            } else {
+                // A main branch's twig: b per pixel, c·d at its centre.
+                let branch_m = transform(mats + 4u * branch);
+                let branch_obj = objects.x + 3u * branch;
+                let c = object_direct(branch_obj, sun_tree);
+                let c_sky = object_sky(branch_obj);
+                let obj = objects.y + 3u * twig;
+                direct = object_direct(obj, into_frame(branch_m, sun_tree));
+                sky = object_sky(obj);
+                let in_branch = (transform(mats + 4u * (branches + twig)) * vec4<f32>(twig_centre, 1.0)).xyz;
+                let in_tree = (branch_m * vec4<f32>(in_branch, 1.0)).xyz;
+                parent_direct = trilinear_at(c, branch_box, in_branch) * trilinear_at(tree_direct, tree_box, in_tree);
+                parent_sky = trilinear_at(c_sky, branch_box, in_branch) * trilinear_at(tree_sky, tree_box, in_tree);
+            }
+        }
+        r.vcm_direct = pack8(direct);
+        r.parent_direct = parent_direct;
+        if params.vcm == 1u {
+            r.vcm_sky = pack8(sky);
+            r.parent_sky = parent_sky;
+        }
+    }
+    let slot = params.count + params.near_count + s;
+    records[slot] = r;
+    keys[slot] = key_of(r, slot);
+    atomicAdd(&draw_args[5u + level], 1u);
 }
 
 // The near trees' records (made on the CPU, after the trees' slots) get their keys.
@@ -344,7 +658,7 @@ fn near_keys(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let slot = params.count + gid.x;
-    keys[slot] = vec2<u32>(ordered(dot(records[slot].center - params.camera, params.forward)), ~slot);
+    keys[slot] = key_of(records[slot], slot);
 }
 
 // One compare-exchange step of a bitonic sort over all of `keys`, into decreasing order.
@@ -369,7 +683,11 @@ fn sort_step(@builtin(global_invocation_id) gid: vec3<u32>) {
 
 // Every record made, far and near.
 fn made() -> u32 {
-    return atomicLoad(&draw_args[4]) + params.near_count;
+    var n = params.near_count;
+    for (var w = 4u; w < 8u; w++) {
+        n += atomicLoad(&draw_args[w]);
+    }
+    return n;
 }
 
 // The records in sorted order, for the draw; past `limit`, the farthest are left out.

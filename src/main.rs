@@ -125,7 +125,7 @@ struct BenchArgs {
     #[arg(long, value_delimiter = ',', value_parser = parse_method, default_value = "geometry,btf,billboard,texel,hybrid")]
     methods: Vec<Method>,
     /// Sweep a knob: KEY=V1,V2,... (btf and hybrid: lod_scale, weight_threshold, lod_fade, planes,
-    /// vcm, light_gain, gpu_far; texel: slice_d0, slice_d1, max_slices, texel_mode, texel_tiles, tile_distance;
+    /// vcm, light_gain, gpu_far, gpu_near; texel: slice_d0, slice_d1, max_slices, texel_mode, texel_tiles, tile_distance;
     /// all three: ground_sky); repeat for a grid.
     #[arg(long, value_parser = parse_sweep)]
     sweep: Vec<canopy::bench::run::Sweep>,
@@ -286,6 +286,10 @@ struct RenderArgs {
     /// on or off.
     #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
     gpu_far: bool,
+    /// btf, hybrid, with --gpu-far on: expand the near trees' billboards on the GPU too (the
+    /// CPU choosing their levels and cross-fades only): on or off.
+    #[arg(long, default_value = "on", value_parser = parse_on_off, action = clap::ArgAction::Set)]
+    gpu_near: bool,
     /// btf: draw the VCM sun factor alone, in grey (white = fully lit).
     #[arg(long)]
     show_shadow: bool,
@@ -573,6 +577,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         vcm_sky: args.vcm_sky,
         light_gain: args.light_gain.unwrap_or(start.light_gain),
         gpu_far: args.gpu_far,
+        gpu_near: args.gpu_near,
     };
     frame.texel = TexelSettings {
         mode: args.texel_mode,

@@ -140,6 +140,10 @@ pub fn controls(
             ui.checkbox(&mut b.show_shadow, "show VCM shadow factor");
         });
         ui.checkbox(&mut b.gpu_far, "far trees' billboards on the GPU");
+        ui.add_enabled(
+            b.gpu_far,
+            egui::Checkbox::new(&mut b.gpu_near, "near trees' billboards on the GPU"),
+        );
         ui.checkbox(
             &mut frame.ground_shadows,
             "ground shadows (alpha map + terrain)",

@@ -43,10 +43,12 @@ pub enum Knob {
     GroundSky,
     /// btf and hybrid: the far trees' billboards built on the GPU (on or off).
     GpuFar,
+    /// btf and hybrid: the near trees' billboards expanded on the GPU (on or off).
+    GpuNear,
 }
 
 impl Knob {
-    pub const ALL: [Knob; 14] = [
+    pub const ALL: [Knob; 15] = [
         Knob::LodScale,
         Knob::WeightThreshold,
         Knob::LodFade,
@@ -61,6 +63,7 @@ impl Knob {
         Knob::TileDistance,
         Knob::GroundSky,
         Knob::GpuFar,
+        Knob::GpuNear,
     ];
 
     /// The method this knob belongs to.
@@ -102,6 +105,7 @@ impl Knob {
             Knob::TileDistance => "tile_distance",
             Knob::GroundSky => "ground_sky",
             Knob::GpuFar => "gpu_far",
+            Knob::GpuNear => "gpu_near",
         }
     }
 
@@ -129,6 +133,7 @@ impl Knob {
             Knob::Vcm => s.vcm = on_off(value).ok_or_else(|| bad("give on or off"))?,
             Knob::LightGain => s.light_gain = number(0.0, 1.0)?,
             Knob::GpuFar => s.gpu_far = on_off(value).ok_or_else(|| bad("give on or off"))?,
+            Knob::GpuNear => s.gpu_near = on_off(value).ok_or_else(|| bad("give on or off"))?,
             Knob::TexelTiles => t.tiles = on_off(value).ok_or_else(|| bad("give on or off"))?,
             Knob::TileDistance => t.tile_distance = number(1.0, 100_000.0)?,
             Knob::SliceD0 => t.bounds.d0 = number(0.01, 100.0)?,

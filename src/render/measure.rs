@@ -271,6 +271,8 @@ pub struct BtfReport {
     pub light_gain: f32,
     /// The far trees' billboards were built on the GPU.
     pub gpu_far: bool,
+    /// The near trees' billboards were expanded on the GPU.
+    pub gpu_near: bool,
     pub btf_bytes: u64,
     /// GPU bytes of the far trees' buffers (0 without them).
     pub far_bytes: u64,
@@ -303,6 +305,7 @@ impl FrameReport {
             vcm_sky: stats.vcm && frame.btf.vcm_sky,
             light_gain: frame.btf.light_gain,
             gpu_far: frame.btf.gpu_far,
+            gpu_near: frame.btf.gpu_far && frame.btf.gpu_near,
             btf_bytes: renderer.btf_bytes(),
             far_bytes: renderer.far_bytes(),
             vcm_bytes: renderer.vcm_bytes(),

@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use glam::Vec3;
 
 use super::billboard::{BillboardGpu, BillboardMode};
-use super::prepare::{BtfScene, PrepareView, SortedBillboards};
+use super::prepare::{BtfScene, NearDrawGpu, PrepareView, SortedBillboards};
 use super::settings::{BtfSettings, PlaneMode};
 use crate::Result;
 use crate::model::Level;
@@ -86,7 +86,17 @@ pub struct FarParamsGpu {
     pub sort_n: u32,
     pub near_count: u32,
     pub limit: u32,
-    pub _pad: u32,
+    pub vcm_res: u32,
+    pub overlay_twig: [f32; 3],
+    pub near_draws: u32,
+    pub overlay_branch: [f32; 3],
+    pub near_slots: u32,
+    pub views_twig: DirSetGpu,
+    pub views_branch: DirSetGpu,
+    pub draws_at: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+    pub _pad2: u32,
 }
 
 /// One step of the bitonic sort (`SortStep`).
@@ -119,7 +129,10 @@ pub struct FarGpu {
     tables: wgpu::Buffer,
     params: wgpu::Buffer,
     base: FarParamsGpu,
-    near_bits: wgpu::Buffer,
+    /// One bit per tree (the near ones), then the frame's near draws.
+    frame_words: wgpu::Buffer,
+    /// Words `frame_words` holds.
+    frame_word_slots: u64,
     draw_args: wgpu::Buffer,
     /// Records: one slot per tree, then the near trees' billboards.
     records: wgpu::Buffer,
@@ -146,14 +159,18 @@ pub struct FarGpu {
     /// The sorted records, bound as the btf pass's billboards.
     draw_bind_group: wgpu::BindGroup,
     build: wgpu::ComputePipeline,
+    near_build: wgpu::ComputePipeline,
     near_keys: wgpu::ComputePipeline,
     sort: wgpu::ComputePipeline,
     gather: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
     /// The frame's uniforms once its near trees are found, before their records come.
     pending: Option<FarParamsGpu>,
-    /// The frame's key count and records to sort (set by [`Self::upload_near`]).
-    frame: Option<(u32, u32)>,
+    /// The frame's near bits, written with the near draws.
+    bits: Vec<u32>,
+    /// The frame's key count, records to sort, and slots expanded by `near_build` (set by
+    /// [`Self::upload_near`]).
+    frame: Option<(u32, u32, u32)>,
     /// The far billboards made, read back from the build pass's counter.
     count: CountReadback,
 }
@@ -242,10 +259,18 @@ impl FarGpu {
             .map(|t| Vec3::from_slice(&t.model[0][..3]).length())
             .filter(|s| s.is_finite())
             .fold(0.0f32, f32::max);
-        let (species_rows, views, lights) = scene.far_tables();
-        let mut tables = species_rows;
-        let views = push_set(&mut tables, views);
+        let (mut tables, views, lights, vcm_res) = scene.gpu_tables();
+        let views_twig = push_set(&mut tables, &views.twig);
+        let views_branch = push_set(&mut tables, &views.branch);
+        let views = push_set(&mut tables, &views.tree);
         let lights = push_set(&mut tables, lights);
+        if (tables.len() * 16) as u64 > limits.max_storage_buffer_binding_size {
+            log::warn!(
+                "the trees' GPU tables ({} bytes, cube maps included) pass one storage binding",
+                tables.len() * 16
+            );
+            return Ok(None);
+        }
         let base = FarParamsGpu {
             camera: [0.0; 3],
             count: 0,
@@ -265,7 +290,17 @@ impl FarGpu {
             sort_n: 2,
             near_count: 0,
             limit: limit.min(u64::from(u32::MAX)) as u32,
-            _pad: 0,
+            vcm_res,
+            overlay_twig: [1.0; 3],
+            near_draws: 0,
+            overlay_branch: [1.0; 3],
+            near_slots: 0,
+            views_twig,
+            views_branch,
+            draws_at: n.div_ceil(32).max(1) as u32,
+            _pad0: 0,
+            _pad1: 0,
+            _pad2: 0,
         };
         let init = |label: &str, contents: &[u8]| {
             wgpu::util::DeviceExt::create_buffer_init(
@@ -297,7 +332,7 @@ impl FarGpu {
                 ),
                 buffer(
                     ctx,
-                    "far near bits",
+                    "far frame words",
                     (n.div_ceil(32).max(1) * 4) as u64,
                     U::STORAGE | U::COPY_DST,
                 ),
@@ -309,7 +344,7 @@ impl FarGpu {
                 ),
             )
         })?;
-        let (trees_buf, shades, tables_buf, params, near_bits, draw_args) = bufs;
+        let (trees_buf, shades, tables_buf, params, frame_words, draw_args) = bufs;
         let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
@@ -380,13 +415,14 @@ impl FarGpu {
             };
             [
                 pipeline("build"),
+                pipeline("near_build"),
                 pipeline("near_keys"),
                 pipeline("sort_step"),
                 pipeline("gather"),
                 pipeline("finish"),
             ]
         })?;
-        let [build, near_keys, sort, gather, finish] = pipelines;
+        let [build, near_build, near_keys, sort, gather, finish] = pipelines;
         let step_stride = u64::from(limits.min_uniform_buffer_offset_alignment)
             .max(std::mem::size_of::<SortStepGpu>() as u64);
         // Placeholders until the first frame sizes them.
@@ -398,7 +434,7 @@ impl FarGpu {
         let (bind_group, step_bind_group, draw_bind_group) = bind_groups(
             ctx,
             [&layout0, &layout1, layout],
-            [&params, &trees_buf, &shades, &tables_buf, &near_bits],
+            [&params, &trees_buf, &shades, &tables_buf, &frame_words],
             [&records, &keys_buf, &draw_args, &sorted],
             &steps,
             &draw_resources,
@@ -414,7 +450,8 @@ impl FarGpu {
             tables: tables_buf,
             params,
             base,
-            near_bits,
+            frame_words,
+            frame_word_slots: n.div_ceil(32).max(1) as u64,
             draw_args,
             records,
             record_slots: 0,
@@ -433,15 +470,17 @@ impl FarGpu {
             step_bind_group,
             draw_bind_group,
             build,
+            near_build,
             near_keys,
             sort,
             gather,
             finish,
             pending: None,
+            bits: Vec::new(),
             frame: None,
             count: CountReadback::new(ctx),
         };
-        far.reserve(ctx, 0)?;
+        far.reserve(ctx, 0, 0)?;
         Ok(Some(far))
     }
 
@@ -451,7 +490,7 @@ impl FarGpu {
             &self.trees,
             &self.shades,
             &self.tables,
-            &self.near_bits,
+            &self.frame_words,
             &self.records,
             &self.keys,
             &self.sorted,
@@ -463,8 +502,9 @@ impl FarGpu {
     }
 
     /// Grows the record, key and sorted buffers to take `near` records after the trees'
-    /// slots (and the sort steps to the keys), rebinding them.
-    fn reserve(&mut self, ctx: &GpuContext, near: u64) -> Result<()> {
+    /// slots (and the sort steps to the keys), and the frame words to take `draws` near
+    /// draws after the bits, rebinding them.
+    fn reserve(&mut self, ctx: &GpuContext, near: u64, draws: u64) -> Result<()> {
         let record = std::mem::size_of::<BillboardGpu>() as u64;
         let slots = self.tree_count as u64 + near;
         let keys = u32::try_from(slots.max(2))
@@ -472,12 +512,27 @@ impl FarGpu {
             .and_then(u32::checked_next_power_of_two)
             .ok_or_else(|| crate::Error::Gpu("too many billboards to sort".into()))?;
         let sorted = slots.min(self.limit);
-        if slots <= self.record_slots && keys <= self.key_slots && sorted <= self.sorted_slots {
+        let words = u64::from(self.base.draws_at) + 4 * draws;
+        if slots <= self.record_slots
+            && keys <= self.key_slots
+            && sorted <= self.sorted_slots
+            && words <= self.frame_word_slots
+        {
             return Ok(());
         }
         use wgpu::BufferUsages as U;
         // Half as much again, so that a growing frame does not rebind every time.
         let grow = |n: u64| (n + n / 2).max(1024);
+        if words > self.frame_word_slots {
+            let word_slots = (u64::from(self.base.draws_at) + 4 * grow(draws))
+                .min(ctx.device.limits().max_storage_buffer_binding_size / 4)
+                .max(words);
+            let bigger = ctx.checked("allocating the near draws' buffer", || {
+                buffer(ctx, "far frame words", word_slots * 4, U::STORAGE | U::COPY_DST)
+            })?;
+            self.frame_words = bigger;
+            self.frame_word_slots = word_slots;
+        }
         let record_slots = grow(slots).min(self.limit.max(slots));
         let sorted_slots = grow(sorted).min(self.limit);
         let steps_list = sort_steps(keys);
@@ -528,7 +583,7 @@ impl FarGpu {
                 &self.trees,
                 &self.shades,
                 &self.tables,
-                &self.near_bits,
+                &self.frame_words,
             ],
             [&records, &keys_buf, &self.draw_args, &sorted_buf],
             &steps,
@@ -618,6 +673,7 @@ impl FarGpu {
         let (overlay, mode) = settings
             .overlay(Level::Tree)
             .unwrap_or(([1.0; 3], BillboardMode::Images));
+        let overlay_of = |l| settings.overlay(l).map_or([1.0; 3], |o| o.0);
         self.pending = Some(FarParamsGpu {
             camera: cam.to_array(),
             count,
@@ -628,6 +684,8 @@ impl FarGpu {
             planes,
             overlay,
             mode: mode as u32,
+            overlay_twig: overlay_of(Level::Twig),
+            overlay_branch: overlay_of(Level::Branch),
             light_gain: settings.light_gain,
             plane_mode: match settings.planes {
                 PlaneMode::Single => 1,
@@ -640,29 +698,39 @@ impl FarGpu {
             },
             ..self.base
         });
-        ctx.queue
-            .write_buffer(&self.near_bits, 0, bytemuck::cast_slice(&bits));
+        self.bits = bits;
         (near, shade_ms)
     }
 
-    /// Takes the near trees' records (in any order: they are sorted with the far ones) and
-    /// readies the frame's passes; false (and no frame) when they do not fit one storage
-    /// binding with the trees' slots, or [`Self::prepare`] found no trees.
-    pub fn upload_near(&mut self, ctx: &GpuContext, near: &SortedBillboards) -> Result<bool> {
+    /// Takes the near trees' records made on the CPU (in any order: they are sorted with
+    /// the far ones) and the near draws for `near_build` to expand into `draw_slots`
+    /// billboards, and readies the frame's passes; false (and no frame) when they do not
+    /// fit one storage binding with the trees' slots, or [`Self::prepare`] found no trees.
+    pub fn upload_near(
+        &mut self,
+        ctx: &GpuContext,
+        near: &SortedBillboards,
+        draws: &[NearDrawGpu],
+        draw_slots: u64,
+    ) -> Result<bool> {
         let Some(mut params) = self.pending.take() else {
             return Ok(false);
         };
         let near_count = near.len() as u64;
-        let slots = self.tree_count as u64 + near_count;
+        let slots = self.tree_count as u64 + near_count + draw_slots;
         // One binding's records, and one dispatch's workgroups over the sort's keys.
         let groups = slots
             .max(2)
             .next_power_of_two()
             .div_ceil(u64::from(WORKGROUP));
-        if slots > self.limit || groups > u64::from(self.max_groups) {
+        let draw_words = u64::from(self.base.draws_at) + 4 * draws.len() as u64;
+        if slots > self.limit
+            || groups > u64::from(self.max_groups)
+            || draw_words * 4 > ctx.device.limits().max_storage_buffer_binding_size
+        {
             return Ok(false);
         }
-        self.reserve(ctx, near_count)?;
+        self.reserve(ctx, near_count + draw_slots, draws.len() as u64)?;
         let record = std::mem::size_of::<BillboardGpu>() as u64;
         if let Some(size) = wgpu::BufferSize::new(near_count * record)
             && let Some(mut view) =
@@ -671,8 +739,19 @@ impl FarGpu {
         {
             near.write_unsorted(view.slice(..));
         }
+        ctx.queue
+            .write_buffer(&self.frame_words, 0, bytemuck::cast_slice(&self.bits));
+        if !draws.is_empty() {
+            ctx.queue.write_buffer(
+                &self.frame_words,
+                u64::from(self.base.draws_at) * 4,
+                bytemuck::cast_slice(draws),
+            );
+        }
         let keys = slots.max(2).next_power_of_two() as u32;
         params.near_count = near_count as u32;
+        params.near_draws = draws.len() as u32;
+        params.near_slots = draw_slots as u32;
         params.sort_n = keys;
         params.limit = self.sorted_slots.min(self.limit) as u32;
         ctx.queue
@@ -682,7 +761,7 @@ impl FarGpu {
             0,
             bytemuck::cast_slice(&[6u32, 0, 0, 0, 0, 0, 0, 0]),
         );
-        self.frame = Some((keys, slots as u32));
+        self.frame = Some((keys, slots as u32, draw_slots as u32));
         Ok(true)
     }
 
@@ -690,7 +769,7 @@ impl FarGpu {
     /// build the far records, key the near ones, sort, gather, set the draw's count.
     /// Nothing without a frame.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, timestamp: Option<&wgpu::QuerySet>) {
-        let Some((keys, slots)) = self.frame else {
+        let Some((keys, slots, expanded)) = self.frame else {
             return;
         };
         let trees = self.tree_count as u32;
@@ -707,9 +786,14 @@ impl FarGpu {
         pass.set_bind_group(1, &self.step_bind_group, &[0]);
         pass.set_pipeline(&self.build);
         pass.dispatch_workgroups(trees.div_ceil(WORKGROUP), 1, 1);
-        if slots > trees {
+        if expanded > 0 {
+            pass.set_pipeline(&self.near_build);
+            pass.dispatch_workgroups(expanded.div_ceil(WORKGROUP), 1, 1);
+        }
+        let made_here = slots - trees - expanded;
+        if made_here > 0 {
             pass.set_pipeline(&self.near_keys);
-            pass.dispatch_workgroups((slots - trees).div_ceil(WORKGROUP), 1, 1);
+            pass.dispatch_workgroups(made_here.div_ceil(WORKGROUP), 1, 1);
         }
         pass.set_pipeline(&self.sort);
         for (i, _) in sort_steps(keys).iter().enumerate() {
@@ -726,9 +810,10 @@ impl FarGpu {
         self.count.copy(encoder, &self.draw_args);
     }
 
-    /// After the frame's submission: how many far billboards were made, by the latest
-    /// frame read back (this one's when `wait`, blocking); None before any.
-    pub fn drawn(&self, ctx: &GpuContext, wait: bool) -> Option<u32> {
+    /// After the frame's submission: how many billboards were made, by the latest frame
+    /// read back (this one's when `wait`, blocking): the far trees', then the near trees'
+    /// expanded here per level (twig, main branch, tree); None before any.
+    pub fn drawn(&self, ctx: &GpuContext, wait: bool) -> Option<[u32; 4]> {
         self.count.collect(ctx, wait)
     }
 
@@ -976,20 +1061,21 @@ impl Grid {
     }
 }
 
-/// The build pass's count of far billboards, copied out after a frame and read when the
-/// GPU has done it, without stalling (as the frame timer's timestamps are).
+/// The build passes' counts of billboards made (far; near per level), copied out after a
+/// frame and read when the GPU has done it, without stalling (as the frame timer's
+/// timestamps are).
 struct CountReadback {
     read: MappedRead,
     /// This frame copied into `read`.
     copied: AtomicBool,
-    /// The latest count read (None before any).
-    last: Mutex<Option<u32>>,
+    /// The latest counts read (None before any).
+    last: Mutex<Option<[u32; 4]>>,
 }
 
 impl CountReadback {
     fn new(ctx: &GpuContext) -> Self {
         Self {
-            read: MappedRead::new(ctx, "far count read", 4),
+            read: MappedRead::new(ctx, "far count read", 16),
             copied: AtomicBool::new(false),
             last: Mutex::new(None),
         }
@@ -998,13 +1084,13 @@ impl CountReadback {
     /// Copies the far count of `args` when the last copy has been read.
     fn copy(&self, encoder: &mut wgpu::CommandEncoder, args: &wgpu::Buffer) {
         if self.read.is_free() && !self.copied.swap(true, Ordering::SeqCst) {
-            encoder.copy_buffer_to_buffer(args, 16, self.read.buffer(), 0, 4);
+            encoder.copy_buffer_to_buffer(args, 16, self.read.buffer(), 0, 16);
         }
     }
 
     /// Maps a copy just submitted; reads a mapped one; with `wait`, blocks until the
     /// copy is read. The latest count read.
-    fn collect(&self, ctx: &GpuContext, wait: bool) -> Option<u32> {
+    fn collect(&self, ctx: &GpuContext, wait: bool) -> Option<[u32; 4]> {
         if self.copied.swap(false, Ordering::SeqCst) {
             self.read.map();
         }
@@ -1015,10 +1101,11 @@ impl CountReadback {
         };
         let _ = ctx.device.poll(poll);
         let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(n) = self
-            .read
-            .read(|view| u32::from_le_bytes([view[0], view[1], view[2], view[3]]))
-        {
+        if let Some(n) = self.read.read(|view| {
+            std::array::from_fn(|w| {
+                u32::from_le_bytes([view[4 * w], view[4 * w + 1], view[4 * w + 2], view[4 * w + 3]])
+            })
+        }) {
             *last = Some(n);
         }
         *last

@@ -256,11 +256,20 @@ impl BtfAssets {
                 settings,
                 trees_on,
             );
-            // Unsorted: the GPU sorts them with the far trees' billboards.
-            let (mut out, records) =
-                self.scene
-                    .prepare_sorted(&world.tree_data, &near, &view, settings, 0, hybrid);
-            match f.upload_near(ctx, &records) {
+            // Unsorted: the GPU sorts them with the far trees' billboards. With `gpu_near`
+            // the CPU only chooses their levels, and the GPU expands them.
+            let (mut out, records, draws, slots) = if settings.gpu_near {
+                let (out, draws, slots) =
+                    self.scene
+                        .prepare_draws(&world.tree_data, &near, &view, settings, hybrid);
+                (out, SortedBillboards::default(), draws, slots)
+            } else {
+                let (out, records) =
+                    self.scene
+                        .prepare_sorted(&world.tree_data, &near, &view, settings, 0, hybrid);
+                (out, records, Vec::new(), 0)
+            };
+            match f.upload_near(ctx, &records, &draws, slots) {
                 Ok(true) => {
                     out.far = true;
                     return (out, shade_ms);
@@ -326,16 +335,20 @@ impl BtfAssets {
         if !f.has_frame() {
             return;
         }
-        let Some(n) = f.drawn(ctx, wait) else {
+        let Some([n, twigs, branches, trees]) = f.drawn(ctx, wait) else {
             return;
         };
+        use crate::model::Level;
+        let near = twigs + branches + trees;
         if let Some(b) = stats.btf.as_mut() {
-            b.trees_per_level[crate::model::Level::Tree] += n;
-            b.billboards[crate::model::Level::Tree] += n;
-            b.gpu_billboards += n;
+            b.trees_per_level[Level::Tree] += n;
+            b.billboards[Level::Tree] += n + trees;
+            b.billboards[Level::Branch] += branches;
+            b.billboards[Level::Twig] += twigs;
+            b.gpu_billboards += n + near;
         }
         stats.trees_drawn += n;
-        stats.triangles += 2 * u64::from(n);
+        stats.triangles += 2 * u64::from(n + near);
     }
 
     /// The far trees' compute passes of the frame last prepared (timed from their start

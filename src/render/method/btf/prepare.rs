@@ -21,6 +21,7 @@ use crate::model::{Level, PerLevel, World};
 use crate::render::camera::{Camera, Frustum};
 use crate::render::world_gpu::TreeGpu;
 use crate::sphere::{DirectionSet, billboard_axes};
+use crate::vcm::CORNERS;
 use crate::{Error, Result};
 
 /// Per species: the part transforms that finer levels expand a tree into.
@@ -352,23 +353,115 @@ impl BtfScene {
         Some(Mat4::from_cols_array_2d(&data.model).transform_point3(parts.bounds.center()))
     }
 
-    /// What the GPU needs to build far trees' records ([`super::far`]): per species 3 rows
-    /// of 4 words (the tree set's centre and radius; its VCM box origin and first layer;
-    /// its VCM box scale), and the tree level's view set and the light set.
-    pub(super) fn far_tables(&self) -> (Vec<[u32; 4]>, &DirectionSet, &DirectionSet) {
+    /// What the GPU needs to build tree records ([`super::far`]): the rows of `btf_far.wgsl`'s
+    /// `tables` (per species `SPECIES_ROWS` rows: each level's set; the part counts; the
+    /// objects' first rows; the VCM boxes and centres; then every species' part transforms,
+    /// its cube-map objects, and the maps' bytes, 16 a row), each level's view set, the
+    /// light set, and the cube maps' face resolution (0 without them).
+    pub(super) fn gpu_tables(&self) -> (Vec<[u32; 4]>, &PerLevel<DirectionSet>, &DirectionSet, u32) {
         let bits = |v: Vec3, w: f32| [v.x, v.y, v.z, w].map(f32::to_bits);
-        let mut rows = Vec::with_capacity(3 * self.species.len());
-        for parts in &self.species {
-            let set = &parts.sets.tree;
-            // As `BillboardGpu::shade` places the billboard in its box.
-            let record = BillboardGpu::UNSHADED.shade(&Shade::NONE, set);
-            rows.push(bits(set.center, set.radius));
-            let mut origin = bits(Vec3::from(record.vcm_box_origin), 0.0);
-            origin[3] = set.layer_base;
-            rows.push(origin);
-            rows.push(bits(Vec3::from(record.vcm_box_scale), 0.0));
+        let mut rows = Vec::with_capacity(GPU_SPECIES_ROWS * self.species.len());
+        let mut mats_at = GPU_SPECIES_ROWS * self.species.len();
+        let vcm = self.vcm.as_ref();
+        let maps: Vec<[Vec<(&[u8], [f32; CORNERS])>; 2]> = (0..self.species.len())
+            .map(|sp| vcm.map_or([Vec::new(), Vec::new()], |v| v.species_maps(sp)))
+            .collect();
+        let mut objects_at = mats_at
+            + self
+                .species
+                .iter()
+                .map(|p| 4 * (p.branches.len() + p.branch_twigs.len() + p.trunk_twigs.len()))
+                .sum::<usize>();
+        for (parts, maps) in self.species.iter().zip(&maps) {
+            for level in Level::ALL {
+                let set = &parts.sets[level];
+                // As `BillboardGpu::shade` places the billboard in its box.
+                let record = BillboardGpu::UNSHADED.shade(&Shade::NONE, set);
+                rows.push(bits(set.center, set.radius));
+                let mut origin = bits(Vec3::from(record.vcm_box_origin), 0.0);
+                origin[3] = set.layer_base;
+                rows.push(origin);
+                rows.push(bits(Vec3::from(record.vcm_box_scale), 0.0));
+            }
+            let (b, t, k) = (
+                parts.branches.len(),
+                parts.branch_twigs.len(),
+                parts.trunk_twigs.len(),
+            );
+            rows.push([b as u32, t as u32, k as u32, mats_at as u32]);
+            rows.push([
+                objects_at as u32,
+                (objects_at + 3 * maps[0].len().max(b)) as u32,
+                0,
+                0,
+            ]);
+            let f = &parts.frames;
+            rows.push(bits(f.tree.bounds.min, 0.0));
+            rows.push(bits(f.tree.bounds.max, 0.0));
+            rows.push(bits(f.branch.bounds.min, 0.0));
+            rows.push(bits(f.branch.bounds.max, 0.0));
+            rows.push(bits(f.branch.center, 0.0));
+            rows.push(bits(f.twig.center, 0.0));
+            mats_at += 4 * (b + t + k);
+            objects_at += 3 * (maps[0].len().max(b) + maps[1].len().max(t + k));
         }
-        (rows, &self.views.tree, &self.lights)
+        for parts in &self.species {
+            for m in parts
+                .branches
+                .iter()
+                .chain(&parts.branch_twigs)
+                .chain(&parts.trunk_twigs)
+            {
+                for c in m.to_cols_array_2d() {
+                    rows.push(c.map(f32::to_bits));
+                }
+            }
+        }
+        // The objects, then their maps.
+        let res = vcm.map_or(0, |v| v.resolution());
+        let map_bytes = CORNERS * crate::vcm::FACES * (res * res) as usize;
+        let mut map_at = objects_at;
+        let mut map_rows: Vec<[u32; 4]> = Vec::new();
+        for (parts, maps) in self.species.iter().zip(&maps) {
+            let counts = [parts.branches.len(), parts.branch_twigs.len() + parts.trunk_twigs.len()];
+            for (list, count) in maps.iter().zip(counts) {
+                for i in 0..list.len().max(count) {
+                    let (row, sky) = match list.get(i) {
+                        Some((bytes, sky)) if bytes.len() >= map_bytes && map_bytes > 0 => {
+                            let at = map_at as u32;
+                            for chunk in bytes[..map_bytes].chunks(16) {
+                                let mut word = [0u8; 16];
+                                word[..chunk.len()].copy_from_slice(chunk);
+                                map_rows.push(bytemuck::cast(word));
+                            }
+                            map_at += map_bytes.div_ceil(16);
+                            (at, *sky)
+                        }
+                        Some((_, sky)) => (u32::MAX, *sky),
+                        None => (u32::MAX, [1.0; CORNERS]),
+                    };
+                    rows.push([row, 0, 0, 0]);
+                    rows.push([sky[0], sky[1], sky[2], sky[3]].map(f32::to_bits));
+                    rows.push([sky[4], sky[5], sky[6], sky[7]].map(f32::to_bits));
+                }
+            }
+        }
+        debug_assert_eq!(rows.len(), objects_at);
+        rows.extend(map_rows);
+        (rows, &self.views, &self.lights, res)
+    }
+
+    /// Billboards a tree of species `sp` makes at `level` (before the frustum test), as
+    /// [`expand`] makes them: 1; the main branches and the trunk's twigs; every twig.
+    pub fn part_count(&self, sp: usize, level: Level) -> u32 {
+        let Some(p) = self.species.get(sp) else {
+            return 0;
+        };
+        (match level {
+            Level::Tree => 1,
+            Level::Branch => p.branches.len() + p.trunk_twigs.len(),
+            Level::Twig => p.branches.len() * p.branch_twigs.len() + p.trunk_twigs.len(),
+        }) as u32
     }
 
     /// The cube maps, when the bake has them.
@@ -427,34 +520,9 @@ impl BtfScene {
         max_billboards: usize,
         hybrid: bool,
     ) -> (BtfFrame, SortedBillboards) {
-        use rayon::prelude::*;
-        let vcm = self.vcm.as_ref().filter(|_| settings.vcm);
-        // Every visible tree in order, species by species, cut into chunks that the
-        // threads prepare on their own; joined in order, they give what one pass would.
-        let order: Vec<(usize, u32)> = visible
-            .iter()
-            .enumerate()
-            .filter(|(sp, _)| *sp < self.species.len())
-            .flat_map(|(sp, list)| list.iter().map(move |&t| (sp, t)))
-            .collect();
-        let chunk = order
-            .len()
-            .div_ceil(4 * rayon::current_num_threads().max(1))
-            .max(PREPARE_CHUNK);
-        let parts: Vec<Prepared> = order
-            .par_chunks(chunk)
-            .map(|trees_in| {
-                let mut p = Prepared::new(self.species.len());
-                for &(sp, t) in trees_in {
-                    if let Some(data) = trees.get(t as usize) {
-                        self.prepare_tree(&mut p, sp, t, data, view, settings, vcm, hybrid);
-                    }
-                }
-                p
-            })
-            .collect();
+        let parts = self.prepare_chunks(trees, visible, view, settings, hybrid, false);
         let mut stats = BtfStats {
-            vcm: vcm.is_some(),
+            vcm: self.vcm.is_some() && settings.vcm,
             ..BtfStats::default()
         };
         let mut trunk_only = vec![Vec::new(); self.species.len()];
@@ -484,6 +552,7 @@ impl BtfScene {
         // then copied once, from their chunks. (Unless the GPU sorts them: `max_billboards`
         // 0 leaves them in the order made, all of them.)
         if max_billboards > 0 {
+            use rayon::prelude::*;
             keys.par_sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
             if keys.len() > max_billboards {
                 stats.dropped = (keys.len() - max_billboards) as u32;
@@ -509,6 +578,88 @@ impl BtfScene {
         )
     }
 
+    /// Every tree of `visible` prepared ([`Self::prepare_tree`]) in chunks that the threads
+    /// take on their own; in order, the chunks give what one pass would.
+    fn prepare_chunks(
+        &self,
+        trees: &[TreeGpu],
+        visible: &[Vec<u32>],
+        view: &PrepareView,
+        settings: &BtfSettings,
+        hybrid: bool,
+        gpu: bool,
+    ) -> Vec<Prepared> {
+        use rayon::prelude::*;
+        let vcm = self.vcm.as_ref().filter(|_| settings.vcm);
+        let order: Vec<(usize, u32)> = visible
+            .iter()
+            .enumerate()
+            .filter(|(sp, _)| *sp < self.species.len())
+            .flat_map(|(sp, list)| list.iter().map(move |&t| (sp, t)))
+            .collect();
+        let chunk = order
+            .len()
+            .div_ceil(4 * rayon::current_num_threads().max(1))
+            .max(PREPARE_CHUNK);
+        order
+            .par_chunks(chunk)
+            .map(|trees_in| {
+                let mut p = Prepared::new(self.species.len());
+                for &(sp, t) in trees_in {
+                    if let Some(data) = trees.get(t as usize) {
+                        self.prepare_tree(&mut p, sp, t, data, view, settings, vcm, hybrid, gpu);
+                    }
+                }
+                p
+            })
+            .collect()
+    }
+
+    /// [`Self::prepare`] with the billboards left to the GPU ([`super::far`]'s
+    /// `near_build`): each tree's level choice, cross-fade and geometry lists as on the CPU,
+    /// and one [`NearDrawGpu`] per level drawn, with the near slots their billboards take
+    /// (their count). The frame's stats count trees, not billboards (read back later).
+    pub fn prepare_draws(
+        &self,
+        trees: &[TreeGpu],
+        visible: &[Vec<u32>],
+        view: &PrepareView,
+        settings: &BtfSettings,
+        hybrid: bool,
+    ) -> (BtfFrame, Vec<NearDrawGpu>, u64) {
+        let parts = self.prepare_chunks(trees, visible, view, settings, hybrid, true);
+        let mut frame = BtfFrame {
+            trunk_only: vec![Vec::new(); self.species.len()],
+            trunk_and_limbs: vec![Vec::new(); self.species.len()],
+            twigs: vec![Vec::new(); self.species.len()],
+            billboards: 0,
+            far: false,
+            records: Vec::new(),
+            stats: BtfStats {
+                vcm: self.vcm.is_some() && settings.vcm,
+                ..BtfStats::default()
+            },
+        };
+        let mut draws = Vec::with_capacity(parts.iter().map(|p| p.draws.len()).sum());
+        let mut slots = 0u64;
+        for p in parts {
+            frame.stats.add(&p.stats);
+            for sp in 0..self.species.len() {
+                frame.trunk_only[sp].extend_from_slice(&p.trunk_only[sp]);
+                frame.trunk_and_limbs[sp].extend_from_slice(&p.trunk_and_limbs[sp]);
+                frame.twigs[sp].extend_from_slice(&p.twigs[sp]);
+            }
+            // `first` holds the draw's count until here.
+            for mut d in p.draws {
+                let count = u64::from(d.first);
+                d.first = slots.min(u64::from(u32::MAX)) as u32;
+                slots += count;
+                draws.push(d);
+            }
+        }
+        (frame, draws, slots)
+    }
+
     /// One visible tree's level choice and billboards, into `out`.
     #[allow(clippy::too_many_arguments)]
     fn prepare_tree(
@@ -521,6 +672,7 @@ impl BtfScene {
         settings: &BtfSettings,
         vcm: Option<&VcmShading>,
         hybrid: bool,
+        gpu: bool,
     ) {
         let Some(parts) = self.species.get(sp) else {
             return;
@@ -548,7 +700,19 @@ impl BtfScene {
         if geometry > 0.0 {
             out.twigs[sp].push((t, geometry));
         }
-        let shading = vcm.map(|v| v.for_tree(t as usize, sp, &m, &parts.frames));
+        if gpu {
+            for (level, opacity) in choice.draws() {
+                out.draws.push(NearDrawGpu {
+                    tree: t,
+                    level: level.index() as u32,
+                    opacity: opacity * (1.0 - geometry),
+                    first: self.part_count(sp, level),
+                });
+            }
+        }
+        let shading = vcm
+            .filter(|_| !gpu)
+            .map(|v| v.for_tree(t as usize, sp, &m, &parts.frames));
         let mut pusher = Pusher {
             scene: self,
             view,
@@ -562,7 +726,7 @@ impl BtfScene {
             ),
             opacity: 1.0,
         };
-        for (level, opacity) in choice.draws() {
+        for (level, opacity) in choice.draws().filter(|_| !gpu) {
             pusher.opacity = opacity * (1.0 - geometry);
             if let Some(overlay) = settings.overlay(level) {
                 pusher.tint = overlay;
@@ -632,6 +796,7 @@ impl BtfScene {
 
 /// One frame's billboard records in the chunks that made them, and their order back to
 /// front.
+#[derive(Default)]
 pub struct SortedBillboards {
     records: Vec<Vec<BillboardGpu>>,
     /// Each chunk's first record, counting through the chunks in order.
@@ -695,6 +860,22 @@ impl SortedBillboards {
     }
 }
 
+/// Rows per species at the start of `btf_far.wgsl`'s `tables` (`SPECIES_ROWS` there).
+pub(super) const GPU_SPECIES_ROWS: usize = 17;
+
+/// One near tree's level for the GPU to expand into its billboards (`NearDraw` in
+/// `btf_far.wgsl`): they take the near slots from `first`, [`BtfScene::part_count`] of them.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct NearDrawGpu {
+    pub tree: u32,
+    /// [`Level::index`].
+    pub level: u32,
+    /// The cross-fade's opacity of the level.
+    pub opacity: f32,
+    pub first: u32,
+}
+
 /// Fewest trees one thread prepares at a time.
 const PREPARE_CHUNK: usize = 256;
 
@@ -702,6 +883,8 @@ const PREPARE_CHUNK: usize = 256;
 /// and the trees drawn partly or wholly as geometry, per species.
 struct Prepared {
     records: Vec<BillboardGpu>,
+    /// For the GPU to expand instead (`first` holding each one's billboard count).
+    draws: Vec<NearDrawGpu>,
     depths: Vec<f32>,
     stats: BtfStats,
     trunk_only: Vec<Vec<u32>>,
@@ -713,6 +896,7 @@ impl Prepared {
     fn new(species: usize) -> Self {
         Self {
             records: Vec::new(),
+            draws: Vec::new(),
             depths: Vec::new(),
             stats: BtfStats::default(),
             trunk_only: vec![Vec::new(); species],
@@ -1387,8 +1571,13 @@ pub(crate) mod tests {
         .unwrap()
         .expect("the far trees fit");
         let (near, _) = gpu.prepare(&ctx, scene, trees, &bounds, view, settings, true);
-        let (_, records) = scene.prepare_sorted(trees, &near, view, settings, 0, false);
-        assert!(gpu.upload_near(&ctx, &records).unwrap());
+        if settings.gpu_near {
+            let (_, draws, slots) = scene.prepare_draws(trees, &near, view, settings, false);
+            assert!(gpu.upload_near(&ctx, &SortedBillboards::default(), &draws, slots).unwrap());
+        } else {
+            let (_, records) = scene.prepare_sorted(trees, &near, view, settings, 0, false);
+            assert!(gpu.upload_near(&ctx, &records, &[], 0).unwrap());
+        }
         let mut encoder = ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
@@ -1405,24 +1594,43 @@ pub(crate) mod tests {
     #[test]
     fn the_gpu_builds_the_far_trees_records_the_cpu_would_back_to_front() {
         // A crowd 90 to 400 m away: every tree past the tree level's fade band.
-        gpu_against_cpu(90.0, false);
+        gpu_against_cpu(90.0, false, false, true);
     }
 
     #[test]
     fn near_trees_made_on_the_cpu_are_sorted_with_the_far_ones() {
         // From 4 m: trees at every level, fading, the near ones' billboards made on the
         // CPU and sorted with the far ones' on the GPU.
-        gpu_against_cpu(4.0, true);
+        gpu_against_cpu(4.0, true, false, true);
+    }
+
+    #[test]
+    fn near_trees_expanded_on_the_gpu_are_what_the_cpu_would_make() {
+        // The same, the near trees' billboards expanded and shaded on the GPU: their parts'
+        // cube maps read towards the sun in each part's frame, and the parents' factors.
+        gpu_against_cpu(4.0, true, true, true);
+        // And without cube maps (every factor 1).
+        gpu_against_cpu(4.0, true, true, false);
     }
 
     /// Trees from `z_min` to 400 m ahead; the GPU's billboards, back to front, are the
-    /// CPU's (`near`: some trees are near).
-    fn gpu_against_cpu(z_min: f32, near: bool) {
+    /// CPU's (`near`: some trees are near; `gpu_near`: their billboards are expanded on the
+    /// GPU; `vcm`: with cube maps of random opacity).
+    fn gpu_against_cpu(z_min: f32, near: bool, gpu_near: bool, vcm: bool) {
         // The tree level at 66 views and 6 lights, as the default bake; trees of mixed yaw
         // and scale.
         let mut scene = scene();
         scene.views.tree = DirectionSet::with_count(66).unwrap();
+        scene.views.branch = DirectionSet::with_count(18).unwrap();
+        scene.views.twig = DirectionSet::with_count(6).unwrap();
         scene.lights = DirectionSet::with_count(6).unwrap();
+        if vcm {
+            scene.vcm = Some(VcmShading::synthetic(
+                4,
+                &[(BRANCHES, BRANCH_TWIGS + TRUNK_TWIGS)],
+                300,
+            ));
+        }
         let mut trees = Vec::new();
         let mut rng = 7u32;
         let mut next = || {
@@ -1452,8 +1660,10 @@ pub(crate) mod tests {
         };
         let settings = BtfSettings {
             weight_threshold: 0.15,
+            gpu_near,
             ..BtfSettings::default()
         };
+        scene.update_sun(view.to_sun);
         // The trees in view by their bounds, as the renderer culls (the billboard's own
         // test then drops a few more).
         let visible = vec![
@@ -1519,7 +1729,7 @@ pub(crate) mod tests {
             assert!(close(g.plane_up, c.plane_up, 1e-4));
             assert!(close(g.obj_right, c.obj_right, 1e-4));
             assert!(close(g.obj_up, c.obj_up, 1e-4));
-            for i in 0..66 {
+            for i in 0..66u32 {
                 let (wg, wc) = (
                     weight_of(g.view_index, g.view_weight, i),
                     weight_of(c.view_index, c.view_weight, i),
@@ -1546,7 +1756,18 @@ pub(crate) mod tests {
             assert_eq!((g.opacity, g.tint), (c.opacity, c.tint));
             assert!(close(g.vcm_box_origin, c.vcm_box_origin, 1e-5));
             assert!(close(g.vcm_box_scale, c.vcm_box_scale, 1e-5));
-            assert_eq!((g.vcm_direct, g.vcm_sky), (c.vcm_direct, c.vcm_sky));
+            let factors = |r: &BillboardGpu| {
+                let mut v = r.vcm_direct.concat();
+                v.extend(r.vcm_sky.concat());
+                v.extend([r.parent_direct, r.parent_sky]);
+                v
+            };
+            for (i, (fg, fc)) in factors(g).into_iter().zip(factors(&c)).enumerate() {
+                assert!(
+                    (fg - fc).abs() < 1e-3,
+                    "record {k} factor {i}: {fg} against {fc}"
+                );
+            }
         }
     }
 }

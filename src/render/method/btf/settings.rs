@@ -61,6 +61,9 @@ pub struct BtfSettings {
     /// Build the billboards of the trees drawn at the tree level alone on the GPU (compute
     /// passes), leaving the CPU the near trees only; off: the CPU prepares every tree.
     pub gpu_far: bool,
+    /// With `gpu_far`: the near trees' billboards are expanded on the GPU too (the CPU
+    /// choosing their levels and cross-fades only); off: the CPU builds them.
+    pub gpu_near: bool,
 }
 
 /// The default [`BtfSettings::light_gain`]. Bench, 320x180, 3 frames, mean FLIP against
@@ -82,6 +85,7 @@ impl Default for BtfSettings {
             vcm_sky: true,
             light_gain: LIGHT_GAIN,
             gpu_far: true,
+            gpu_near: true,
         }
     }
 }

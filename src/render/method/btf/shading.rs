@@ -437,6 +437,22 @@ impl VcmShading {
         self.res
     }
 
+    /// Species `sp`'s cube maps for the GPU: per main branch, then per twig (the reference
+    /// branch's, then the trunk's), its 8 maps' bytes (`8 × 6 × res²`, corner by corner)
+    /// and its sky visibility at the corners.
+    #[allow(clippy::type_complexity)]
+    pub(super) fn species_maps(
+        &self,
+        sp: usize,
+    ) -> [Vec<(&[u8], [f32; CORNERS])>; 2] {
+        fn objects(v: Option<&Vec<ObjectVcm>>) -> Vec<(&[u8], [f32; CORNERS])> {
+            v.map_or(Vec::new(), |v| {
+                v.iter().map(|o| (&o.opacity[..], o.sky)).collect()
+            })
+        }
+        [objects(self.branches.get(sp)), objects(self.twigs.get(sp))]
+    }
+
     /// Reads every tree instance's cube maps in the direction `to_sun` (world) if the sun
     /// moved. Returns whether it did.
     pub fn set_sun(&mut self, to_sun: Vec3) -> bool {
@@ -602,6 +618,48 @@ impl TreeShading<'_> {
                     parent_sky: c_sky * d_sky,
                 },
             );
+        }
+    }
+}
+
+#[cfg(test)]
+impl VcmShading {
+    /// Cube maps of pseudo-random opacity at face resolution `res`, per species for
+    /// `objects[sp]` = (main branches, twigs) and for `trees` tree instances, each object's
+    /// sky visibility pseudo-random too (for tests of code that reads them).
+    pub(crate) fn synthetic(res: u32, objects: &[(usize, usize)], trees: usize) -> Self {
+        let mut rng = 0x2545_f491u32;
+        let mut object = || {
+            let opacity = (0..CORNERS * FACES * (res * res) as usize)
+                .map(|_| {
+                    rng ^= rng << 13;
+                    rng ^= rng >> 17;
+                    rng ^= rng << 5;
+                    (rng >> 24) as u8
+                })
+                .collect();
+            let sky = std::array::from_fn(|k| 0.3 + 0.08 * k as f32);
+            ObjectVcm { opacity, sky }
+        };
+        let branches = objects
+            .iter()
+            .map(|&(b, _)| (0..b).map(|_| object()).collect())
+            .collect();
+        let twigs = objects
+            .iter()
+            .map(|&(_, t)| (0..t).map(|_| object()).collect())
+            .collect();
+        let trees: Vec<ObjectVcm> = (0..trees).map(|_| object()).collect();
+        Self {
+            res,
+            tree_direct: vec![[1.0; CORNERS]; trees.len()],
+            tree_sky: trees.iter().map(|t| t.sky).collect(),
+            branches,
+            twigs,
+            trees,
+            cells: None,
+            sun: None,
+            bytes: 0,
         }
     }
 }
