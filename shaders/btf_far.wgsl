@@ -75,22 +75,25 @@ struct FarParams {
     views_branch: DirSet,
     // Where the near draws start in `frame_words`, in words.
     draws_at: u32,
-    _pad0: u32,
+    // Where the near bits start in `frame_words`, in words (the shades start at 0).
+    bits_at: u32,
     _pad1: u32,
     _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: FarParams;
 @group(0) @binding(1) var<storage, read> trees: array<FarTree>;
-@group(0) @binding(2) var<storage, read> shades: array<FarShade>;
+// The near trees' billboards expanded by `near_build`, one slot per part of each draw.
+@group(0) @binding(2) var<storage, read_write> near_records: array<Billboard>;
 // Words: float bits, or indices (the triangles; the species' layer bases); then the
 // species' part transforms, their cube maps' objects and the maps' bytes.
 @group(0) @binding(3) var<storage, read> tables: array<vec4<u32>>;
-// One bit per tree: set for the near trees, which the CPU prepares (or expands into
-// `NearDraw`s, at `params.draws_at`).
+// Each tree's `FarShade` (16 words, from 0); at `params.bits_at` one bit per tree, set for
+// the near trees, which the CPU prepares (or hands over as `NearDraw`s, at
+// `params.draws_at`).
 @group(0) @binding(4) var<storage, read> frame_words: array<u32>;
 // One slot per tree (its record when it is far and in view), then the near trees' made on
-// the CPU, then those expanded here.
+// the CPU. (A key's slot past those is `near_records`' slot after them.)
 @group(0) @binding(5) var<storage, read_write> records: array<Billboard>;
 // Per slot of `records` (padded to a power of two): (ordered depth, !slot), 0 for none;
 // sorted in decreasing order, back to front.
@@ -350,6 +353,19 @@ fn make_record(m: mat4x4<f32>, set_at: u32, views: DirSet, tint: vec3<f32>) -> B
     return r;
 }
 
+// Tree `t`'s VCM factors, at the start of `frame_words`.
+fn shade_of(t: u32) -> FarShade {
+    let at = 16u * t;
+    var w: array<f32, 16>;
+    for (var k = 0u; k < 16u; k++) {
+        w[k] = bitcast<f32>(frame_words[at + k]);
+    }
+    return FarShade(
+        array<vec4<f32>, 2>(vec4<f32>(w[0], w[1], w[2], w[3]), vec4<f32>(w[4], w[5], w[6], w[7])),
+        array<vec4<f32>, 2>(vec4<f32>(w[8], w[9], w[10], w[11]), vec4<f32>(w[12], w[13], w[14], w[15])),
+    );
+}
+
 // The record's key: (ordered depth, !slot).
 fn key_of(r: Billboard, slot: u32) -> vec2<u32> {
     return vec2<u32>(ordered(dot(r.center - params.camera, params.forward)), ~slot);
@@ -361,7 +377,7 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
     if i >= params.count {
         return;
     }
-    if ((frame_words[i / 32u] >> (i % 32u)) & 1u) != 0u {
+    if ((frame_words[params.bits_at + i / 32u] >> (i % 32u)) & 1u) != 0u {
         return;
     }
     let tree = trees[i];
@@ -383,7 +399,7 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     if params.vcm != 0u {
-        let sh = shades[i];
+        let sh = shade_of(i);
         r.vcm_direct = sh.direct;
         if params.vcm == 1u {
             r.vcm_sky = sh.sky;
@@ -595,8 +611,9 @@ fn near_build(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     r.opacity = draw.opacity;
     if params.vcm != 0u {
-        let tree_direct = corners(shades[draw.tree].direct);
-        let tree_sky = corners(shades[draw.tree].sky);
+        let sh = shade_of(draw.tree);
+        let tree_direct = corners(sh.direct);
+        let tree_sky = corners(sh.sky);
         var direct = tree_direct;
         var sky = tree_sky;
         var parent_direct = 1.0;
@@ -645,8 +662,8 @@ fn near_build(@builtin(global_invocation_id) gid: vec3<u32>) {
             r.parent_sky = parent_sky;
         }
     }
+    near_records[s] = r;
     let slot = params.count + params.near_count + s;
-    records[slot] = r;
     keys[slot] = key_of(r, slot);
     atomicAdd(&draw_args[5u + level], 1u);
 }
@@ -699,7 +716,13 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     if i >= total || i < skip {
         return;
     }
-    sorted[i - skip] = records[~keys[i].y];
+    let slot = ~keys[i].y;
+    let cpu_end = params.count + params.near_count;
+    if slot < cpu_end {
+        sorted[i - skip] = records[slot];
+    } else {
+        sorted[i - skip] = near_records[slot - cpu_end];
+    }
 }
 
 // The draw's instance count.

@@ -5,7 +5,7 @@
 
 use std::mem::{offset_of, size_of};
 
-use canopy::render::btf::BillboardGpu;
+use canopy::render::btf::{BillboardGpu, NearDrawGpu};
 use canopy::render::btf::far::{DirSetGpu, FarParamsGpu, FarShadeGpu, FarTreeGpu, SortStepGpu};
 use canopy::render::frame::FrameUniforms;
 use canopy::render::self_shadow::SelfLightGpu;
@@ -316,7 +316,17 @@ fn far_tree_structs_match_btf_far_wgsl() {
         sort_n,
         near_count,
         limit,
-        _pad
+        vcm_res,
+        overlay_twig,
+        near_draws,
+        overlay_branch,
+        near_slots,
+        views_twig,
+        views_branch,
+        draws_at,
+        bits_at,
+        _pad1,
+        _pad2
     });
     check(
         "FarParams",
@@ -327,4 +337,14 @@ fn far_tree_structs_match_btf_far_wgsl() {
     let pad = fields.pop().expect("the padding").1;
     fields.extend([("_pad0", pad), ("_pad1", pad + 4)]);
     check("SortStep", wgsl_layout(&source, "SortStep"), (size, fields));
+    check(
+        "NearDraw",
+        wgsl_layout(&source, "NearDraw"),
+        rust_layout!(NearDrawGpu {
+            tree,
+            level,
+            opacity,
+            first
+        }),
+    );
 }

@@ -10,8 +10,17 @@
 //! records, far and near, back to front (bitonic, on (depth, slot) keys, so the order is
 //! the same every run) and gather them for one indirect draw. The per-tree VCM factors are
 //! uploaded when the sun moves.
-//! How many far billboards were drawn comes back a frame or two later (at once when the
-//! frame is measured).
+//!
+//! With [`BtfSettings::gpu_near`] (the default) the CPU does not make the near trees'
+//! records either: it chooses each near tree's levels and cross-fade as before and hands
+//! one [`NearDrawGpu`] per level drawn to `near_build`, one thread per billboard, which
+//! finds its part (the tree; a main branch or a trunk twig; a main branch's twig), places
+//! it, and shades it as `TreeShading` does: the part's 8 cube maps read towards the sun in
+//! its own frame (the main branches' and twigs' maps are in the tables, one byte a texel)
+//! and its parents' factors at its centre. Its records and keys then go through the same
+//! sort.
+//! How many billboards were made comes back a frame or two later (at once when the frame
+//! is measured).
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -94,7 +103,7 @@ pub struct FarParamsGpu {
     pub views_twig: DirSetGpu,
     pub views_branch: DirSetGpu,
     pub draws_at: u32,
-    pub _pad0: u32,
+    pub bits_at: u32,
     pub _pad1: u32,
     pub _pad2: u32,
 }
@@ -110,6 +119,9 @@ pub struct SortStepGpu {
 
 const WORKGROUP: u32 = 64;
 
+/// Words of one tree's VCM factors (`FarShadeGpu`) in the frame words.
+const SHADE_WORDS: usize = std::mem::size_of::<FarShadeGpu>() / 4;
+
 /// Words of the draw-arguments buffer: the indirect draw's 4, then the far billboards made.
 const DRAW_WORDS: u64 = 8;
 
@@ -117,7 +129,9 @@ const DRAW_WORDS: u64 = 8;
 pub struct FarGpu {
     /// Bound in `bind_group` (kept alive with it).
     trees: wgpu::Buffer,
-    shades: wgpu::Buffer,
+    /// The near trees' billboards expanded by `near_build`, one slot per part.
+    near_records: wgpu::Buffer,
+    near_slots: u64,
     /// The sun the shades were read for (None: not uploaded yet).
     shade_sun: Option<Vec3>,
     tree_count: usize,
@@ -129,7 +143,8 @@ pub struct FarGpu {
     tables: wgpu::Buffer,
     params: wgpu::Buffer,
     base: FarParamsGpu,
-    /// One bit per tree (the near ones), then the frame's near draws.
+    /// Each tree's VCM factors (`FarShade`, 16 words; uploaded when the sun moves), one bit
+    /// per tree (the near ones), then the frame's near draws.
     frame_words: wgpu::Buffer,
     /// Words `frame_words` holds.
     frame_word_slots: u64,
@@ -297,8 +312,8 @@ impl FarGpu {
             near_slots: 0,
             views_twig,
             views_branch,
-            draws_at: n.div_ceil(32).max(1) as u32,
-            _pad0: 0,
+            draws_at: (SHADE_WORDS * n + n.div_ceil(32).max(1)) as u32,
+            bits_at: (SHADE_WORDS * n) as u32,
             _pad1: 0,
             _pad2: 0,
         };
@@ -313,16 +328,10 @@ impl FarGpu {
             )
         };
         use wgpu::BufferUsages as U;
-        let shade_bytes = (n.max(1) * std::mem::size_of::<FarShadeGpu>()) as u64;
+        let words = u64::from(base.draws_at);
         let bufs = ctx.checked("allocating the far trees' GPU buffers", || {
             (
                 init("far trees", bytemuck::cast_slice(&far_trees)),
-                buffer(
-                    ctx,
-                    "far tree shades",
-                    shade_bytes,
-                    U::STORAGE | U::COPY_DST,
-                ),
                 init("far tables", bytemuck::cast_slice(&tables)),
                 buffer(
                     ctx,
@@ -333,8 +342,8 @@ impl FarGpu {
                 buffer(
                     ctx,
                     "far frame words",
-                    (n.div_ceil(32).max(1) * 4) as u64,
-                    U::STORAGE | U::COPY_DST,
+                    words * 4,
+                    U::STORAGE | U::COPY_DST | U::COPY_SRC,
                 ),
                 buffer(
                     ctx,
@@ -344,7 +353,7 @@ impl FarGpu {
                 ),
             )
         })?;
-        let (trees_buf, shades, tables_buf, params, frame_words, draw_args) = bufs;
+        let (trees_buf, tables_buf, params, frame_words, draw_args) = bufs;
         let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
@@ -373,7 +382,7 @@ impl FarGpu {
                 entries: &[
                     uniform(0, false),
                     storage(1, true),
-                    storage(2, true),
+                    storage(2, false),
                     storage(3, true),
                     storage(4, true),
                     storage(5, false),
@@ -427,21 +436,38 @@ impl FarGpu {
             .max(std::mem::size_of::<SortStepGpu>() as u64);
         // Placeholders until the first frame sizes them.
         let small = |label| buffer(ctx, label, 16, U::STORAGE);
-        let (records, keys_buf, sorted) =
-            (small("far records"), small("far keys"), small("far sorted"));
+        let (records, keys_buf, sorted, near_records) = (
+            small("far records"),
+            small("far keys"),
+            small("far sorted"),
+            buffer(
+                ctx,
+                "near records",
+                std::mem::size_of::<BillboardGpu>() as u64,
+                U::STORAGE,
+            ),
+        );
         let steps = buffer(ctx, "far sort steps", step_stride, U::UNIFORM);
         let draw_resources = (draw.0.clone(), draw.1.clone(), draw.2.clone());
         let (bind_group, step_bind_group, draw_bind_group) = bind_groups(
             ctx,
             [&layout0, &layout1, layout],
-            [&params, &trees_buf, &shades, &tables_buf, &frame_words],
-            [&records, &keys_buf, &draw_args, &sorted],
+            [&params, &trees_buf, &tables_buf],
+            [
+                &near_records,
+                &frame_words,
+                &records,
+                &keys_buf,
+                &draw_args,
+                &sorted,
+            ],
             &steps,
             &draw_resources,
         );
         let mut far = Self {
             trees: trees_buf,
-            shades,
+            near_records,
+            near_slots: 0,
             shade_sun: None,
             tree_count: n,
             species: species[..n].to_vec(),
@@ -451,7 +477,7 @@ impl FarGpu {
             params,
             base,
             frame_words,
-            frame_word_slots: n.div_ceil(32).max(1) as u64,
+            frame_word_slots: words,
             draw_args,
             records,
             record_slots: 0,
@@ -480,7 +506,7 @@ impl FarGpu {
             frame: None,
             count: CountReadback::new(ctx),
         };
-        far.reserve(ctx, 0, 0)?;
+        far.reserve(ctx, 0, 0, 0)?;
         Ok(Some(far))
     }
 
@@ -488,7 +514,7 @@ impl FarGpu {
     pub fn bytes(&self) -> u64 {
         [
             &self.trees,
-            &self.shades,
+            &self.near_records,
             &self.tables,
             &self.frame_words,
             &self.records,
@@ -501,19 +527,21 @@ impl FarGpu {
         .sum()
     }
 
-    /// Grows the record, key and sorted buffers to take `near` records after the trees'
-    /// slots (and the sort steps to the keys), and the frame words to take `draws` near
-    /// draws after the bits, rebinding them.
-    fn reserve(&mut self, ctx: &GpuContext, near: u64, draws: u64) -> Result<()> {
+    /// Grows the buffers for a frame of `near` records made on the CPU (after the trees'
+    /// slots), `expanded` slots of `near_build` and `draws` near draws (after the shades
+    /// and bits), and the sort's keys and steps to them all, rebinding what changed.
+    fn reserve(&mut self, ctx: &GpuContext, near: u64, expanded: u64, draws: u64) -> Result<()> {
         let record = std::mem::size_of::<BillboardGpu>() as u64;
         let slots = self.tree_count as u64 + near;
-        let keys = u32::try_from(slots.max(2))
+        let total = slots + expanded;
+        let keys = u32::try_from(total.max(2))
             .ok()
             .and_then(u32::checked_next_power_of_two)
             .ok_or_else(|| crate::Error::Gpu("too many billboards to sort".into()))?;
-        let sorted = slots.min(self.limit);
+        let sorted = total.min(self.limit);
         let words = u64::from(self.base.draws_at) + 4 * draws;
         if slots <= self.record_slots
+            && expanded <= self.near_slots
             && keys <= self.key_slots
             && sorted <= self.sorted_slots
             && words <= self.frame_word_slots
@@ -523,48 +551,70 @@ impl FarGpu {
         use wgpu::BufferUsages as U;
         // Half as much again, so that a growing frame does not rebind every time.
         let grow = |n: u64| (n + n / 2).max(1024);
+        let max_words = ctx.device.limits().max_storage_buffer_binding_size / 4;
         if words > self.frame_word_slots {
             let word_slots = (u64::from(self.base.draws_at) + 4 * grow(draws))
-                .min(ctx.device.limits().max_storage_buffer_binding_size / 4)
+                .min(max_words)
                 .max(words);
             let bigger = ctx.checked("allocating the near draws' buffer", || {
-                buffer(ctx, "far frame words", word_slots * 4, U::STORAGE | U::COPY_DST)
+                buffer(
+                    ctx,
+                    "far frame words",
+                    word_slots * 4,
+                    U::STORAGE | U::COPY_DST | U::COPY_SRC,
+                )
             })?;
+            // The shades and bits already written this frame come along.
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("far frame words"),
+                });
+            encoder.copy_buffer_to_buffer(
+                &self.frame_words,
+                0,
+                &bigger,
+                0,
+                self.frame_word_slots * 4,
+            );
+            ctx.queue.submit([encoder.finish()]);
             self.frame_words = bigger;
             self.frame_word_slots = word_slots;
         }
-        let record_slots = grow(slots).min(self.limit.max(slots));
-        let sorted_slots = grow(sorted).min(self.limit);
-        let steps_list = sort_steps(keys);
-        let mut step_bytes =
-            vec![0u8; (steps_list.len().max(1) as u64 * self.step_stride) as usize];
-        for (i, &(k, j)) in steps_list.iter().enumerate() {
-            let at = i * self.step_stride as usize;
-            let s = SortStepGpu { k, j, _pad: [0; 2] };
-            step_bytes[at..at + std::mem::size_of::<SortStepGpu>()]
-                .copy_from_slice(bytemuck::bytes_of(&s));
+        if slots > self.record_slots {
+            let record_slots = grow(slots).min(self.limit.max(slots));
+            self.records = ctx.checked("allocating the billboards' records", || {
+                buffer(ctx, "far records", record_slots * record, U::STORAGE | U::COPY_DST)
+            })?;
+            self.record_slots = record_slots;
         }
-        let (records, keys_buf, sorted_buf, steps) =
-            ctx.checked("allocating the billboards' sort buffers", || {
+        if expanded > self.near_slots {
+            let near_slots = grow(expanded).min(self.limit.max(expanded));
+            self.near_records = ctx.checked("allocating the near trees' records", || {
+                buffer(ctx, "near records", near_slots * record, U::STORAGE)
+            })?;
+            self.near_slots = near_slots;
+        }
+        if sorted > self.sorted_slots {
+            let sorted_slots = grow(sorted).min(self.limit);
+            self.sorted = ctx.checked("allocating the sorted billboards", || {
+                buffer(ctx, "far sorted", sorted_slots * record, U::STORAGE | U::COPY_SRC)
+            })?;
+            self.sorted_slots = sorted_slots;
+        }
+        if keys > self.key_slots {
+            let steps_list = sort_steps(keys);
+            let mut step_bytes =
+                vec![0u8; (steps_list.len().max(1) as u64 * self.step_stride) as usize];
+            for (i, &(k, j)) in steps_list.iter().enumerate() {
+                let at = i * self.step_stride as usize;
+                let s = SortStepGpu { k, j, _pad: [0; 2] };
+                step_bytes[at..at + std::mem::size_of::<SortStepGpu>()]
+                    .copy_from_slice(bytemuck::bytes_of(&s));
+            }
+            let (keys_buf, steps) = ctx.checked("allocating the sort's keys", || {
                 (
-                    buffer(
-                        ctx,
-                        "far records",
-                        record_slots * record,
-                        U::STORAGE | U::COPY_DST,
-                    ),
-                    buffer(
-                        ctx,
-                        "far keys",
-                        u64::from(keys) * 8,
-                        U::STORAGE | U::COPY_DST,
-                    ),
-                    buffer(
-                        ctx,
-                        "far sorted",
-                        sorted_slots * record,
-                        U::STORAGE | U::COPY_SRC,
-                    ),
+                    buffer(ctx, "far keys", u64::from(keys) * 8, U::STORAGE | U::COPY_DST),
                     wgpu::util::DeviceExt::create_buffer_init(
                         &ctx.device,
                         &wgpu::util::BufferInitDescriptor {
@@ -575,27 +625,25 @@ impl FarGpu {
                     ),
                 )
             })?;
+            self.keys = keys_buf;
+            self.steps = steps;
+            self.key_slots = keys;
+        }
         let (bind_group, step_bind_group, draw_bind_group) = bind_groups(
             ctx,
             [&self.layouts[0], &self.layouts[1], &self.draw_layout],
+            [&self.params, &self.trees, &self.tables],
             [
-                &self.params,
-                &self.trees,
-                &self.shades,
-                &self.tables,
+                &self.near_records,
                 &self.frame_words,
+                &self.records,
+                &self.keys,
+                &self.draw_args,
+                &self.sorted,
             ],
-            [&records, &keys_buf, &self.draw_args, &sorted_buf],
-            &steps,
+            &self.steps,
             &self.draw_resources,
         );
-        self.records = records;
-        self.keys = keys_buf;
-        self.sorted = sorted_buf;
-        self.steps = steps;
-        self.record_slots = record_slots;
-        self.key_slots = keys;
-        self.sorted_slots = sorted_slots;
         self.bind_group = bind_group;
         self.step_bind_group = step_bind_group;
         self.draw_bind_group = draw_bind_group;
@@ -662,7 +710,7 @@ impl FarGpu {
                 })
                 .collect();
             ctx.queue
-                .write_buffer(&self.shades, 0, bytemuck::cast_slice(&shades));
+                .write_buffer(&self.frame_words, 0, bytemuck::cast_slice(&shades));
             self.shade_sun = v.sun();
             shade_ms = t0.elapsed().as_secs_f64() * 1e3;
         }
@@ -702,6 +750,11 @@ impl FarGpu {
         (near, shade_ms)
     }
 
+    /// Most billboards `near_build` can expand in one frame (one storage binding's records).
+    pub fn expand_limit(&self) -> u64 {
+        self.limit
+    }
+
     /// Takes the near trees' records made on the CPU (in any order: they are sorted with
     /// the far ones) and the near draws for `near_build` to expand into `draw_slots`
     /// billboards, and readies the frame's passes; false (and no frame) when they do not
@@ -717,20 +770,32 @@ impl FarGpu {
             return Ok(false);
         };
         let near_count = near.len() as u64;
-        let slots = self.tree_count as u64 + near_count + draw_slots;
-        // One binding's records, and one dispatch's workgroups over the sort's keys.
-        let groups = slots
+        let slots = self.tree_count as u64 + near_count;
+        let total = slots + draw_slots;
+        // One binding's records each (the trees' and the CPU's, and those expanded), and
+        // one dispatch's workgroups over the sort's keys and over the expanded slots.
+        let groups = total
             .max(2)
             .next_power_of_two()
-            .div_ceil(u64::from(WORKGROUP));
+            .div_ceil(u64::from(WORKGROUP))
+            .max(draw_slots.div_ceil(u64::from(WORKGROUP)));
         let draw_words = u64::from(self.base.draws_at) + 4 * draws.len() as u64;
         if slots > self.limit
+            || draw_slots > self.limit
             || groups > u64::from(self.max_groups)
             || draw_words * 4 > ctx.device.limits().max_storage_buffer_binding_size
         {
+            log::debug!(
+                "the GPU cannot take this frame's billboards: {slots} slots of trees and CPU \
+                 records, {draw_slots} to expand ({} draws), {groups} workgroups; one binding \
+                 holds {} records, one dispatch {} workgroups",
+                draws.len(),
+                self.limit,
+                self.max_groups
+            );
             return Ok(false);
         }
-        self.reserve(ctx, near_count + draw_slots, draws.len() as u64)?;
+        self.reserve(ctx, near_count, draw_slots, draws.len() as u64)?;
         let record = std::mem::size_of::<BillboardGpu>() as u64;
         if let Some(size) = wgpu::BufferSize::new(near_count * record)
             && let Some(mut view) =
@@ -739,8 +804,11 @@ impl FarGpu {
         {
             near.write_unsorted(view.slice(..));
         }
-        ctx.queue
-            .write_buffer(&self.frame_words, 0, bytemuck::cast_slice(&self.bits));
+        ctx.queue.write_buffer(
+            &self.frame_words,
+            u64::from(self.base.bits_at) * 4,
+            bytemuck::cast_slice(&self.bits),
+        );
         if !draws.is_empty() {
             ctx.queue.write_buffer(
                 &self.frame_words,
@@ -748,7 +816,7 @@ impl FarGpu {
                 bytemuck::cast_slice(draws),
             );
         }
-        let keys = slots.max(2).next_power_of_two() as u32;
+        let keys = total.max(2).next_power_of_two() as u32;
         params.near_count = near_count as u32;
         params.near_draws = draws.len() as u32;
         params.near_slots = draw_slots as u32;
@@ -761,7 +829,7 @@ impl FarGpu {
             0,
             bytemuck::cast_slice(&[6u32, 0, 0, 0, 0, 0, 0, 0]),
         );
-        self.frame = Some((keys, slots as u32, draw_slots as u32));
+        self.frame = Some((keys, total as u32, draw_slots as u32));
         Ok(true)
     }
 
@@ -860,13 +928,13 @@ fn buffer(ctx: &GpuContext, label: &str, size: u64, usage: wgpu::BufferUsages) -
     })
 }
 
-/// The compute bind groups (fixed buffers: params, trees, shades, tables, near bits; sized
-/// ones: records, keys, draw arguments, sorted), the sort step's, and the draw's.
+/// The compute bind groups (fixed buffers: params, trees, tables; sized ones: near records,
+/// frame words, records, keys, draw arguments, sorted), the sort step's, and the draw's.
 fn bind_groups(
     ctx: &GpuContext,
     layouts: [&wgpu::BindGroupLayout; 3],
-    fixed: [&wgpu::Buffer; 5],
-    sized: [&wgpu::Buffer; 4],
+    fixed: [&wgpu::Buffer; 3],
+    sized: [&wgpu::Buffer; 6],
     steps: &wgpu::Buffer,
     draw: &(wgpu::Buffer, wgpu::TextureView, wgpu::Sampler),
 ) -> (wgpu::BindGroup, wgpu::BindGroup, wgpu::BindGroup) {
@@ -876,13 +944,13 @@ fn bind_groups(
         entries: &[
             entry(0, fixed[0]),
             entry(1, fixed[1]),
-            entry(2, fixed[2]),
-            entry(3, fixed[3]),
-            entry(4, fixed[4]),
-            entry(5, sized[0]),
-            entry(6, sized[1]),
-            entry(7, sized[2]),
-            entry(8, sized[3]),
+            entry(2, sized[0]),
+            entry(3, fixed[2]),
+            entry(4, sized[1]),
+            entry(5, sized[2]),
+            entry(6, sized[3]),
+            entry(7, sized[4]),
+            entry(8, sized[5]),
         ],
     });
     let step = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -901,7 +969,7 @@ fn bind_groups(
         label: Some("btf far billboards"),
         layout: layouts[2],
         entries: &[
-            entry(0, sized[3]),
+            entry(0, sized[5]),
             entry(1, &draw.0),
             wgpu::BindGroupEntry {
                 binding: 2,

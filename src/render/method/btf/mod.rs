@@ -17,7 +17,9 @@ use std::collections::HashMap;
 use glam::Vec3;
 
 pub use billboard::{BillboardGpu, BillboardMode};
-pub use prepare::{BtfFrame, BtfScene, LevelChoice, PrepareView, SortedBillboards, choose_level};
+pub use prepare::{
+    BtfFrame, BtfScene, LevelChoice, NearDrawGpu, PrepareView, SortedBillboards, choose_level,
+};
 pub use settings::{
     BtfSettings, BtfStats, FETCHES_AT_MOST, GEOMETRY_COLOUR, LOD_COLOURS, PlaneMode,
 };
@@ -259,10 +261,15 @@ impl BtfAssets {
             // Unsorted: the GPU sorts them with the far trees' billboards. With `gpu_near`
             // the CPU only chooses their levels, and the GPU expands them.
             let (mut out, records, draws, slots) = if settings.gpu_near {
-                let (out, draws, slots) =
-                    self.scene
-                        .prepare_draws(&world.tree_data, &near, &view, settings, hybrid);
-                (out, SortedBillboards::default(), draws, slots)
+                self.scene.prepare_near(
+                    &world.tree_data,
+                    &world.tree_species,
+                    &near,
+                    &view,
+                    settings,
+                    hybrid,
+                    f.expand_limit(),
+                )
             } else {
                 let (out, records) =
                     self.scene

@@ -660,6 +660,86 @@ impl BtfScene {
         (frame, draws, slots)
     }
 
+    /// The near trees' frame for the GPU ([`super::far`]): their draws
+    /// ([`Self::prepare_draws`]), at most `budget` slots of them; past that, the farthest
+    /// trees' billboards are made here instead (unsorted), so that nothing goes missing.
+    /// `species[t]` is tree `t`'s species.
+    #[allow(clippy::too_many_arguments)]
+    pub fn prepare_near(
+        &self,
+        trees: &[TreeGpu],
+        species: &[u32],
+        near: &[Vec<u32>],
+        view: &PrepareView,
+        settings: &BtfSettings,
+        hybrid: bool,
+        budget: u64,
+    ) -> (BtfFrame, SortedBillboards, Vec<NearDrawGpu>, u64) {
+        let (mut frame, draws, slots) = self.prepare_draws(trees, near, view, settings, hybrid);
+        if slots <= budget {
+            return (frame, SortedBillboards::default(), draws, slots);
+        }
+        // The trees by distance, each with its draws' slots (a tree's draws are together).
+        let cam = view.camera.position;
+        let mut by_tree: Vec<(f32, u32, u64)> = Vec::new();
+        for (k, d) in draws.iter().enumerate() {
+            let next = draws.get(k + 1).map_or(slots, |n| u64::from(n.first));
+            let count = next - u64::from(d.first);
+            match by_tree.last_mut() {
+                Some(last) if last.1 == d.tree => last.2 += count,
+                _ => {
+                    let sp = species.get(d.tree as usize).copied().unwrap_or(u32::MAX);
+                    let dist = trees
+                        .get(d.tree as usize)
+                        .and_then(|data| self.tree_centre(sp as usize, data))
+                        .map_or(f32::INFINITY, |c| c.distance_squared(cam));
+                    by_tree.push((dist, d.tree, count));
+                }
+            }
+        }
+        by_tree.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut used = 0u64;
+        let mut kept = Vec::new();
+        let mut rest = vec![Vec::new(); self.species.len()];
+        for &(_, t, count) in &by_tree {
+            if used + count <= budget && rest.iter().all(Vec::is_empty) {
+                used += count;
+                kept.push(t);
+            } else if let Some(list) = species
+                .get(t as usize)
+                .and_then(|&sp| rest.get_mut(sp as usize))
+            {
+                list.push(t);
+            }
+        }
+        kept.sort_unstable();
+        for list in &mut rest {
+            list.sort_unstable();
+        }
+        let mut gpu = Vec::with_capacity(draws.len());
+        let mut at = 0u64;
+        for (k, d) in draws.iter().enumerate() {
+            if kept.binary_search(&d.tree).is_ok() {
+                let next = draws.get(k + 1).map_or(slots, |n| u64::from(n.first));
+                gpu.push(NearDrawGpu {
+                    first: at as u32,
+                    ..*d
+                });
+                at += next - u64::from(d.first);
+            }
+        }
+        // Their levels, lists and tree counts are in `frame` already: only the billboards
+        // made here are new.
+        let (cpu, records) = self.prepare_sorted(trees, &rest, view, settings, 0, hybrid);
+        for level in Level::ALL {
+            frame.stats.billboards[level] += cpu.stats.billboards[level];
+        }
+        frame.stats.images_sampled += cpu.stats.images_sampled;
+        frame.stats.fetches_saved += cpu.stats.fetches_saved;
+        frame.billboards = cpu.billboards;
+        (frame, records, gpu, at)
+    }
+
     /// One visible tree's level choice and billboards, into `out`.
     #[allow(clippy::too_many_arguments)]
     fn prepare_tree(
@@ -1519,6 +1599,7 @@ pub(crate) mod tests {
         trees: &[TreeGpu],
         view: &PrepareView,
         settings: &BtfSettings,
+        budget: u64,
     ) -> Vec<BillboardGpu> {
         use crate::render::{AdapterPreference, GpuContext};
         let ctx = GpuContext::headless(AdapterPreference::Cpu).expect("a Vulkan adapter");
@@ -1572,8 +1653,11 @@ pub(crate) mod tests {
         .expect("the far trees fit");
         let (near, _) = gpu.prepare(&ctx, scene, trees, &bounds, view, settings, true);
         if settings.gpu_near {
-            let (_, draws, slots) = scene.prepare_draws(trees, &near, view, settings, false);
-            assert!(gpu.upload_near(&ctx, &SortedBillboards::default(), &draws, slots).unwrap());
+            let (_, records, draws, slots) =
+                scene.prepare_near(trees, &species, &near, view, settings, false, budget);
+            assert!(slots <= budget);
+            assert_eq!(records.is_empty(), budget == u64::MAX);
+            assert!(gpu.upload_near(&ctx, &records, &draws, slots).unwrap());
         } else {
             let (_, records) = scene.prepare_sorted(trees, &near, view, settings, 0, false);
             assert!(gpu.upload_near(&ctx, &records, &[], 0).unwrap());
@@ -1594,29 +1678,36 @@ pub(crate) mod tests {
     #[test]
     fn the_gpu_builds_the_far_trees_records_the_cpu_would_back_to_front() {
         // A crowd 90 to 400 m away: every tree past the tree level's fade band.
-        gpu_against_cpu(90.0, false, false, true);
+        gpu_against_cpu(90.0, false, false, true, u64::MAX);
     }
 
     #[test]
     fn near_trees_made_on_the_cpu_are_sorted_with_the_far_ones() {
         // From 4 m: trees at every level, fading, the near ones' billboards made on the
         // CPU and sorted with the far ones' on the GPU.
-        gpu_against_cpu(4.0, true, false, true);
+        gpu_against_cpu(4.0, true, false, true, u64::MAX);
     }
 
     #[test]
     fn near_trees_expanded_on_the_gpu_are_what_the_cpu_would_make() {
         // The same, the near trees' billboards expanded and shaded on the GPU: their parts'
         // cube maps read towards the sun in each part's frame, and the parents' factors.
-        gpu_against_cpu(4.0, true, true, true);
+        gpu_against_cpu(4.0, true, true, true, u64::MAX);
         // And without cube maps (every factor 1).
-        gpu_against_cpu(4.0, true, true, false);
+        gpu_against_cpu(4.0, true, true, false, u64::MAX);
+    }
+
+    #[test]
+    fn past_the_gpus_room_the_farther_near_trees_billboards_are_made_on_the_cpu() {
+        // Room for some of the near trees' billboards only: the nearest trees' go to the
+        // GPU, the others' are made on the CPU, and together they are the CPU's frame.
+        gpu_against_cpu(4.0, true, true, true, 300);
     }
 
     /// Trees from `z_min` to 400 m ahead; the GPU's billboards, back to front, are the
     /// CPU's (`near`: some trees are near; `gpu_near`: their billboards are expanded on the
-    /// GPU; `vcm`: with cube maps of random opacity).
-    fn gpu_against_cpu(z_min: f32, near: bool, gpu_near: bool, vcm: bool) {
+    /// GPU, at most `budget` slots of them; `vcm`: with cube maps of random opacity).
+    fn gpu_against_cpu(z_min: f32, near: bool, gpu_near: bool, vcm: bool, budget: u64) {
         // The tree level at 66 views and 6 lights, as the default bake; trees of mixed yaw
         // and scale.
         let mut scene = scene();
@@ -1692,7 +1783,7 @@ pub(crate) mod tests {
         }
         let mut cpu = cpu_frame.records;
         assert!(cpu.len() > 100, "{} billboards in view", cpu.len());
-        let gpu = gpu_far_records(&scene, &trees, &view, &settings);
+        let gpu = gpu_far_records(&scene, &trees, &view, &settings, budget);
         assert_eq!(gpu.len(), cpu.len(), "as many billboards");
         let forward = camera.forward();
         let depth = |r: &BillboardGpu| (Vec3::from(r.center) - camera.position).dot(forward);
