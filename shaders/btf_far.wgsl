@@ -99,8 +99,9 @@ struct FarParams {
 // sorted in decreasing order, back to front.
 @group(0) @binding(6) var<storage, read_write> keys: array<vec2<u32>>;
 // The indirect draw: vertex count, instance count, first vertex, first instance; then the
-// far billboards made, and the near ones expanded here per level (twig, branch, tree).
-@group(0) @binding(7) var<storage, read_write> draw_args: array<atomic<u32>, 8>;
+// far billboards made, and the near ones expanded here per level (twig, branch, tree);
+// then the image fetches of every billboard made here, and those image-weight culling saved.
+@group(0) @binding(7) var<storage, read_write> draw_args: array<atomic<u32>, 12>;
 @group(0) @binding(8) var<storage, read_write> sorted: array<Billboard>;
 
 // One step of the bitonic sort: block size `k`, partner distance `j`.
@@ -113,6 +114,10 @@ struct SortStep {
 @group(1) @binding(0) var<uniform> sort_at: SortStep;
 
 const SNAP: f32 = 1e-6;
+// Per view a billboard samples its lights' images and 2 more (`AMBIENT_IMAGES_PER_VIEW` in
+// src/format.rs); at most 3 views x (3 lights + 2) (`FETCHES_AT_MOST`).
+const AMBIENT_IMAGES: u32 = 2u;
+const FETCHES_AT_MOST: u32 = 15u;
 const MAX_LIGHT_GAIN: f32 = 2.0;
 
 // glam's `normalize_or`: `v` over its length, or `fallback` where that is not finite.
@@ -350,6 +355,12 @@ fn make_record(m: mat4x4<f32>, set_at: u32, views: DirSet, tint: vec3<f32>) -> B
     r.parent_sky = 1.0;
     r.vcm_direct = array<vec4<f32>, 2>(vec4<f32>(1.0), vec4<f32>(1.0));
     r.vcm_sky = array<vec4<f32>, 2>(vec4<f32>(1.0), vec4<f32>(1.0));
+    // The image fetches per pixel, as the CPU counts them.
+    let views_used = dot(vec3<u32>(vb.weight > vec3<f32>(0.0)), vec3<u32>(1u));
+    let lights_used = dot(vec3<u32>(lb.weight > vec3<f32>(0.0)), vec3<u32>(1u));
+    let fetches = views_used * (lights_used + AMBIENT_IMAGES);
+    atomicAdd(&draw_args[8], fetches);
+    atomicAdd(&draw_args[9], FETCHES_AT_MOST - min(fetches, FETCHES_AT_MOST));
     return r;
 }
 
@@ -588,11 +599,13 @@ fn near_build(@builtin(global_invocation_id) gid: vec3<u32>) {
         level = LEVEL_TWIG;
         part = transform(mats + 4u * (branches + per_branch + trunk_at));
     }
+    // The overlay is the draw's level's (a main-branch draw's trunk twigs take the main
+    // branch's colour, as on the CPU).
     var tint = tree.tint;
     if params.mode != MODE_IMAGES {
-        if level == LEVEL_TWIG {
+        if draw.level == LEVEL_TWIG {
             tint = params.overlay_twig;
-        } else if level == LEVEL_BRANCH {
+        } else if draw.level == LEVEL_BRANCH {
             tint = params.overlay_branch;
         } else {
             tint = params.overlay;

@@ -5,8 +5,8 @@
 
 use std::mem::{offset_of, size_of};
 
-use canopy::render::btf::{BillboardGpu, NearDrawGpu};
 use canopy::render::btf::far::{DirSetGpu, FarParamsGpu, FarShadeGpu, FarTreeGpu, SortStepGpu};
+use canopy::render::btf::{BillboardGpu, NearDrawGpu};
 use canopy::render::frame::FrameUniforms;
 use canopy::render::self_shadow::SelfLightGpu;
 use canopy::render::world_gpu::{PartSetGpu, TreeGpu};

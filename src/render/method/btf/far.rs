@@ -122,8 +122,9 @@ const WORKGROUP: u32 = 64;
 /// Words of one tree's VCM factors (`FarShadeGpu`) in the frame words.
 const SHADE_WORDS: usize = std::mem::size_of::<FarShadeGpu>() / 4;
 
-/// Words of the draw-arguments buffer: the indirect draw's 4, then the far billboards made.
-const DRAW_WORDS: u64 = 8;
+/// Words of the draw-arguments buffer: the indirect draw's 4, the far billboards made, the
+/// near ones per level, the image fetches and the fetches saved, and 2 unused.
+const DRAW_WORDS: u64 = 12;
 
 /// The far trees' buffers and compute pipelines.
 pub struct FarGpu {
@@ -584,7 +585,12 @@ impl FarGpu {
         if slots > self.record_slots {
             let record_slots = grow(slots).min(self.limit.max(slots));
             self.records = ctx.checked("allocating the billboards' records", || {
-                buffer(ctx, "far records", record_slots * record, U::STORAGE | U::COPY_DST)
+                buffer(
+                    ctx,
+                    "far records",
+                    record_slots * record,
+                    U::STORAGE | U::COPY_DST,
+                )
             })?;
             self.record_slots = record_slots;
         }
@@ -598,7 +604,12 @@ impl FarGpu {
         if sorted > self.sorted_slots {
             let sorted_slots = grow(sorted).min(self.limit);
             self.sorted = ctx.checked("allocating the sorted billboards", || {
-                buffer(ctx, "far sorted", sorted_slots * record, U::STORAGE | U::COPY_SRC)
+                buffer(
+                    ctx,
+                    "far sorted",
+                    sorted_slots * record,
+                    U::STORAGE | U::COPY_SRC,
+                )
             })?;
             self.sorted_slots = sorted_slots;
         }
@@ -614,7 +625,12 @@ impl FarGpu {
             }
             let (keys_buf, steps) = ctx.checked("allocating the sort's keys", || {
                 (
-                    buffer(ctx, "far keys", u64::from(keys) * 8, U::STORAGE | U::COPY_DST),
+                    buffer(
+                        ctx,
+                        "far keys",
+                        u64::from(keys) * 8,
+                        U::STORAGE | U::COPY_DST,
+                    ),
                     wgpu::util::DeviceExt::create_buffer_init(
                         &ctx.device,
                         &wgpu::util::BufferInitDescriptor {
@@ -827,7 +843,7 @@ impl FarGpu {
         ctx.queue.write_buffer(
             &self.draw_args,
             0,
-            bytemuck::cast_slice(&[6u32, 0, 0, 0, 0, 0, 0, 0]),
+            bytemuck::cast_slice(&[6u32, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]),
         );
         self.frame = Some((keys, total as u32, draw_slots as u32));
         Ok(true)
@@ -880,8 +896,9 @@ impl FarGpu {
 
     /// After the frame's submission: how many billboards were made, by the latest frame
     /// read back (this one's when `wait`, blocking): the far trees', then the near trees'
-    /// expanded here per level (twig, main branch, tree); None before any.
-    pub fn drawn(&self, ctx: &GpuContext, wait: bool) -> Option<[u32; 4]> {
+    /// expanded here per level (twig, main branch, tree), then their image fetches per
+    /// pixel summed and the fetches image-weight culling saved; None before any.
+    pub fn drawn(&self, ctx: &GpuContext, wait: bool) -> Option<[u32; 6]> {
         self.count.collect(ctx, wait)
     }
 
@@ -1137,13 +1154,13 @@ struct CountReadback {
     /// This frame copied into `read`.
     copied: AtomicBool,
     /// The latest counts read (None before any).
-    last: Mutex<Option<[u32; 4]>>,
+    last: Mutex<Option<[u32; 6]>>,
 }
 
 impl CountReadback {
     fn new(ctx: &GpuContext) -> Self {
         Self {
-            read: MappedRead::new(ctx, "far count read", 16),
+            read: MappedRead::new(ctx, "far count read", 24),
             copied: AtomicBool::new(false),
             last: Mutex::new(None),
         }
@@ -1152,13 +1169,13 @@ impl CountReadback {
     /// Copies the far count of `args` when the last copy has been read.
     fn copy(&self, encoder: &mut wgpu::CommandEncoder, args: &wgpu::Buffer) {
         if self.read.is_free() && !self.copied.swap(true, Ordering::SeqCst) {
-            encoder.copy_buffer_to_buffer(args, 16, self.read.buffer(), 0, 16);
+            encoder.copy_buffer_to_buffer(args, 16, self.read.buffer(), 0, 24);
         }
     }
 
     /// Maps a copy just submitted; reads a mapped one; with `wait`, blocks until the
     /// copy is read. The latest count read.
-    fn collect(&self, ctx: &GpuContext, wait: bool) -> Option<[u32; 4]> {
+    fn collect(&self, ctx: &GpuContext, wait: bool) -> Option<[u32; 6]> {
         if self.copied.swap(false, Ordering::SeqCst) {
             self.read.map();
         }
@@ -1171,7 +1188,12 @@ impl CountReadback {
         let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(n) = self.read.read(|view| {
             std::array::from_fn(|w| {
-                u32::from_le_bytes([view[4 * w], view[4 * w + 1], view[4 * w + 2], view[4 * w + 3]])
+                u32::from_le_bytes([
+                    view[4 * w],
+                    view[4 * w + 1],
+                    view[4 * w + 2],
+                    view[4 * w + 3],
+                ])
             })
         }) {
             *last = Some(n);

@@ -342,7 +342,7 @@ impl BtfAssets {
         if !f.has_frame() {
             return;
         }
-        let Some([n, twigs, branches, trees]) = f.drawn(ctx, wait) else {
+        let Some([n, twigs, branches, trees, images, saved]) = f.drawn(ctx, wait) else {
             return;
         };
         use crate::model::Level;
@@ -353,6 +353,8 @@ impl BtfAssets {
             b.billboards[Level::Branch] += branches;
             b.billboards[Level::Twig] += twigs;
             b.gpu_billboards += n + near;
+            b.images_sampled += u64::from(images);
+            b.fetches_saved += u64::from(saved);
         }
         stats.trees_drawn += n;
         stats.triangles += 2 * u64::from(n + near);

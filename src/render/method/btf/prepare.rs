@@ -13,7 +13,7 @@ use glam::{Mat3, Mat4, Vec3};
 
 use super::billboard::{BillboardGpu, BillboardMode, SetInfo};
 use super::settings::{BtfSettings, BtfStats, FETCHES_AT_MOST, PlaneMode};
-use super::shading::{ObjectFrame, Shade, VcmShading};
+use super::shading::{ObjectFrame, ObjectMaps, Shade, VcmShading};
 use crate::format::{Baked, BtfImageSet};
 use crate::lod::{self, LevelTexels};
 use crate::model::mesh::Aabb;
@@ -358,12 +358,14 @@ impl BtfScene {
     /// objects' first rows; the VCM boxes and centres; then every species' part transforms,
     /// its cube-map objects, and the maps' bytes, 16 a row), each level's view set, the
     /// light set, and the cube maps' face resolution (0 without them).
-    pub(super) fn gpu_tables(&self) -> (Vec<[u32; 4]>, &PerLevel<DirectionSet>, &DirectionSet, u32) {
+    pub(super) fn gpu_tables(
+        &self,
+    ) -> (Vec<[u32; 4]>, &PerLevel<DirectionSet>, &DirectionSet, u32) {
         let bits = |v: Vec3, w: f32| [v.x, v.y, v.z, w].map(f32::to_bits);
         let mut rows = Vec::with_capacity(GPU_SPECIES_ROWS * self.species.len());
         let mut mats_at = GPU_SPECIES_ROWS * self.species.len();
         let vcm = self.vcm.as_ref();
-        let maps: Vec<[Vec<(&[u8], [f32; CORNERS])>; 2]> = (0..self.species.len())
+        let maps: Vec<[Vec<ObjectMaps>; 2]> = (0..self.species.len())
             .map(|sp| vcm.map_or([Vec::new(), Vec::new()], |v| v.species_maps(sp)))
             .collect();
         let mut objects_at = mats_at
@@ -423,7 +425,10 @@ impl BtfScene {
         let mut map_at = objects_at;
         let mut map_rows: Vec<[u32; 4]> = Vec::new();
         for (parts, maps) in self.species.iter().zip(&maps) {
-            let counts = [parts.branches.len(), parts.branch_twigs.len() + parts.trunk_twigs.len()];
+            let counts = [
+                parts.branches.len(),
+                parts.branch_twigs.len() + parts.trunk_twigs.len(),
+            ];
             for (list, count) in maps.iter().zip(counts) {
                 for i in 0..list.len().max(count) {
                     let (row, sky) = match list.get(i) {
@@ -1678,36 +1683,45 @@ pub(crate) mod tests {
     #[test]
     fn the_gpu_builds_the_far_trees_records_the_cpu_would_back_to_front() {
         // A crowd 90 to 400 m away: every tree past the tree level's fade band.
-        gpu_against_cpu(90.0, false, false, true, u64::MAX);
+        gpu_against_cpu(90.0, false, false, true, u64::MAX, false);
     }
 
     #[test]
     fn near_trees_made_on_the_cpu_are_sorted_with_the_far_ones() {
         // From 4 m: trees at every level, fading, the near ones' billboards made on the
         // CPU and sorted with the far ones' on the GPU.
-        gpu_against_cpu(4.0, true, false, true, u64::MAX);
+        gpu_against_cpu(4.0, true, false, true, u64::MAX, false);
     }
 
     #[test]
     fn near_trees_expanded_on_the_gpu_are_what_the_cpu_would_make() {
         // The same, the near trees' billboards expanded and shaded on the GPU: their parts'
         // cube maps read towards the sun in each part's frame, and the parents' factors.
-        gpu_against_cpu(4.0, true, true, true, u64::MAX);
-        // And without cube maps (every factor 1).
-        gpu_against_cpu(4.0, true, true, false, u64::MAX);
+        gpu_against_cpu(4.0, true, true, true, u64::MAX, false);
+        // And without cube maps (every factor 1), with the level overlay (a main-branch
+        // draw's twigs in the main branch's colour).
+        gpu_against_cpu(4.0, true, true, false, u64::MAX, true);
     }
 
     #[test]
     fn past_the_gpus_room_the_farther_near_trees_billboards_are_made_on_the_cpu() {
         // Room for some of the near trees' billboards only: the nearest trees' go to the
         // GPU, the others' are made on the CPU, and together they are the CPU's frame.
-        gpu_against_cpu(4.0, true, true, true, 300);
+        gpu_against_cpu(4.0, true, true, true, 300, false);
     }
 
     /// Trees from `z_min` to 400 m ahead; the GPU's billboards, back to front, are the
     /// CPU's (`near`: some trees are near; `gpu_near`: their billboards are expanded on the
-    /// GPU, at most `budget` slots of them; `vcm`: with cube maps of random opacity).
-    fn gpu_against_cpu(z_min: f32, near: bool, gpu_near: bool, vcm: bool, budget: u64) {
+    /// GPU, at most `budget` slots of them; `vcm`: with cube maps of random opacity;
+    /// `overlay`: tinted by level).
+    fn gpu_against_cpu(
+        z_min: f32,
+        near: bool,
+        gpu_near: bool,
+        vcm: bool,
+        budget: u64,
+        overlay: bool,
+    ) {
         // The tree level at 66 views and 6 lights, as the default bake; trees of mixed yaw
         // and scale.
         let mut scene = scene();
@@ -1752,6 +1766,7 @@ pub(crate) mod tests {
         let settings = BtfSettings {
             weight_threshold: 0.15,
             gpu_near,
+            show_lod: overlay,
             ..BtfSettings::default()
         };
         scene.update_sun(view.to_sun);

@@ -126,8 +126,8 @@ pub struct BtfStats {
     pub fetches_saved: u64,
     /// Billboards left out because the instance buffer would pass the GPU's limit.
     pub dropped: u32,
-    /// Of `billboards`, those built on the GPU (far trees at the tree level); their image
-    /// fetches are not in `images_sampled` nor `fetches_saved`.
+    /// Of `billboards`, those built on the GPU (far trees, and near ones with `gpu_near`);
+    /// their image fetches are counted there and read back with them.
     pub gpu_billboards: u32,
     /// The billboards were shaded by visibility cube maps.
     pub vcm: bool,
@@ -153,9 +153,9 @@ impl BtfStats {
         self.billboards.iter().sum()
     }
 
-    /// Images sampled per billboard, on average, over the billboards made on the CPU.
+    /// Images sampled per billboard, on average.
     pub fn images_per_billboard(&self) -> f64 {
-        let n = self.total_billboards().saturating_sub(self.gpu_billboards);
+        let n = self.total_billboards();
         if n == 0 {
             0.0
         } else {

@@ -188,6 +188,9 @@ impl ObjectVcm {
     }
 }
 
+/// One object's 8 cube maps' bytes and its sky visibility at its corners.
+pub(super) type ObjectMaps<'a> = (&'a [u8], [f32; CORNERS]);
+
 /// The factors one billboard is shaded with.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Shade {
@@ -440,12 +443,8 @@ impl VcmShading {
     /// Species `sp`'s cube maps for the GPU: per main branch, then per twig (the reference
     /// branch's, then the trunk's), its 8 maps' bytes (`8 × 6 × res²`, corner by corner)
     /// and its sky visibility at the corners.
-    #[allow(clippy::type_complexity)]
-    pub(super) fn species_maps(
-        &self,
-        sp: usize,
-    ) -> [Vec<(&[u8], [f32; CORNERS])>; 2] {
-        fn objects(v: Option<&Vec<ObjectVcm>>) -> Vec<(&[u8], [f32; CORNERS])> {
+    pub(super) fn species_maps(&self, sp: usize) -> [Vec<ObjectMaps<'_>>; 2] {
+        fn objects(v: Option<&Vec<ObjectVcm>>) -> Vec<ObjectMaps<'_>> {
             v.map_or(Vec::new(), |v| {
                 v.iter().map(|o| (&o.opacity[..], o.sky)).collect()
             })
