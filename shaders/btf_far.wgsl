@@ -637,22 +637,20 @@ fn near_build(@builtin(global_invocation_id) gid: vec3<u32>) {
             let branch_box = h + 13u;
             let branch_centre = row3(h + 15u);
             let twig_centre = row3(h + 16u);
-            if branch != NO_MAP && twig == NO_MAP {
-                // A main branch: c per pixel, d at its centre.
-                let obj = objects.x + 3u * branch;
+            if branch == NO_MAP || twig == NO_MAP {
+                // A main branch (c per pixel) or a twig on the trunk (b per pixel), in the
+                // tree frame: d at its centre.
+                var obj = objects.x + 3u * branch;
+                var centre = branch_centre;
+                if branch == NO_MAP {
+                    obj = objects.y + 3u * twig;
+                    centre = twig_centre;
+                }
                 direct = object_direct(obj, sun_tree);
                 sky = object_sky(obj);
-                let centre = (part * vec4<f32>(branch_centre, 1.0)).xyz;
-                parent_direct = trilinear_at(tree_direct, tree_box, centre);
-                parent_sky = trilinear_at(tree_sky, tree_box, centre);
-            } else if branch == NO_MAP {
-                // A twig on the trunk: b per pixel, d at its centre.
-                let obj = objects.y + 3u * twig;
-                direct = object_direct(obj, sun_tree);
-                sky = object_sky(obj);
-                let centre = (part * vec4<f32>(twig_centre, 1.0)).xyz;
-                parent_direct = trilinear_at(tree_direct, tree_box, centre);
-                parent_sky = trilinear_at(tree_sky, tree_box, centre);
+                let placed = (part * vec4<f32>(centre, 1.0)).xyz;
+                parent_direct = trilinear_at(tree_direct, tree_box, placed);
+                parent_sky = trilinear_at(tree_sky, tree_box, placed);
             } else {
                 // A main branch's twig: b per pixel, c·d at its centre.
                 let branch_m = transform(mats + 4u * branch);

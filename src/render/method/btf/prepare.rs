@@ -526,23 +526,11 @@ impl BtfScene {
         hybrid: bool,
     ) -> (BtfFrame, SortedBillboards) {
         let parts = self.prepare_chunks(trees, visible, view, settings, hybrid, false);
-        let mut stats = BtfStats {
-            vcm: self.vcm.is_some() && settings.vcm,
-            ..BtfStats::default()
-        };
-        let mut trunk_only = vec![Vec::new(); self.species.len()];
-        let mut trunk_and_limbs = vec![Vec::new(); self.species.len()];
-        let mut twigs = vec![Vec::new(); self.species.len()];
+        let mut frame = self.joined(&parts, settings);
         // Each chunk's first record in the order made.
         let mut starts = Vec::with_capacity(parts.len());
         let mut keys: Vec<(f32, u32)> = Vec::new();
         for p in &parts {
-            stats.add(&p.stats);
-            for sp in 0..self.species.len() {
-                trunk_only[sp].extend_from_slice(&p.trunk_only[sp]);
-                trunk_and_limbs[sp].extend_from_slice(&p.trunk_and_limbs[sp]);
-                twigs[sp].extend_from_slice(&p.twigs[sp]);
-            }
             let start = keys.len();
             starts.push(start);
             keys.extend(
@@ -560,19 +548,11 @@ impl BtfScene {
             use rayon::prelude::*;
             keys.par_sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
             if keys.len() > max_billboards {
-                stats.dropped = (keys.len() - max_billboards) as u32;
+                frame.stats.dropped = (keys.len() - max_billboards) as u32;
                 keys.drain(..keys.len() - max_billboards);
             }
         }
-        let frame = BtfFrame {
-            trunk_only,
-            trunk_and_limbs,
-            twigs,
-            billboards: keys.len() as u32,
-            far: false,
-            records: Vec::new(),
-            stats,
-        };
+        frame.billboards = keys.len() as u32;
         (
             frame,
             SortedBillboards {
@@ -581,6 +561,32 @@ impl BtfScene {
                 keys,
             },
         )
+    }
+
+    /// The frame of the chunks `parts`, in order: their geometry lists and stats (no
+    /// billboards yet).
+    fn joined(&self, parts: &[Prepared], settings: &BtfSettings) -> BtfFrame {
+        let mut frame = BtfFrame {
+            trunk_only: vec![Vec::new(); self.species.len()],
+            trunk_and_limbs: vec![Vec::new(); self.species.len()],
+            twigs: vec![Vec::new(); self.species.len()],
+            billboards: 0,
+            far: false,
+            records: Vec::new(),
+            stats: BtfStats {
+                vcm: self.vcm.is_some() && settings.vcm,
+                ..BtfStats::default()
+            },
+        };
+        for p in parts {
+            frame.stats.add(&p.stats);
+            for sp in 0..self.species.len() {
+                frame.trunk_only[sp].extend_from_slice(&p.trunk_only[sp]);
+                frame.trunk_and_limbs[sp].extend_from_slice(&p.trunk_and_limbs[sp]);
+                frame.twigs[sp].extend_from_slice(&p.twigs[sp]);
+            }
+        }
+        frame
     }
 
     /// Every tree of `visible` prepared ([`Self::prepare_tree`]) in chunks that the threads
@@ -633,27 +639,10 @@ impl BtfScene {
         hybrid: bool,
     ) -> (BtfFrame, Vec<NearDrawGpu>, u64) {
         let parts = self.prepare_chunks(trees, visible, view, settings, hybrid, true);
-        let mut frame = BtfFrame {
-            trunk_only: vec![Vec::new(); self.species.len()],
-            trunk_and_limbs: vec![Vec::new(); self.species.len()],
-            twigs: vec![Vec::new(); self.species.len()],
-            billboards: 0,
-            far: false,
-            records: Vec::new(),
-            stats: BtfStats {
-                vcm: self.vcm.is_some() && settings.vcm,
-                ..BtfStats::default()
-            },
-        };
+        let frame = self.joined(&parts, settings);
         let mut draws = Vec::with_capacity(parts.iter().map(|p| p.draws.len()).sum());
         let mut slots = 0u64;
         for p in parts {
-            frame.stats.add(&p.stats);
-            for sp in 0..self.species.len() {
-                frame.trunk_only[sp].extend_from_slice(&p.trunk_only[sp]);
-                frame.trunk_and_limbs[sp].extend_from_slice(&p.trunk_and_limbs[sp]);
-                frame.twigs[sp].extend_from_slice(&p.twigs[sp]);
-            }
             // `first` holds the draw's count until here.
             for mut d in p.draws {
                 let count = u64::from(d.first);
@@ -686,10 +675,12 @@ impl BtfScene {
         }
         // The trees by distance, each with its draws' slots (a tree's draws are together).
         let cam = view.camera.position;
+        let count_of = |k: usize| {
+            draws.get(k + 1).map_or(slots, |n| u64::from(n.first)) - u64::from(draws[k].first)
+        };
         let mut by_tree: Vec<(f32, u32, u64)> = Vec::new();
         for (k, d) in draws.iter().enumerate() {
-            let next = draws.get(k + 1).map_or(slots, |n| u64::from(n.first));
-            let count = next - u64::from(d.first);
+            let count = count_of(k);
             match by_tree.last_mut() {
                 Some(last) if last.1 == d.tree => last.2 += count,
                 _ => {
@@ -703,11 +694,14 @@ impl BtfScene {
             }
         }
         by_tree.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        // The nearest trees while they fit; every tree from the first that does not is left.
         let mut used = 0u64;
+        let mut full = false;
         let mut kept = Vec::new();
         let mut rest = vec![Vec::new(); self.species.len()];
         for &(_, t, count) in &by_tree {
-            if used + count <= budget && rest.iter().all(Vec::is_empty) {
+            full |= used + count > budget;
+            if !full {
                 used += count;
                 kept.push(t);
             } else if let Some(list) = species
@@ -725,12 +719,11 @@ impl BtfScene {
         let mut at = 0u64;
         for (k, d) in draws.iter().enumerate() {
             if kept.binary_search(&d.tree).is_ok() {
-                let next = draws.get(k + 1).map_or(slots, |n| u64::from(n.first));
                 gpu.push(NearDrawGpu {
                     first: at as u32,
                     ..*d
                 });
-                at += next - u64::from(d.first);
+                at += count_of(k);
             }
         }
         // Their levels, lists and tree counts are in `frame` already: only the billboards
