@@ -32,9 +32,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Open the viewer on a scene file (default: the embedded default forest).
+    /// Open the viewer on a scene file (default: the embedded example forest of 36,000 trees).
     View {
-        /// Scene file (TOML). Omit for the embedded default forest.
+        /// Scene file (TOML). Omit for the embedded example forest at real density
+        /// (assets/scenes/forest.toml; its first bake takes about 5 minutes on 2 cores).
         scene: Option<PathBuf>,
         /// Write a screenshot of the 3D view to this PNG after --after-frames frames, then
         /// quit (for scripts and CI).
@@ -63,7 +64,7 @@ enum Command {
     Render(RenderArgs),
     /// Bake the BTF image sets of a scene (default: into the cache the viewer and `render` use).
     Bake {
-        /// Scene file (TOML). Omit for the embedded default forest.
+        /// Scene file (TOML). Omit for the embedded default forest (1,000 trees).
         scene: Option<PathBuf>,
         /// Write the baked file here instead of the cache.
         #[arg(long)]
@@ -116,7 +117,7 @@ enum Command {
 
 #[derive(clap::Args)]
 struct BenchArgs {
-    /// Scene file (TOML). Omit for the embedded default forest.
+    /// Scene file (TOML). Omit for the embedded default forest (1,000 trees).
     scene: Option<PathBuf>,
     /// A built-in flight (overview, walk, approach, sunset, orbit) or a flight file (TOML).
     #[arg(long, default_value = "walk")]
@@ -154,7 +155,7 @@ struct BenchArgs {
 
 #[derive(clap::Args)]
 struct TuneArgs {
-    /// Scene file (TOML). Omit for the embedded default forest.
+    /// Scene file (TOML). Omit for the embedded default forest (1,000 trees).
     scene: Option<PathBuf>,
     /// Largest mean FLIP against the truth along the flight.
     #[arg(long)]
@@ -195,7 +196,7 @@ struct TuneArgs {
 
 #[derive(clap::Args)]
 struct RenderArgs {
-    /// Scene file (TOML). Omit for the embedded default forest.
+    /// Scene file (TOML). Omit for the embedded default forest (1,000 trees).
     scene: Option<PathBuf>,
     /// Output PNG.
     #[arg(long)]

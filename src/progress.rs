@@ -46,13 +46,9 @@ pub fn show_bake(bar: &ProgressBar, p: &crate::bake::Progress) {
 /// from the time so far.
 pub fn log_line(p: &crate::bake::Progress, elapsed: Duration) -> String {
     let f = p.done as f64 / p.total.max(1) as f64;
-    let left = if p.done > 0 {
-        format!(
-            ", about {:.0} s left",
-            elapsed.as_secs_f64() * (1.0 - f) / f
-        )
-    } else {
-        String::new()
+    let left = match seconds_left(p, elapsed) {
+        Some(s) => format!(", about {s:.0} s left"),
+        None => String::new(),
     };
     format!(
         "baking {}: {}/{} steps ({:.0} %){left}",
@@ -61,6 +57,16 @@ pub fn log_line(p: &crate::bake::Progress, elapsed: Duration) -> String {
         p.total,
         f * 100.0
     )
+}
+
+/// The seconds a bake has left, extrapolated from the time so far (`None` before its first
+/// step).
+pub fn seconds_left(p: &crate::bake::Progress, elapsed: Duration) -> Option<f64> {
+    if p.done == 0 {
+        return None;
+    }
+    let f = (p.done as f64 / p.total.max(1) as f64).min(1.0);
+    Some(elapsed.as_secs_f64() * (1.0 - f) / f)
 }
 
 #[cfg(test)]
@@ -78,6 +84,12 @@ mod tests {
         assert_eq!(
             l,
             "baking vcm tree 12: 25/100 steps (25 %), about 30 s left"
+        );
+        let none = crate::bake::Progress { done: 0, ..p };
+        assert_eq!(seconds_left(&none, Duration::from_secs(10)), None);
+        assert_eq!(
+            log_line(&none, Duration::from_secs(10)),
+            "baking vcm tree 12: 0/100 steps (0 %)"
         );
     }
 }

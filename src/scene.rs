@@ -21,10 +21,12 @@ fn is_default_texel(t: &TexelParams) -> bool {
 use crate::model::species::{PRESET_NAMES, preset};
 use crate::model::{FieldError, ModelError, World, check};
 
-/// The embedded default scene (1,000 trees on 1 km² of hills); it documents the format.
+/// The embedded default scene (1,000 trees on 1 km² of hills): the scene of every command
+/// but the viewer, of the bench and of the tests; it documents the format.
 pub const DEFAULT_SCENE_TOML: &str = include_str!("../assets/default.toml");
 
-/// The embedded example forest at real density (`assets/scenes/forest.toml`).
+/// The embedded example forest at real density (`assets/scenes/forest.toml`): what the
+/// viewer opens when given no scene.
 pub const FOREST_SCENE_TOML: &str = include_str!("../assets/scenes/forest.toml");
 
 /// One stand of the example forest, 250 m a side (`assets/scenes/stand.toml`).
@@ -34,14 +36,14 @@ pub const STAND_SCENE_TOML: &str = include_str!("../assets/scenes/stand.toml");
 /// what it is, and the scene file's text.
 pub const EXAMPLE_SCENES: &[(&str, &str, &str)] = &[
     (
-        "default",
-        "1,000 trees spread over 1 km² of hills",
-        DEFAULT_SCENE_TOML,
+        "forest",
+        "a forest at 600 trees per hectare: stands, clearings, meadows, about 36,000 trees (the viewer's default; a bake of about 5 minutes)",
+        FOREST_SCENE_TOML,
     ),
     (
-        "forest",
-        "a forest at 600 trees per hectare: stands, clearings, meadows, about 36,000 trees (a long bake)",
-        FOREST_SCENE_TOML,
+        "default",
+        "1,000 trees spread over 1 km² of hills (the bench's and the tests' scene; a bake of about a minute)",
+        DEFAULT_SCENE_TOML,
     ),
     (
         "stand",
@@ -306,11 +308,20 @@ impl Scene {
             .map(|(n, _, text)| Scene::parse(text, &format!("{n}.toml")))
     }
 
-    /// The embedded default scene (`assets/default.toml`).
+    /// The embedded default scene (`assets/default.toml`): 1,000 trees, the scene of every
+    /// command but the viewer when none is named.
     pub fn default_scene() -> Scene {
         // Embedded text, not user input; a test checks that it parses.
         Scene::parse(DEFAULT_SCENE_TOML, "default.toml")
             .unwrap_or_else(|e| panic!("the embedded default scene is invalid: {e}"))
+    }
+
+    /// What the viewer opens when given no scene: the example forest at real density
+    /// (`assets/scenes/forest.toml`, about 36,000 trees).
+    pub fn viewer_scene() -> Scene {
+        // Embedded text, not user input; a test checks that it parses.
+        Scene::parse(FOREST_SCENE_TOML, "forest.toml")
+            .unwrap_or_else(|e| panic!("the embedded example forest is invalid: {e}"))
     }
 
     /// Builds the world of this scene: its terrain, species prototypes and forest

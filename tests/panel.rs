@@ -87,7 +87,8 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
         vcm_resolution: Some(32),
         sun_update_ms: Some(12.34),
         sun_update_gpu_ms: Some(45.67),
-        bake_progress: Some((40, 100, "fir tree".into())),
+        bake_progress: Some((40, 100, "fir tree".into(), Some(61.7))),
+        paused_for_bake: true,
         ..Default::default()
     };
     let mut harness = tall().build_ui_state(
@@ -101,7 +102,10 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
         harness.query_by_label("show LOD level").is_none(),
         "geometry shows no btf controls"
     );
-    harness.get_by_label("baking BTF images: fir tree");
+    harness.get_by_label("baking BTF images: fir tree, about 62 s left");
+    harness.get_by_label(
+        "until it is done, the view is drawn less often, to leave the bake the cores",
+    );
     harness.get_by_label("btf").click();
     harness.run();
     assert_eq!(harness.state().frame.method, canopy::render::Method::Btf);

@@ -13,7 +13,7 @@ pub mod soak;
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use winit::application::ApplicationHandler;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
@@ -60,7 +60,8 @@ impl Default for ViewOptions {
     }
 }
 
-/// Opens the viewer on a scene file, or on the embedded default forest.
+/// Opens the viewer on a scene file, or on the embedded example forest at real density
+/// ([`Scene::viewer_scene`]).
 pub fn run(scene: Option<&Path>) -> Result<()> {
     run_with(scene, ViewOptions::default())
 }
@@ -70,7 +71,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
     heap::limit_arenas();
     let scene = match scene_path {
         Some(p) => Scene::load(p)?,
-        None => Scene::default_scene(),
+        None => Scene::viewer_scene(),
     };
     let world = scene.build_world()?;
     // A named baked file is checked before the window opens: a wrong one is refused.
@@ -84,7 +85,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
     };
     let title = match scene_path {
         Some(p) => format!("canopy: {}", p.display()),
-        None => "canopy: default forest".to_string(),
+        None => "canopy: example forest (36,000 trees)".to_string(),
     };
     let event_loop = EventLoop::new().map_err(|e| {
         Error::Window(format!(
@@ -114,6 +115,8 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         stats: PanelStats::default(),
         message: None,
         last_frame: Instant::now(),
+        frame_cost: Duration::ZERO,
+        paused_for_bake: false,
         frames: 0,
         fatal: None,
         sun_slider_held: false,
@@ -190,6 +193,17 @@ fn shown_frame(frame: &FrameDesc, has_btf: bool) -> FrameDesc {
     shown
 }
 
+/// The time from one frame's start to the next while the first bake runs and the view has
+/// no trees to show: four times the frame's cost, so that the viewer takes a quarter of
+/// the cores at most (on a software renderer the bake and the view share them: the
+/// example forest's first bake took 395 s in a viewer drawing all the time, against 248 s
+/// for `canopy bake`, both debug builds on 2 cores), but at least 5 frames a second where
+/// frames are cheap, and one a second at worst, so that the progress and the panel stay
+/// alive.
+fn pause_while_baking(frame_cost: Duration) -> Duration {
+    (frame_cost * 4).clamp(Duration::from_millis(200), Duration::from_secs(1))
+}
+
 struct Running {
     window: Arc<Window>,
     surface: wgpu::Surface<'static>,
@@ -209,6 +223,7 @@ struct BakeJob {
     progress: Arc<Mutex<crate::bake::Progress>>,
     /// What the bake costs, estimated before it starts (shown under its progress bar).
     estimate: Option<String>,
+    started: Instant,
     handle: std::thread::JoinHandle<Result<(crate::format::Baked, crate::bake::Source)>>,
 }
 
@@ -245,6 +260,7 @@ impl BakeJob {
         Self {
             progress,
             estimate,
+            started: Instant::now(),
             handle,
         }
     }
@@ -295,6 +311,10 @@ struct App {
     /// Last screenshot result: text, and whether it is an error.
     message: Option<(String, bool)>,
     last_frame: Instant,
+    /// How long the last redraw took (CPU, and the GPU where it waited for it).
+    frame_cost: Duration,
+    /// The view is drawn less often while the first bake runs ([`pause_while_baking`]).
+    paused_for_bake: bool,
     frames: u64,
     fatal: Option<Error>,
     /// A sun slider was being dragged in the last frame's panel.
@@ -303,7 +323,7 @@ struct App {
     bench: BenchWindow,
     /// The species gallery window.
     gallery: gallery::Gallery,
-    /// The scene file, watched for edits (none for the embedded default forest).
+    /// The scene file, watched for edits (none for an embedded scene).
     watch: Option<reload::Watch>,
     rebake: Option<Rebake>,
     /// The ground's sky visibility, computed on its own thread for the renderer of the
@@ -540,10 +560,10 @@ impl App {
             .as_ref()
             .or(self.rebake.as_ref().map(|r| &r.job))
             .and_then(|j| {
-                j.progress
-                    .lock()
-                    .ok()
-                    .map(|p| (p.done, p.total, p.what.clone()))
+                j.progress.lock().ok().map(|p| {
+                    let left = crate::progress::seconds_left(&p, j.started.elapsed());
+                    (p.done, p.total, p.what.clone(), left)
+                })
             });
         self.stats.bake_estimate = self
             .bake_job
@@ -975,18 +995,24 @@ impl App {
             }
         }
         self.stats.gpu_frame_ms = r.renderer.last_gpu_ms();
+        // The whole frame's time, what the user waits for (the GPU's arrives frames late and
+        // would overshoot); while the view waits for the bake, the frame's own cost.
+        let frame_ms = if self.paused_for_bake {
+            self.frame_cost.as_secs_f32() * 1e3
+        } else {
+            dt * 1e3
+        };
         if self.frame.render_scale.auto {
-            // The whole frame's time, what the user waits for (the GPU's arrives frames
-            // late and would overshoot).
-            let ms = dt * 1e3;
+            let ms = frame_ms;
             let s = &mut self.frame.render_scale;
             s.scale = crate::render::scale::next_scale(s.scale, ms, s.target_ms);
         }
         self.stats.sun_update_gpu_ms = r.renderer.last_sun_update_gpu_ms();
-        self.stats.cpu_frame_ms = 0.9 * self.stats.cpu_frame_ms + 0.1 * f64::from(dt) * 1e3;
+        self.stats.paused_for_bake = self.paused_for_bake;
+        self.stats.cpu_frame_ms = 0.9 * self.stats.cpu_frame_ms + 0.1 * f64::from(frame_ms);
         self.stats
             .history
-            .push(f64::from(dt) * 1e3, self.stats.gpu_frame_ms);
+            .push(f64::from(frame_ms), self.stats.gpu_frame_ms);
         self.stats.camera_speed = self.fly.speed;
 
         // egui on top of the 3D view.
@@ -1224,15 +1250,30 @@ impl ApplicationHandler for App {
                 self.fly.wheel(notches);
             }
             WindowEvent::DroppedFile(path) => self.open(&path),
-            WindowEvent::RedrawRequested => self.redraw(event_loop),
+            WindowEvent::RedrawRequested => {
+                let start = Instant::now();
+                self.redraw(event_loop);
+                self.frame_cost = start.elapsed();
+            }
             _ => {}
         }
     }
 
-    fn about_to_wait(&mut self, _event_loop: &ActiveEventLoop) {
-        if let Some(r) = &self.running {
-            r.window.request_redraw();
+    fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
+        let Some(r) = &self.running else { return };
+        // While the first bake runs there are no trees to show: the view is drawn less
+        // often, leaving the cores to the bake.
+        let baking = self.bake_job.is_some() && self.frame.method.needs_bake();
+        self.paused_for_bake = baking && !r.renderer.has_btf();
+        if self.paused_for_bake {
+            let next = self.last_frame + pause_while_baking(self.frame_cost);
+            if Instant::now() < next {
+                event_loop.set_control_flow(ControlFlow::WaitUntil(next));
+                return;
+            }
         }
+        event_loop.set_control_flow(ControlFlow::Poll);
+        r.window.request_redraw();
     }
 }
 
@@ -1250,6 +1291,16 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("canopy-open-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         dir.join(name)
+    }
+
+    #[test]
+    fn while_the_first_bake_runs_the_view_takes_a_quarter_of_the_time_at_most() {
+        let ms = Duration::from_millis;
+        // A costly frame waits three times its cost after it, within a second at most.
+        assert_eq!(pause_while_baking(ms(150)), ms(600));
+        assert_eq!(pause_while_baking(ms(400)), Duration::from_secs(1));
+        // A cheap one still draws 5 frames a second, not hundreds.
+        assert_eq!(pause_while_baking(ms(2)), ms(200));
     }
 
     #[test]

@@ -34,10 +34,12 @@ pub struct PanelStats {
     pub sun_update_ms: Option<f64>,
     /// The GPU time of the last ground shadow maps' pass, ms (timestamp queries).
     pub sun_update_gpu_ms: Option<f64>,
-    /// A bake running in the background: done, total, what.
-    pub bake_progress: Option<(u64, u64, String)>,
+    /// A bake running in the background: done, total, what, and the seconds it has left.
+    pub bake_progress: Option<(u64, u64, String, Option<f64>)>,
     /// That bake's estimated cost, in words.
     pub bake_estimate: Option<String>,
+    /// The view is drawn less often until the bake is done, to leave it the cores.
+    pub paused_for_bake: bool,
     /// The last frames' CPU and GPU times, for the plot.
     pub history: super::history::FrameTimeHistory,
 }
@@ -104,16 +106,22 @@ pub fn controls(
             ui.selectable_value(&mut frame.method, *m, m.name());
         }
     });
-    if let Some((done, total, what)) = &stats.bake_progress {
+    if let Some((done, total, what, left)) = &stats.bake_progress {
         let f = if *total > 0 {
             *done as f32 / *total as f32
         } else {
             0.0
         };
-        ui.label(format!("baking BTF images: {what}"));
+        ui.label(match left {
+            Some(s) => format!("baking BTF images: {what}, about {s:.0} s left"),
+            None => format!("baking BTF images: {what}"),
+        });
         ui.add(egui::ProgressBar::new(f).show_percentage());
         if let Some(e) = &stats.bake_estimate {
             ui.small(e);
+        }
+        if stats.paused_for_bake {
+            ui.small("until it is done, the view is drawn less often, to leave the bake the cores");
         }
     }
     if frame.method.is_btf() {
