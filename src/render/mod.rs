@@ -564,6 +564,7 @@ impl Renderer {
                 g.shadows_on,
             ),
             Prepared::Btf(b) | Prepared::Billboard(b) => {
+                let t0 = std::time::Instant::now();
                 // `hybrid`'s geometry trees: whole trunks and limbs, fading twigs; they cast
                 // and receive cascaded sun shadows fitted to them alone.
                 let whole: Vec<Vec<(u32, f32)>> = b
@@ -578,6 +579,12 @@ impl Renderer {
                     frame.btf.show_lod.then_some(btf::GEOMETRY_COLOUR),
                 );
                 let cascades = self.geometry_tree_cascades(frame, &b.twigs);
+                log::debug!(
+                    "btf prepare: the trunks' and limbs' lists ({} and {} trees) in {:.2} ms",
+                    b.trunk_only.iter().map(Vec::len).sum::<usize>(),
+                    b.trunk_and_limbs.iter().map(Vec::len).sum::<usize>(),
+                    t0.elapsed().as_secs_f64() * 1e3
+                );
                 let on = cascades.is_some();
                 (runs, cascades.unwrap_or_else(Cascades::none), on)
             }

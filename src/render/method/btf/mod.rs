@@ -249,6 +249,7 @@ impl BtfAssets {
             .and_then(Option::as_mut)
             .filter(|_| settings.gpu_far);
         if let Some(f) = far {
+            let t0 = std::time::Instant::now();
             let (near, shade_ms) = f.prepare(
                 ctx,
                 &self.scene,
@@ -258,6 +259,7 @@ impl BtfAssets {
                 settings,
                 trees_on,
             );
+            let t1 = std::time::Instant::now();
             // Unsorted: the GPU sorts them with the far trees' billboards. With `gpu_near`
             // the CPU only chooses their levels, and the GPU expands them.
             let (mut out, records, draws, slots) = if settings.gpu_near {
@@ -276,7 +278,21 @@ impl BtfAssets {
                         .prepare_sorted(&world.tree_data, &near, &view, settings, 0, hybrid);
                 (out, records, Vec::new(), 0)
             };
-            match f.upload_near(ctx, &records, &draws, slots) {
+            let t2 = std::time::Instant::now();
+            let uploaded = f.upload_near(ctx, &records, &draws, slots);
+            let ms = |a: std::time::Instant, b: std::time::Instant| (b - a).as_secs_f64() * 1e3;
+            log::debug!(
+                "btf prepare: near trees found in {:.2} ms (VCM factors uploaded in {shade_ms:.2}), \
+                 {} near trees' levels in {:.2} ms ({} CPU records, {} draws, {slots} slots), \
+                 uploaded in {:.2} ms",
+                ms(t0, t1) - shade_ms,
+                near.iter().map(Vec::len).sum::<usize>(),
+                ms(t1, t2),
+                records.len(),
+                draws.len(),
+                ms(t2, std::time::Instant::now()),
+            );
+            match uploaded {
                 Ok(true) => {
                     out.far = true;
                     return (out, shade_ms);
