@@ -7,7 +7,8 @@
 // a gather copies them in that order for one indirect draw. `billboard_record.wgsl` is
 // prepended.
 
-// One tree instance: `TreeGpu`'s model and tint, its species, its bounds in the world.
+// One tree instance: `TreeGpu`'s model and tint, its species, its bounds in the world (7
+// rows of `tables`, from `params.trees_at`).
 struct FarTree {
     model: mat4x4<f32>,
     tint: vec3<f32>,
@@ -38,7 +39,7 @@ struct DirSet {
 
 struct FarParams {
     camera: vec3<f32>,
-    // Trees in `trees`.
+    // Trees (at `trees_at` in `tables`).
     count: u32,
     forward: vec3<f32>,
     plane_count: u32,
@@ -77,16 +78,20 @@ struct FarParams {
     draws_at: u32,
     // Where the near bits start in `frame_words`, in words (the shades start at 0).
     bits_at: u32,
-    _pad1: u32,
-    _pad2: u32,
+    // Where the trees start in `tables`, in rows (7 a tree).
+    trees_at: u32,
+    // Slots of `near_records`; the near slots past them are in `near_records_b`.
+    near_room: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: FarParams;
-@group(0) @binding(1) var<storage, read> trees: array<FarTree>;
-// The near trees' billboards expanded by `near_build`, one slot per part of each draw.
+// The near trees' billboards expanded by `near_build`, one slot per part of each draw: the
+// first `params.near_room` slots here, the rest in the second binding (one binding holds
+// 524,288 records on lavapipe, fewer than a large frame's near parts).
+@group(0) @binding(1) var<storage, read_write> near_records_b: array<Billboard>;
 @group(0) @binding(2) var<storage, read_write> near_records: array<Billboard>;
 // Words: float bits, or indices (the triangles; the species' layer bases); then the
-// species' part transforms, their cube maps' objects and the maps' bytes.
+// species' part transforms, their cube maps' objects and the maps' bytes; then the trees.
 @group(0) @binding(3) var<storage, read> tables: array<vec4<u32>>;
 // Each tree's `FarShade` (16 words, from 0); at `params.bits_at` one bit per tree, set for
 // the near trees, which the CPU prepares (or hands over as `NearDraw`s, at
@@ -135,6 +140,35 @@ fn row(i: u32) -> vec4<f32> {
 
 fn row3(i: u32) -> vec3<f32> {
     return row(i).xyz;
+}
+
+fn tree_at(i: u32) -> FarTree {
+    let r = params.trees_at + 7u * i;
+    return FarTree(
+        mat4x4<f32>(row(r), row(r + 1u), row(r + 2u), row(r + 3u)),
+        row3(r + 4u),
+        tables[r + 4u].w,
+        row3(r + 5u),
+        0.0,
+        row3(r + 6u),
+        0.0,
+    );
+}
+
+// Near slot `s`, in whichever binding holds it.
+fn put_near(s: u32, r: Billboard) {
+    if s < params.near_room {
+        near_records[s] = r;
+    } else {
+        near_records_b[s - params.near_room] = r;
+    }
+}
+
+fn near_at(s: u32) -> Billboard {
+    if s < params.near_room {
+        return near_records[s];
+    }
+    return near_records_b[s - params.near_room];
 }
 
 // The triangle of the finest level holding `d` (`DirectionSet::locate`).
@@ -391,7 +425,7 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
     if ((frame_words[params.bits_at + i / 32u] >> (i % 32u)) & 1u) != 0u {
         return;
     }
-    let tree = trees[i];
+    let tree = tree_at(i);
     // The tree's bounds, then its billboard's sphere, against each plane
     // (`Frustum::intersects`), as the CPU culls then builds.
     for (var p = 0u; p < params.plane_count; p++) {
@@ -554,7 +588,7 @@ fn near_build(@builtin(global_invocation_id) gid: vec3<u32>) {
     if draw.tree >= params.count || s < draw.first {
         return;
     }
-    let tree = trees[draw.tree];
+    let tree = tree_at(draw.tree);
     let sp = tree.species;
     let h = species_row(sp);
     let counts = tables[h + 9u];
@@ -673,7 +707,7 @@ fn near_build(@builtin(global_invocation_id) gid: vec3<u32>) {
             r.parent_sky = parent_sky;
         }
     }
-    near_records[s] = r;
+    put_near(s, r);
     let slot = params.count + params.near_count + s;
     keys[slot] = key_of(r, slot);
     atomicAdd(&draw_args[5u + level], 1u);
@@ -732,7 +766,7 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     if slot < cpu_end {
         sorted[i - skip] = records[slot];
     } else {
-        sorted[i - skip] = near_records[slot - cpu_end];
+        sorted[i - skip] = near_at(slot - cpu_end);
     }
 }
 

@@ -325,8 +325,8 @@ fn far_tree_structs_match_btf_far_wgsl() {
         views_branch,
         draws_at,
         bits_at,
-        _pad1,
-        _pad2
+        trees_at,
+        near_room
     });
     check(
         "FarParams",

@@ -104,8 +104,8 @@ pub struct FarParamsGpu {
     pub views_branch: DirSetGpu,
     pub draws_at: u32,
     pub bits_at: u32,
-    pub _pad1: u32,
-    pub _pad2: u32,
+    pub trees_at: u32,
+    pub near_room: u32,
 }
 
 /// One step of the bitonic sort (`SortStep`).
@@ -128,11 +128,14 @@ const DRAW_WORDS: u64 = 12;
 
 /// The far trees' buffers and compute pipelines.
 pub struct FarGpu {
-    /// Bound in `bind_group` (kept alive with it).
-    trees: wgpu::Buffer,
-    /// The near trees' billboards expanded by `near_build`, one slot per part.
+    /// The near trees' billboards expanded by `near_build`, one slot per part: the first
+    /// `near_room` slots, then the rest in `near_records_b`.
     near_records: wgpu::Buffer,
     near_slots: u64,
+    near_records_b: wgpu::Buffer,
+    near_slots_b: u64,
+    /// Near slots the first binding takes (one binding's records).
+    near_room: u64,
     /// The sun the shades were read for (None: not uploaded yet).
     shade_sun: Option<Vec3>,
     tree_count: usize,
@@ -280,6 +283,10 @@ impl FarGpu {
         let views_branch = push_set(&mut tables, &views.branch);
         let views = push_set(&mut tables, &views.tree);
         let lights = push_set(&mut tables, lights);
+        // The trees, 7 rows each (`tree_at`): their binding went to the second binding of
+        // the near records.
+        let trees_at = tables.len() as u32;
+        tables.extend_from_slice(bytemuck::cast_slice::<FarTreeGpu, [u32; 4]>(&far_trees));
         if (tables.len() * 16) as u64 > limits.max_storage_buffer_binding_size {
             log::warn!(
                 "the trees' GPU tables ({} bytes, cube maps included) pass one storage binding",
@@ -315,8 +322,8 @@ impl FarGpu {
             views_branch,
             draws_at: (SHADE_WORDS * n + n.div_ceil(32).max(1)) as u32,
             bits_at: (SHADE_WORDS * n) as u32,
-            _pad1: 0,
-            _pad2: 0,
+            trees_at,
+            near_room: limit.min(u64::from(u32::MAX)) as u32,
         };
         let init = |label: &str, contents: &[u8]| {
             wgpu::util::DeviceExt::create_buffer_init(
@@ -332,7 +339,6 @@ impl FarGpu {
         let words = u64::from(base.draws_at);
         let bufs = ctx.checked("allocating the far trees' GPU buffers", || {
             (
-                init("far trees", bytemuck::cast_slice(&far_trees)),
                 init("far tables", bytemuck::cast_slice(&tables)),
                 buffer(
                     ctx,
@@ -354,7 +360,7 @@ impl FarGpu {
                 ),
             )
         })?;
-        let (trees_buf, tables_buf, params, frame_words, draw_args) = bufs;
+        let (tables_buf, params, frame_words, draw_args) = bufs;
         let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
@@ -382,7 +388,7 @@ impl FarGpu {
                 label: Some("btf far"),
                 entries: &[
                     uniform(0, false),
-                    storage(1, true),
+                    storage(1, false),
                     storage(2, false),
                     storage(3, true),
                     storage(4, true),
@@ -437,23 +443,27 @@ impl FarGpu {
             .max(std::mem::size_of::<SortStepGpu>() as u64);
         // Placeholders until the first frame sizes them.
         let small = |label| buffer(ctx, label, 16, U::STORAGE);
-        let (records, keys_buf, sorted, near_records) = (
+        let one_record = |label| {
+            buffer(
+                ctx,
+                label,
+                std::mem::size_of::<BillboardGpu>() as u64,
+                U::STORAGE,
+            )
+        };
+        let (records, keys_buf, sorted, near_records, near_records_b) = (
             small("far records"),
             small("far keys"),
             small("far sorted"),
-            buffer(
-                ctx,
-                "near records",
-                std::mem::size_of::<BillboardGpu>() as u64,
-                U::STORAGE,
-            ),
+            one_record("near records"),
+            one_record("near records, second binding"),
         );
         let steps = buffer(ctx, "far sort steps", step_stride, U::UNIFORM);
         let draw_resources = (draw.0.clone(), draw.1.clone(), draw.2.clone());
         let (bind_group, step_bind_group, draw_bind_group) = bind_groups(
             ctx,
             [&layout0, &layout1, layout],
-            [&params, &trees_buf, &tables_buf],
+            [&params, &near_records_b, &tables_buf],
             [
                 &near_records,
                 &frame_words,
@@ -466,9 +476,11 @@ impl FarGpu {
             &draw_resources,
         );
         let mut far = Self {
-            trees: trees_buf,
             near_records,
             near_slots: 0,
+            near_records_b,
+            near_slots_b: 0,
+            near_room: limit,
             shade_sun: None,
             tree_count: n,
             species: species[..n].to_vec(),
@@ -514,7 +526,7 @@ impl FarGpu {
     /// GPU bytes of the buffers.
     pub fn bytes(&self) -> u64 {
         [
-            &self.trees,
+            &self.near_records_b,
             &self.near_records,
             &self.tables,
             &self.frame_words,
@@ -542,7 +554,8 @@ impl FarGpu {
         let sorted = total.min(self.limit);
         let words = u64::from(self.base.draws_at) + 4 * draws;
         if slots <= self.record_slots
-            && expanded <= self.near_slots
+            && expanded.min(self.near_room) <= self.near_slots
+            && expanded.saturating_sub(self.near_room) <= self.near_slots_b
             && keys <= self.key_slots
             && sorted <= self.sorted_slots
             && words <= self.frame_word_slots
@@ -594,12 +607,29 @@ impl FarGpu {
             })?;
             self.record_slots = record_slots;
         }
-        if expanded > self.near_slots {
-            let near_slots = grow(expanded).min(self.limit.max(expanded));
+        // The first binding takes `near_room` slots, the second the rest.
+        let (first, second) = (
+            expanded.min(self.near_room),
+            expanded.saturating_sub(self.near_room),
+        );
+        if first > self.near_slots {
+            let near_slots = grow(first).min(self.near_room.max(first));
             self.near_records = ctx.checked("allocating the near trees' records", || {
                 buffer(ctx, "near records", near_slots * record, U::STORAGE)
             })?;
             self.near_slots = near_slots;
+        }
+        if second > self.near_slots_b {
+            let near_slots = grow(second).min(self.near_room.max(second));
+            self.near_records_b = ctx.checked("allocating the near trees' records", || {
+                buffer(
+                    ctx,
+                    "near records, second binding",
+                    near_slots * record,
+                    U::STORAGE,
+                )
+            })?;
+            self.near_slots_b = near_slots;
         }
         if sorted > self.sorted_slots {
             let sorted_slots = grow(sorted).min(self.limit);
@@ -648,7 +678,7 @@ impl FarGpu {
         let (bind_group, step_bind_group, draw_bind_group) = bind_groups(
             ctx,
             [&self.layouts[0], &self.layouts[1], &self.draw_layout],
-            [&self.params, &self.trees, &self.tables],
+            [&self.params, &self.near_records_b, &self.tables],
             [
                 &self.near_records,
                 &self.frame_words,
@@ -766,15 +796,25 @@ impl FarGpu {
         (near, shade_ms)
     }
 
-    /// Most billboards `near_build` can expand in one frame (one storage binding's records).
+    /// Most billboards `near_build` can expand in one frame (two storage bindings'
+    /// records).
     pub fn expand_limit(&self) -> u64 {
-        self.limit
+        2 * self.near_room
+    }
+
+    /// Gives the first binding of the near records room for `slots` only (tests: the
+    /// second binding then takes the rest without frames of 524,288 slots).
+    #[cfg(test)]
+    pub(crate) fn set_near_room(&mut self, slots: u64) {
+        self.near_room = slots.clamp(1, self.limit);
+        self.base.near_room = self.near_room as u32;
     }
 
     /// Takes the near trees' records made on the CPU (in any order: they are sorted with
     /// the far ones) and the near draws for `near_build` to expand into `draw_slots`
-    /// billboards, and readies the frame's passes; false (and no frame) when they do not
-    /// fit one storage binding with the trees' slots, or [`Self::prepare`] found no trees.
+    /// billboards, and readies the frame's passes; false (and no frame) when the trees'
+    /// slots and the CPU's records do not fit one storage binding, the expanded ones two
+    /// ([`Self::expand_limit`]), or [`Self::prepare`] found no trees.
     pub fn upload_near(
         &mut self,
         ctx: &GpuContext,
@@ -797,16 +837,17 @@ impl FarGpu {
             .max(draw_slots.div_ceil(u64::from(WORKGROUP)));
         let draw_words = u64::from(self.base.draws_at) + 4 * draws.len() as u64;
         if slots > self.limit
-            || draw_slots > self.limit
+            || draw_slots > self.expand_limit()
             || groups > u64::from(self.max_groups)
             || draw_words * 4 > ctx.device.limits().max_storage_buffer_binding_size
         {
             log::debug!(
                 "the GPU cannot take this frame's billboards: {slots} slots of trees and CPU \
                  records, {draw_slots} to expand ({} draws), {groups} workgroups; one binding \
-                 holds {} records, one dispatch {} workgroups",
+                 holds {} records, the expanded ones {}, one dispatch {} workgroups",
                 draws.len(),
                 self.limit,
+                self.expand_limit(),
                 self.max_groups
             );
             return Ok(false);

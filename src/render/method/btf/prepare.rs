@@ -1598,6 +1598,7 @@ pub(crate) mod tests {
         view: &PrepareView,
         settings: &BtfSettings,
         budget: u64,
+        near_room: Option<u64>,
     ) -> Vec<BillboardGpu> {
         use crate::render::{AdapterPreference, GpuContext};
         let ctx = GpuContext::headless(AdapterPreference::Cpu).expect("a Vulkan adapter");
@@ -1649,6 +1650,9 @@ pub(crate) mod tests {
         )
         .unwrap()
         .expect("the far trees fit");
+        if let Some(room) = near_room {
+            gpu.set_near_room(room);
+        }
         let (near, _) = gpu.prepare(&ctx, scene, trees, &bounds, view, settings, true);
         if settings.gpu_near {
             let (_, records, draws, slots) =
@@ -1676,31 +1680,39 @@ pub(crate) mod tests {
     #[test]
     fn the_gpu_builds_the_far_trees_records_the_cpu_would_back_to_front() {
         // A crowd 90 to 400 m away: every tree past the tree level's fade band.
-        gpu_against_cpu(90.0, false, false, true, u64::MAX, false);
+        gpu_against_cpu(90.0, false, false, true, u64::MAX, false, None);
     }
 
     #[test]
     fn near_trees_made_on_the_cpu_are_sorted_with_the_far_ones() {
         // From 4 m: trees at every level, fading, the near ones' billboards made on the
         // CPU and sorted with the far ones' on the GPU.
-        gpu_against_cpu(4.0, true, false, true, u64::MAX, false);
+        gpu_against_cpu(4.0, true, false, true, u64::MAX, false, None);
     }
 
     #[test]
     fn near_trees_expanded_on_the_gpu_are_what_the_cpu_would_make() {
         // The same, the near trees' billboards expanded and shaded on the GPU: their parts'
         // cube maps read towards the sun in each part's frame, and the parents' factors.
-        gpu_against_cpu(4.0, true, true, true, u64::MAX, false);
+        gpu_against_cpu(4.0, true, true, true, u64::MAX, false, None);
         // And without cube maps (every factor 1), with the level overlay (a main-branch
         // draw's twigs in the main branch's colour).
-        gpu_against_cpu(4.0, true, true, false, u64::MAX, true);
+        gpu_against_cpu(4.0, true, true, false, u64::MAX, true, None);
     }
 
     #[test]
     fn past_the_gpus_room_the_farther_near_trees_billboards_are_made_on_the_cpu() {
         // Room for some of the near trees' billboards only: the nearest trees' go to the
         // GPU, the others' are made on the CPU, and together they are the CPU's frame.
-        gpu_against_cpu(4.0, true, true, true, 300, false);
+        gpu_against_cpu(4.0, true, true, true, 300, false, None);
+    }
+
+    #[test]
+    fn near_slots_past_one_bindings_room_go_to_a_second_binding() {
+        // A first binding of 100 slots (lavapipe's holds 524,288 records, which a frame of
+        // 100,000 trees at 1280x720 passes): the next 100 go to the second, the farther
+        // near trees' billboards to the CPU, and together they are the CPU's frame.
+        gpu_against_cpu(4.0, true, true, true, 200, false, Some(100));
     }
 
     /// Trees from `z_min` to 400 m ahead; the GPU's billboards, back to front, are the
@@ -1714,6 +1726,7 @@ pub(crate) mod tests {
         vcm: bool,
         budget: u64,
         overlay: bool,
+        near_room: Option<u64>,
     ) {
         // The tree level at 66 views and 6 lights, as the default bake; trees of mixed yaw
         // and scale.
@@ -1791,7 +1804,7 @@ pub(crate) mod tests {
         }
         let mut cpu = cpu_frame.records;
         assert!(cpu.len() > 100, "{} billboards in view", cpu.len());
-        let gpu = gpu_far_records(&scene, &trees, &view, &settings, budget);
+        let gpu = gpu_far_records(&scene, &trees, &view, &settings, budget, near_room);
         assert_eq!(gpu.len(), cpu.len(), "as many billboards");
         let forward = camera.forward();
         let depth = |r: &BillboardGpu| (Vec3::from(r.center) - camera.position).dot(forward);
