@@ -1003,9 +1003,8 @@ impl App {
             dt * 1e3
         };
         if self.frame.render_scale.auto {
-            let ms = frame_ms;
             let s = &mut self.frame.render_scale;
-            s.scale = crate::render::scale::next_scale(s.scale, ms, s.target_ms);
+            s.scale = crate::render::scale::next_scale(s.scale, frame_ms, s.target_ms);
         }
         self.stats.sun_update_gpu_ms = r.renderer.last_sun_update_gpu_ms();
         self.stats.paused_for_bake = self.paused_for_bake;

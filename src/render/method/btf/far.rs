@@ -129,11 +129,10 @@ const DRAW_WORDS: u64 = 12;
 /// The far trees' buffers and compute pipelines.
 pub struct FarGpu {
     /// The near trees' billboards expanded by `near_build`, one slot per part: the first
-    /// `near_room` slots, then the rest in `near_records_b`.
-    near_records: wgpu::Buffer,
-    near_slots: u64,
-    near_records_b: wgpu::Buffer,
-    near_slots_b: u64,
+    /// `near_room` slots, then the rest in the second buffer (its own binding).
+    near_records: [wgpu::Buffer; 2],
+    /// Slots each of `near_records` holds.
+    near_slots: [u64; 2],
     /// Near slots the first binding takes (one binding's records).
     near_room: u64,
     /// The sun the shades were read for (None: not uploaded yet).
@@ -451,7 +450,7 @@ impl FarGpu {
                 U::STORAGE,
             )
         };
-        let (records, keys_buf, sorted, near_records, near_records_b) = (
+        let (records, keys_buf, sorted, near_first, near_second) = (
             small("far records"),
             small("far keys"),
             small("far sorted"),
@@ -463,9 +462,9 @@ impl FarGpu {
         let (bind_group, step_bind_group, draw_bind_group) = bind_groups(
             ctx,
             [&layout0, &layout1, layout],
-            [&params, &near_records_b, &tables_buf],
+            [&params, &near_second, &tables_buf],
             [
-                &near_records,
+                &near_first,
                 &frame_words,
                 &records,
                 &keys_buf,
@@ -476,10 +475,8 @@ impl FarGpu {
             &draw_resources,
         );
         let mut far = Self {
-            near_records,
-            near_slots: 0,
-            near_records_b,
-            near_slots_b: 0,
+            near_records: [near_first, near_second],
+            near_slots: [0; 2],
             near_room: limit,
             shade_sun: None,
             tree_count: n,
@@ -526,8 +523,8 @@ impl FarGpu {
     /// GPU bytes of the buffers.
     pub fn bytes(&self) -> u64 {
         [
-            &self.near_records_b,
-            &self.near_records,
+            &self.near_records[0],
+            &self.near_records[1],
             &self.tables,
             &self.frame_words,
             &self.records,
@@ -554,8 +551,8 @@ impl FarGpu {
         let sorted = total.min(self.limit);
         let words = u64::from(self.base.draws_at) + 4 * draws;
         if slots <= self.record_slots
-            && expanded.min(self.near_room) <= self.near_slots
-            && expanded.saturating_sub(self.near_room) <= self.near_slots_b
+            && self.near_split(expanded)[0] <= self.near_slots[0]
+            && self.near_split(expanded)[1] <= self.near_slots[1]
             && keys <= self.key_slots
             && sorted <= self.sorted_slots
             && words <= self.frame_word_slots
@@ -607,29 +604,14 @@ impl FarGpu {
             })?;
             self.record_slots = record_slots;
         }
-        // The first binding takes `near_room` slots, the second the rest.
-        let (first, second) = (
-            expanded.min(self.near_room),
-            expanded.saturating_sub(self.near_room),
-        );
-        if first > self.near_slots {
-            let near_slots = grow(first).min(self.near_room.max(first));
-            self.near_records = ctx.checked("allocating the near trees' records", || {
-                buffer(ctx, "near records", near_slots * record, U::STORAGE)
-            })?;
-            self.near_slots = near_slots;
-        }
-        if second > self.near_slots_b {
-            let near_slots = grow(second).min(self.near_room.max(second));
-            self.near_records_b = ctx.checked("allocating the near trees' records", || {
-                buffer(
-                    ctx,
-                    "near records, second binding",
-                    near_slots * record,
-                    U::STORAGE,
-                )
-            })?;
-            self.near_slots_b = near_slots;
+        for (b, need) in self.near_split(expanded).into_iter().enumerate() {
+            if need > self.near_slots[b] {
+                let near_slots = grow(need).min(self.near_room.max(need));
+                self.near_records[b] = ctx.checked("allocating the near trees' records", || {
+                    buffer(ctx, "near records", near_slots * record, U::STORAGE)
+                })?;
+                self.near_slots[b] = near_slots;
+            }
         }
         if sorted > self.sorted_slots {
             let sorted_slots = grow(sorted).min(self.limit);
@@ -678,9 +660,9 @@ impl FarGpu {
         let (bind_group, step_bind_group, draw_bind_group) = bind_groups(
             ctx,
             [&self.layouts[0], &self.layouts[1], &self.draw_layout],
-            [&self.params, &self.near_records_b, &self.tables],
+            [&self.params, &self.near_records[1], &self.tables],
             [
-                &self.near_records,
+                &self.near_records[0],
                 &self.frame_words,
                 &self.records,
                 &self.keys,
@@ -794,6 +776,15 @@ impl FarGpu {
         });
         self.bits = bits;
         (near, shade_ms)
+    }
+
+    /// The slots of `expanded` near billboards each binding takes: the first `near_room`,
+    /// the second the rest.
+    fn near_split(&self, expanded: u64) -> [u64; 2] {
+        [
+            expanded.min(self.near_room),
+            expanded.saturating_sub(self.near_room),
+        ]
     }
 
     /// Most billboards `near_build` can expand in one frame (two storage bindings'
