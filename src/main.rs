@@ -87,7 +87,8 @@ enum Command {
         #[arg(long)]
         diff: Option<PathBuf>,
         /// Split the error by pixel class, from an image of A's classes (`render --method
-        /// geometry --pixel-classes`, same camera and size).
+        /// geometry --pixel-classes`, same camera and size), with B's mean linear
+        /// luminance over A's in each class.
         #[arg(long)]
         classes: Option<PathBuf>,
     },
@@ -857,7 +858,8 @@ fn compare(
     let by_class = match classes {
         Some(path) => {
             let mask = canopy::metrics::load_rgb(path)?;
-            Some(canopy::metrics::by_class(&r, &mask)?)
+            let (ia, ib) = (canopy::metrics::load_rgb(a)?, canopy::metrics::load_rgb(b)?);
+            Some(canopy::metrics::by_class(&r, &ia, &ib, &mask)?)
         }
         None => None,
     };
@@ -888,12 +890,14 @@ fn compare(
         );
         for c in by_class.iter().flatten() {
             println!(
-                "  {:<11} {:>5.1} % of pixels, mean {:.4}, p90 {:.4}, share of the error {:>5.1} %",
+                "  {:<11} {:>5.1} % of pixels, mean {:.4}, p90 {:.4}, share of the error {:>5.1} %, \
+                 luminance {:.3} of A's",
                 c.class.name(),
                 c.pixel_fraction * 100.0,
                 c.stats.mean,
                 c.stats.p90,
-                c.error_share * 100.0
+                c.error_share * 100.0,
+                c.luminance_ratio()
             );
         }
     }

@@ -147,7 +147,7 @@ impl PixelClass {
     }
 }
 
-/// FLIP over the pixels of one class.
+/// FLIP over the pixels of one class, and how bright the two images are there.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct ClassFlip {
     pub class: PixelClass,
@@ -156,42 +156,95 @@ pub struct ClassFlip {
     pub stats: FlipStats,
     /// This class's part of the whole image's summed error.
     pub error_share: f64,
+    /// Mean linear luminance ([`linear_luminance`]) of the reference (A) over the class.
+    pub reference_luminance: f64,
+    /// The same for the compared image (B).
+    pub luminance: f64,
 }
 
-/// `result`'s error split by the classes in `classes` (an image of the same size); the
-/// classes no pixel has are left out.
-pub fn by_class(result: &FlipResult, classes: &RgbImage) -> Result<Vec<ClassFlip>> {
-    if classes.dimensions() != (result.width, result.height) {
-        let (bw, bh) = classes.dimensions();
-        return Err(Error::ImageSizeMismatch {
-            a: "compared images".into(),
-            aw: result.width,
-            ah: result.height,
-            b: "class image".into(),
-            bw,
-            bh,
-        });
+impl ClassFlip {
+    /// The compared image's mean linear luminance over the reference's in this class (1
+    /// where both are black): below 1, B is darker there.
+    pub fn luminance_ratio(&self) -> f64 {
+        if self.reference_luminance > 0.0 {
+            self.luminance / self.reference_luminance
+        } else if self.luminance > 0.0 {
+            f64::INFINITY
+        } else {
+            1.0
+        }
+    }
+}
+
+/// The linear luminance of an sRGB pixel (the sRGB curve undone, Rec. 709 weights), 0..1.
+pub fn linear_luminance(p: [u8; 3]) -> f64 {
+    let linear = |v: u8| {
+        let c = f64::from(v) / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    0.2126 * linear(p[0]) + 0.7152 * linear(p[1]) + 0.0722 * linear(p[2])
+}
+
+/// `result` (FLIP of `test` against `reference`) split by the classes in `classes`, all
+/// four images of one size; the classes no pixel has are left out.
+pub fn by_class(
+    result: &FlipResult,
+    reference: &RgbImage,
+    test: &RgbImage,
+    classes: &RgbImage,
+) -> Result<Vec<ClassFlip>> {
+    for (name, img) in [
+        ("class image", classes),
+        ("reference image", reference),
+        ("compared image", test),
+    ] {
+        if img.dimensions() != (result.width, result.height) {
+            let (bw, bh) = img.dimensions();
+            return Err(Error::ImageSizeMismatch {
+                a: "compared images".into(),
+                aw: result.width,
+                ah: result.height,
+                b: name.into(),
+                bw,
+                bh,
+            });
+        }
     }
     let total: f64 = result.errors.iter().map(|&e| f64::from(e)).sum();
     let n = result.errors.len().max(1) as f64;
     let mut out = Vec::new();
     for class in PixelClass::ALL {
-        let errors: Vec<f32> = result
+        let mut errors = Vec::new();
+        let (mut lum_a, mut lum_b) = (0.0, 0.0);
+        for (((&e, c), a), b) in result
             .errors
             .iter()
             .zip(classes.pixels())
-            .filter(|(_, p)| PixelClass::of(p.0) == class)
-            .map(|(&e, _)| e)
-            .collect();
+            .zip(reference.pixels())
+            .zip(test.pixels())
+        {
+            if PixelClass::of(c.0) == class {
+                errors.push(e);
+                lum_a += linear_luminance(a.0);
+                lum_b += linear_luminance(b.0);
+            }
+        }
         if errors.is_empty() {
             continue;
         }
         let sum: f64 = errors.iter().map(|&e| f64::from(e)).sum();
+        let count = errors.len() as f64;
         out.push(ClassFlip {
             class,
-            pixel_fraction: errors.len() as f64 / n,
+            pixel_fraction: count / n,
             stats: summarise(&errors),
             error_share: if total > 0.0 { sum / total } else { 0.0 },
+            reference_luminance: lum_a / count,
+            luminance: lum_b / count,
         });
     }
     Ok(out)
@@ -238,7 +291,14 @@ mod tests {
             height: 1,
             errors: vec![0.1, 0.2, 0.3, 0.4],
         };
-        let c = by_class(&r, &classes).unwrap();
+        // The reference mid grey everywhere; the compared image white over the sky, the
+        // same grey over the ground, black over the near trees and the far trees.
+        let grey = RgbImage::from_pixel(4, 1, image::Rgb([128, 128, 128]));
+        let mut test = grey.clone();
+        test.put_pixel(0, 0, image::Rgb([255, 255, 255]));
+        test.put_pixel(2, 0, image::Rgb([0, 0, 0]));
+        test.put_pixel(3, 0, image::Rgb([0, 0, 0]));
+        let c = by_class(&r, &grey, &test, &classes).unwrap();
         assert_eq!(
             c.iter().map(|c| c.class).collect::<Vec<_>>(),
             PixelClass::ALL.to_vec()
@@ -250,8 +310,35 @@ mod tests {
         }
         let total: f64 = c.iter().map(|c| c.error_share).sum();
         assert!((total - 1.0).abs() < 1e-9);
+        // sRGB 128 is 0.216 linear: white is 4.6 times as bright.
+        let ratios: Vec<f64> = c.iter().map(ClassFlip::luminance_ratio).collect();
+        assert!((ratios[0] - 1.0 / 0.2159).abs() < 0.01, "{ratios:?}");
+        assert!(
+            (ratios[1] - 1.0).abs() < 1e-12 && ratios[2] == 0.0,
+            "{ratios:?}"
+        );
+        assert!((c[1].reference_luminance - 0.2159).abs() < 1e-3);
         let small = RgbImage::new(2, 1);
-        assert!(by_class(&r, &small).is_err());
+        assert!(by_class(&r, &grey, &test, &small).is_err());
+        assert!(by_class(&r, &small, &test, &classes).is_err());
+        assert!(by_class(&r, &grey, &small, &classes).is_err());
+    }
+
+    #[test]
+    fn luminance_is_linear_and_a_black_class_is_level() {
+        assert_eq!(linear_luminance([0, 0, 0]), 0.0);
+        assert!((linear_luminance([255, 255, 255]) - 1.0).abs() < 1e-12);
+        // Green weighs most: 0.7152 of white.
+        assert!((linear_luminance([0, 255, 0]) - 0.7152).abs() < 1e-12);
+        let black = ClassFlip {
+            class: PixelClass::Sky,
+            pixel_fraction: 1.0,
+            stats: summarise(&[0.0]),
+            error_share: 0.0,
+            reference_luminance: 0.0,
+            luminance: 0.0,
+        };
+        assert_eq!(black.luminance_ratio(), 1.0);
     }
 
     #[test]

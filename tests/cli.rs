@@ -107,6 +107,64 @@ fn render_then_compare_end_to_end() {
     let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(s["mean"].as_f64().unwrap() > 0.01, "{s}");
     assert!(diff.exists());
+
+    // Split by the first frame's pixel classes: each class says how bright both images are
+    // there (the same image: equal; the other sun: the ground differs).
+    let classes = tmp("small-classes.png");
+    let o = canopy()
+        .arg("render")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&classes)
+        .args([
+            "--size",
+            "96x64",
+            "--frames",
+            "1",
+            "--cpu",
+            "--pixel-classes",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for (b, same) in [(&out, true), (&out2, false)] {
+        let o = canopy()
+            .arg("compare")
+            .arg(&out)
+            .arg(b)
+            .arg("--classes")
+            .arg(&classes)
+            .arg("--json")
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let ground = s["classes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["class"] == "ground")
+            .unwrap_or_else(|| panic!("no ground class: {s}"));
+        let (a_lum, b_lum) = (
+            ground["reference_luminance"].as_f64().unwrap(),
+            ground["luminance"].as_f64().unwrap(),
+        );
+        assert!(a_lum > 0.0 && b_lum > 0.0, "{ground}");
+        assert_eq!(a_lum == b_lum, same, "{ground}");
+    }
+    let o = canopy()
+        .arg("compare")
+        .arg(&out)
+        .arg(&out2)
+        .arg("--classes")
+        .arg(&classes)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("luminance") && text.contains("of A's"),
+        "{text}"
+    );
 }
 
 #[test]
