@@ -850,7 +850,8 @@ fn compare(
     diff: Option<&Path>,
     classes: Option<&Path>,
 ) -> anyhow::Result<()> {
-    let r = canopy::metrics::compare_files(a, b)?;
+    let compared = canopy::metrics::compare_files(a, b)?;
+    let r = &compared.result;
     if let Some(d) = diff {
         let img = image::DynamicImage::ImageRgb8(r.error_image()).to_rgba8();
         canopy::imageio::save_png(d, &img)?;
@@ -858,8 +859,12 @@ fn compare(
     let by_class = match classes {
         Some(path) => {
             let mask = canopy::metrics::load_rgb(path)?;
-            let (ia, ib) = (canopy::metrics::load_rgb(a)?, canopy::metrics::load_rgb(b)?);
-            Some(canopy::metrics::by_class(&r, &ia, &ib, &mask)?)
+            Some(canopy::metrics::by_class(
+                r,
+                &compared.reference,
+                &compared.test,
+                &mask,
+            )?)
         }
         None => None,
     };

@@ -178,14 +178,7 @@ impl ClassFlip {
 
 /// The linear luminance of an sRGB pixel (the sRGB curve undone, Rec. 709 weights), 0..1.
 pub fn linear_luminance(p: [u8; 3]) -> f64 {
-    let linear = |v: u8| {
-        let c = f64::from(v) / 255.0;
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
+    let linear = |v: u8| f64::from(crate::render::target::srgb_to_linear(v));
     0.2126 * linear(p[0]) + 0.7152 * linear(p[1]) + 0.0722 * linear(p[2])
 }
 
@@ -259,8 +252,16 @@ pub fn load_rgb(path: &Path) -> Result<RgbImage> {
     Ok(img.to_rgb8())
 }
 
+/// Two image files compared: FLIP of the second against the first, and both images (for
+/// [`by_class`]).
+pub struct Compared {
+    pub result: FlipResult,
+    pub reference: RgbImage,
+    pub test: RgbImage,
+}
+
 /// Compares two image files; names them in the error if their sizes differ.
-pub fn compare_files(reference: &Path, test: &Path) -> Result<FlipResult> {
+pub fn compare_files(reference: &Path, test: &Path) -> Result<Compared> {
     let a = load_rgb(reference)?;
     let b = load_rgb(test)?;
     if a.dimensions() != b.dimensions() {
@@ -273,7 +274,11 @@ pub fn compare_files(reference: &Path, test: &Path) -> Result<FlipResult> {
             bh: b.height(),
         });
     }
-    flip(&a, &b)
+    Ok(Compared {
+        result: flip(&a, &b)?,
+        reference: a,
+        test: b,
+    })
 }
 
 #[cfg(test)]

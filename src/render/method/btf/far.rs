@@ -550,9 +550,10 @@ impl FarGpu {
             .ok_or_else(|| crate::Error::Gpu("too many billboards to sort".into()))?;
         let sorted = total.min(self.limit);
         let words = u64::from(self.base.draws_at) + 4 * draws;
+        let [first, second] = self.near_split(expanded);
         if slots <= self.record_slots
-            && self.near_split(expanded)[0] <= self.near_slots[0]
-            && self.near_split(expanded)[1] <= self.near_slots[1]
+            && first <= self.near_slots[0]
+            && second <= self.near_slots[1]
             && keys <= self.key_slots
             && sorted <= self.sorted_slots
             && words <= self.frame_word_slots
