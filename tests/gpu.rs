@@ -264,6 +264,7 @@ fn pixel_classes_tell_sky_ground_and_near_and_far_trees_apart() {
         ..frame
     };
     let none = canopy::render::shadow::Cascades::none();
-    let u = |f: &FrameDesc| canopy::render::frame::FrameUniforms::new(f, 1.0, &none).pixel_classes;
+    let u =
+        |f: &FrameDesc| canopy::render::uniforms::FrameUniforms::new(f, 1.0, &none).pixel_classes;
     assert_eq!((u(&frame), u(&btf)), (1, 0));
 }

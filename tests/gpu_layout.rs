@@ -7,8 +7,8 @@ use std::mem::{offset_of, size_of};
 
 use canopy::render::btf::far::{DirSetGpu, FarParamsGpu, FarShadeGpu, FarTreeGpu, SortStepGpu};
 use canopy::render::btf::{BillboardGpu, NearDrawGpu};
-use canopy::render::frame::FrameUniforms;
 use canopy::render::self_shadow::SelfLightGpu;
+use canopy::render::uniforms::FrameUniforms;
 use canopy::render::world_gpu::{PartSetGpu, TreeGpu};
 
 /// (size, [(field, offset)]) of a Rust struct, fields named as in WGSL.

@@ -14,7 +14,7 @@ use std::sync::OnceLock;
 use canopy::bake;
 use canopy::format::Baked;
 use canopy::model::{Level, PerLevel, World};
-use canopy::render::btf::LOD_COLOURS;
+use canopy::render::btf::LOD_COLORS;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
@@ -78,7 +78,7 @@ fn lod_fractions(covered: &[(usize, Vec3, Vec3)]) -> (PerLevel<f32>, usize) {
         }
         judged += 1;
         let (k, err) = Level::ALL
-            .map(|k| (k, unmix(p, b, Vec3::from(LOD_COLOURS[k])).1))
+            .map(|k| (k, unmix(p, b, Vec3::from(LOD_COLORS[k])).1))
             .into_iter()
             .min_by(|x, y| x.1.total_cmp(&y.1))
             .unwrap();
@@ -420,7 +420,7 @@ fn show_shadow_draws_the_sun_factor_in_grey_darker_behind_another_tree() {
         // times the coverage. Read where it covers at least half of the pixel and the
         // second fir is not in front of it or behind it (its show-LOD frame is the same
         // there with and without the second fir).
-        let colour = Vec3::from(LOD_COLOURS[li]) * EXPOSURE;
+        let colour = Vec3::from(LOD_COLORS[li]) * EXPOSURE;
         let matte: Vec<(usize, f32)> = covered(&views[0].lod, &views[0].bare)
             .into_iter()
             .map(|(i, p, b)| (i, unmix(p, b, colour).0))

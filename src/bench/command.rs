@@ -64,7 +64,7 @@ pub fn plan(
         )));
     }
     // The knobs start from the scene's `[render]` table.
-    let base = crate::render::frame::btf_settings_of(scene);
+    let base = crate::render::btf::BtfSettings::from_scene(scene);
     let configs = run::configurations(&req.methods, &req.sweeps, base)?;
     Ok((flight, n, configs))
 }

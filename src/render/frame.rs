@@ -1,66 +1,14 @@
 //! The plain description of one frame (camera, sun, sky, method, settings) that callers hand
-//! to the render core, the statistics it hands back, and the uniform block the shaders see.
+//! to the render core, and the statistics it hands back.
 
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 
 use super::camera::Camera;
 use crate::scene::{Scene, sun_direction};
 
-/// How the forest is drawn. Each method can draw the whole scene alone.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Method {
-    /// Every leaf, needle and branch as triangles: the ground truth.
-    #[default]
-    Geometry,
-    /// BTF billboards of the twig / main branch / tree hierarchy (needs a bake).
-    Btf,
-    /// One camera-facing image per tree from a single baked view and light: the floor.
-    Billboard,
-    /// Each tree as a volumetric texel: its baked volumes sliced parallel to the screen
-    /// (needs a bake with texel volumes).
-    Texel,
-    /// `btf`, with a tree drawn as geometry wherever even its twig level's texels project
-    /// above the LOD bound (cross-faded): no more detail than the view needs, and no less.
-    Hybrid,
-}
-
-impl Method {
-    pub const ALL: &'static [Method] = &[
-        Method::Geometry,
-        Method::Btf,
-        Method::Billboard,
-        Method::Texel,
-        Method::Hybrid,
-    ];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Geometry => "geometry",
-            Method::Btf => "btf",
-            Method::Billboard => "billboard",
-            Method::Texel => "texel",
-            Method::Hybrid => "hybrid",
-        }
-    }
-
-    /// The method draws baked images (and needs a bake).
-    pub fn needs_bake(self) -> bool {
-        matches!(
-            self,
-            Method::Btf | Method::Billboard | Method::Texel | Method::Hybrid
-        )
-    }
-
-    /// The method draws the BTF hierarchy and takes the `btf` knobs.
-    pub fn is_btf(self) -> bool {
-        matches!(self, Method::Btf | Method::Hybrid)
-    }
-
-    pub fn parse(s: &str) -> Option<Method> {
-        Self::ALL.iter().copied().find(|m| m.name() == s)
-    }
-}
+use super::method::btf::settings::{BtfSettings, BtfStats};
+pub use super::method::kind::Method;
+use super::method::texel::settings::{TexelSettings, TexelStats};
 
 /// The sun: a directional light.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -158,9 +106,9 @@ pub struct Reference {
 impl Default for Reference {
     fn default() -> Self {
         Self {
-            sky_directions: super::sky_visibility::SKY_DIRECTIONS,
+            sky_directions: super::consts::SKY_DIRECTIONS,
             sun_map_size: 4096,
-            self_map_size: super::self_shadow::SELF_MAP_SIZE,
+            self_map_size: super::consts::SELF_MAP_SIZE,
         }
     }
 }
@@ -178,9 +126,9 @@ pub struct FrameDesc {
     pub exposure: f32,
     pub stage: Stage,
     /// Knobs of the `btf` method.
-    pub btf: super::btf::BtfSettings,
+    pub btf: BtfSettings,
     /// Knobs of the `texel` method.
-    pub texel: super::method::texel::TexelSettings,
+    pub texel: TexelSettings,
     /// Draw the trees (off: terrain and sky only, e.g. while a bake is running).
     pub trees: bool,
     /// Image-based methods: soft tree shadows on the ground from an alpha shadow map, and
@@ -210,6 +158,12 @@ pub struct FrameDesc {
 pub const NEAR_TREE_M: f32 = 100.0;
 
 impl FrameDesc {
+    /// The reference this frame is drawn as: its [`Self::reference`] when the method is
+    /// `geometry` (other methods ignore it).
+    pub fn reference_drawn(&self) -> Option<Reference> {
+        self.reference.filter(|_| self.method == Method::Geometry)
+    }
+
     /// The frame a scene file describes: its start camera, sun and sky.
     pub fn from_scene(scene: &Scene) -> Self {
         let c = &scene.camera;
@@ -231,7 +185,7 @@ impl FrameDesc {
             fog_density: 0.0006,
             exposure: 1.0,
             stage: Stage::World,
-            btf: btf_settings_of(scene),
+            btf: BtfSettings::from_scene(scene),
             texel: Default::default(),
             trees: true,
             ground_shadows: true,
@@ -242,20 +196,6 @@ impl FrameDesc {
             pixel_classes: false,
         }
     }
-}
-
-/// The `btf` knobs a scene starts from: its `[render]` table over the defaults.
-pub fn btf_settings_of(scene: &Scene) -> super::btf::BtfSettings {
-    let mut s = super::btf::BtfSettings::default();
-    if let Some(r) = &scene.render {
-        s.lod_scale = r.lod_scale.unwrap_or(s.lod_scale);
-        s.weight_threshold = r.weight_threshold.unwrap_or(s.weight_threshold);
-        s.lod_fade = r.lod_fade.unwrap_or(s.lod_fade);
-        if let Some(p) = r.planes.as_deref().and_then(super::btf::PlaneMode::parse) {
-            s.planes = p;
-        }
-    }
-    s
 }
 
 /// What the render core did for one frame.
@@ -279,9 +219,9 @@ pub struct FrameStats {
     /// shading factors, instance lists), in ms; sun-dependent work is not included.
     pub prepare_ms: f64,
     /// What the `btf` method did (absent for other methods).
-    pub btf: Option<super::btf::BtfStats>,
+    pub btf: Option<BtfStats>,
     /// What the `texel` method did (absent for other methods).
-    pub texel: Option<super::method::texel::TexelStats>,
+    pub texel: Option<TexelStats>,
     /// Sun-dependent state was rebuilt this frame (the sun moved): the trees' VCM reads
     /// and the ground alpha shadow map.
     pub sun_update: bool,
@@ -290,114 +230,4 @@ pub struct FrameStats {
     pub sun_update_ms: Option<f64>,
     /// Side (texels) of the ground shadow maps the frame was shaded with, when it had them.
     pub ground_map_size: Option<u32>,
-}
-
-/// The uniform block of `frame.wgsl` (`struct Frame`), byte for byte: each `[f32; 3]` is a
-/// WGSL `vec3<f32>` and the scalar after it fills its 16-byte slot (checked against the WGSL
-/// by tests/gpu_layout.rs).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct FrameUniforms {
-    pub view_proj: [[f32; 4]; 4],
-    pub inv_view_proj: [[f32; 4]; 4],
-    /// The geometry method's shadow cascades.
-    pub light_view_proj: [[[f32; 4]; 4]; 3],
-    pub camera_pos: [f32; 3],
-    /// Fog density per metre.
-    pub fog_density: f32,
-    pub camera_forward: [f32; 3],
-    pub exposure: f32,
-    /// Unit vector towards the sun.
-    pub sun_dir: [f32; 3],
-    /// 1 when sun shadows apply (cascades, or the ground depth map).
-    pub shadows_on: u32,
-    /// Sun colour x intensity (0 below the horizon, except in the studio).
-    pub sun_color: [f32; 3],
-    /// PCF radius of the cascades, in texels.
-    pub pcf_radius: f32,
-    pub sky_ambient: [f32; 3],
-    /// Directions of the reference's sky visibility (0: the sky is never hidden).
-    pub sky_vis_count: u32,
-    pub ground_ambient: [f32; 3],
-    /// Side of one cell of the sky visibility volume (m).
-    pub sky_vis_texel_world: f32,
-    pub sky_zenith: [f32; 3],
-    /// 1: draw pixel classes instead of colours (see [`FrameDesc::pixel_classes`]).
-    pub pixel_classes: u32,
-    pub sky_horizon: [f32; 3],
-    /// 1 when the cascades hold `hybrid`'s geometry trees alone, whose shadows then fall on
-    /// the rest of the scene through them (they are left out of the ground alpha map).
-    pub hybrid_cascades: u32,
-    /// Far view depth of each cascade (m).
-    pub cascade_splits: [f32; 3],
-    /// One texel of a cascade's map in uv (1 / its side).
-    pub cascade_texel_uv: f32,
-    /// World size of one texel in each cascade.
-    pub cascade_texel_world: [f32; 3],
-    /// Half the side of the scene's square (m): past it (the horizon ring) the terrain
-    /// depth map shades nothing; the trees' alpha map still does. 0 until they are built.
-    pub ground_half: f32,
-    /// The sun's view of the whole scene, for the ground shadow maps.
-    pub ground_light_view_proj: [[f32; 4]; 4],
-    /// 1 when the ground alpha shadow map applies.
-    pub ground_alpha_on: u32,
-    /// 1 when the terrain's depth from the ground pass replaces the cascades.
-    pub terrain_depth_on: u32,
-    /// World size of one texel of the ground maps.
-    pub ground_texel_world: f32,
-    /// Fraction of the ground textures' side in use.
-    pub ground_uv_scale: f32,
-}
-
-impl FrameUniforms {
-    /// Uniforms for the main view.
-    pub fn new(frame: &FrameDesc, aspect: f32, cascades: &super::shadow::Cascades) -> Self {
-        let vp = frame.camera.view_projection(aspect);
-        let studio = frame.stage == Stage::Studio;
-        let sun = if studio {
-            frame.sun.color * frame.sun.intensity
-        } else {
-            frame.sun.radiance()
-        };
-        let sky = frame.sky.color * frame.sky.intensity;
-        let ground = frame.sky.ground_color * frame.sky.intensity;
-        let horizon = frame.sky.color.lerp(Vec3::new(0.85, 0.88, 0.92), 0.55);
-        let shadows_on = frame.shadows.enabled && (studio || frame.sun.elevation_deg > 0.0);
-        Self {
-            view_proj: vp.to_cols_array_2d(),
-            inv_view_proj: vp.inverse().to_cols_array_2d(),
-            light_view_proj: cascades.matrices.map(|m| m.to_cols_array_2d()),
-            camera_pos: frame.camera.position.to_array(),
-            fog_density: frame.fog_density.max(0.0),
-            camera_forward: frame.camera.forward().to_array(),
-            exposure: frame.exposure,
-            sun_dir: frame.sun.direction().to_array(),
-            shadows_on: u32::from(shadows_on),
-            sun_color: sun.to_array(),
-            pcf_radius: 1.0,
-            sky_ambient: sky.to_array(),
-            sky_vis_count: 0,
-            ground_ambient: ground.to_array(),
-            sky_vis_texel_world: 0.0,
-            sky_zenith: frame.sky.color.to_array(),
-            pixel_classes: u32::from(frame.pixel_classes && frame.method == Method::Geometry),
-            sky_horizon: horizon.to_array(),
-            hybrid_cascades: 0,
-            cascade_splits: cascades.splits,
-            cascade_texel_uv: 1.0 / frame.shadows.map_size.max(1) as f32,
-            cascade_texel_world: cascades.texel_world,
-            ground_half: 0.0,
-            ground_light_view_proj: Mat4::IDENTITY.to_cols_array_2d(),
-            ground_alpha_on: 0,
-            terrain_depth_on: 0,
-            ground_texel_world: 0.0,
-            ground_uv_scale: 0.0,
-        }
-    }
-
-    /// The same block for a shadow pass: only `view_proj` matters there.
-    pub fn for_light(mut self, light_view_proj: Mat4) -> Self {
-        self.view_proj = light_view_proj.to_cols_array_2d();
-        self
-    }
 }

@@ -7,10 +7,11 @@
 //! The maps are allocated only when a method first asks for them (the `geometry` method and
 //! the bake's studio renderers never do); until then the frame binds a 1x1 placeholder.
 
-use super::frame::FrameUniforms;
+use super::method::kind::Method;
 use super::pipelines::{self, Layouts};
 use super::shadow::Cascades;
 use super::timing::GpuTimer;
+use super::uniforms::FrameUniforms;
 use super::world_gpu::WorldGpu;
 use super::{GpuContext, SHADOW_FORMAT};
 use crate::Result;
@@ -31,8 +32,8 @@ pub struct GroundKey {
     pub to_sun: glam::Vec3,
     /// The trees are in it (not while only terrain and sky are shown).
     pub trees: bool,
-    /// The trees are texels (else BTF billboards).
-    pub texels: bool,
+    /// The method whose trees cast (its casters' kind: billboards, texel boxes).
+    pub casters: Method,
     /// Side of the part of the textures in use.
     pub size: u32,
     /// A hash of the trees left out of the alpha map (`hybrid`'s geometry trees, which
@@ -177,7 +178,7 @@ impl GroundMaps {
         &self,
         to_sun: glam::Vec3,
         trees: bool,
-        texels: bool,
+        casters: Method,
         held: bool,
         excluded: u64,
     ) -> (GroundKey, bool) {
@@ -190,7 +191,7 @@ impl GroundMaps {
         let want = GroundKey {
             to_sun,
             trees,
-            texels,
+            casters,
             size,
             excluded,
         };
@@ -199,7 +200,7 @@ impl GroundMaps {
             Some(k) => {
                 k.to_sun != to_sun
                     || k.trees != trees
-                    || k.texels != texels
+                    || k.casters != casters
                     || k.excluded != excluded
                     || (!held && k.size != size)
             }

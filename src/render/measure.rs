@@ -291,10 +291,7 @@ impl FrameReport {
         renderer: &Renderer,
         ctx: &GpuContext,
     ) -> Self {
-        // The render core draws the reference only for `geometry`.
-        let reference = frame
-            .reference
-            .filter(|_| frame.method == crate::render::Method::Geometry);
+        let reference = frame.reference_drawn();
         let btf = m.stats.btf.map(|stats| BtfReport {
             stats,
             lod_scale: frame.btf.lod_scale,

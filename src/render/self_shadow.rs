@@ -34,10 +34,7 @@ use crate::{Error, Result};
 /// Texel format of the cascades' tree keys.
 pub const KEY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 
-/// Default side of a tree's map, in texels: about 1 cm for a 20 m fir. The default forest's
-/// start view moves by mean FLIP 0.0098 from 2048 to 4096 (0.0167 from 1024), for 18 % more
-/// frame time than 1024 and 26 % less than 4096 (lavapipe).
-pub const SELF_MAP_SIZE: u32 = 2048;
+pub use super::consts::SELF_MAP_SIZE;
 
 /// Trees whose maps are drawn at once (layers of the map array), at most.
 pub const SELF_MAP_LAYERS: u32 = 32;
@@ -355,13 +352,7 @@ impl SelfShadow {
             pass.set_bind_group(1, &world.trees_bind_group, &[]);
             pass.set_bind_group(3, &self.lights_group, &[]);
             tris += world
-                .draw(
-                    &mut pass,
-                    &[run],
-                    None,
-                    false,
-                    &super::method::geometry::ALL_PARTS,
-                )
+                .draw(&mut pass, &[run], None, false, &super::meshes::ALL_PARTS)
                 .0;
         }
         tris
@@ -405,7 +396,7 @@ impl SelfShadow {
                 batch,
                 Some(trees),
                 false,
-                &super::method::geometry::ALL_PARTS,
+                &super::meshes::ALL_PARTS,
             );
             stats.triangles += tris;
             stats.trees_drawn += drawn;

@@ -30,7 +30,7 @@ fn with_frame(pass: &str) -> String {
 /// A pass that draws billboards: frame uniforms, the BTF atlas's layout, the billboard
 /// record, the pass's file.
 fn with_billboards(pass: &str) -> String {
-    let atlas = crate::render::method::btf::ATLAS_SIDE;
+    let atlas = super::consts::ATLAS_SIDE;
     format!(
         "{FRAME}\nconst BTF_ATLAS_SIDE: u32 = {atlas}u;\n{BILLBOARD_RECORD}\n{BILLBOARD}\n{pass}"
     )

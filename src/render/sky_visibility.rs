@@ -27,9 +27,7 @@ use crate::Result;
 use crate::model::World;
 use crate::model::mesh::{Aabb, Mesh};
 
-/// Directions of the reference's sky visibility (the closing note of issue 14 says how the
-/// count was chosen).
-pub const SKY_DIRECTIONS: u32 = 64;
+pub use super::consts::SKY_DIRECTIONS;
 
 /// Most cells of a scene's sky visibility grid: the cell side grows with the scene to stay
 /// under it (the default forest: 3.7 m cells, 5 s on 2 cores).

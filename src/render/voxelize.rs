@@ -8,9 +8,11 @@
 
 use glam::{UVec3, Vec3};
 
+use super::meshes::{MeshPasses, encode_cascades};
+use super::method::geometry::GeometryFrame;
 use super::pipelines::{Layouts, buffer_entry};
 use super::world_gpu::vertex_layout;
-use super::{DEPTH_FORMAT, GpuContext, shaders};
+use super::{DEPTH_FORMAT, FrameDesc, FrameStats, GpuContext, Stage, shaders, target};
 use crate::{Error, Result};
 
 /// Fixed-point scale of the colour sums (1.0 = this many units).
@@ -248,5 +250,117 @@ impl VoxelTarget {
                 mask: u64::from(w[4]) | (u64::from(w[5]) << 32),
             })
             .collect())
+    }
+}
+
+impl super::Renderer {
+    /// A voxel grid for [`Self::voxelize`] (building the voxel pipeline on first use).
+    pub fn voxel_target(
+        &mut self,
+        ctx: &GpuContext,
+        box_min: glam::Vec3,
+        dims: glam::UVec3,
+        voxel: f32,
+        ss: u32,
+    ) -> Result<VoxelTarget> {
+        if self.voxel_pipeline.is_none() {
+            let p = ctx.checked("building the voxel pipeline", || {
+                VoxelPipeline::new(&ctx.device, &self.layouts)
+            })?;
+            self.voxel_pipeline = Some(p);
+        }
+        let Some(p) = &self.voxel_pipeline else {
+            return Err(Error::Gpu("the voxel pipeline was not built".into()));
+        };
+        VoxelTarget::new(ctx, p, box_min, dims, voxel, ss)
+    }
+
+    /// The texel bake's voxelisation: the trees of `frame` (a `geometry` frame in the
+    /// studio, orthographic) drawn at `width` x `height` pixels, every fragment added to the
+    /// voxel of `target` it lies in (see [`voxelize`]). Sun shadows and the reference's
+    /// sky visibility shade the fragments as in a frame.
+    pub fn voxelize(
+        &mut self,
+        ctx: &GpuContext,
+        frame: &FrameDesc,
+        width: u32,
+        height: u32,
+        target: &VoxelTarget,
+    ) -> Result<()> {
+        target::check_size(width, height, Some(ctx))?;
+        if ctx.is_lost() {
+            return Err(Error::Gpu("the GPU device was lost; restart canopy".into()));
+        }
+        self.ensure_depth(ctx, width, height)?;
+        self.ensure_bindings(ctx, frame.shadows.map_size)?;
+        let aspect = width as f32 / height as f32;
+        let visible = self.world.cull(&frame.camera.frustum(aspect));
+        let g = GeometryFrame::prepare(&self.world, frame, aspect, visible);
+        let runs = self.world.upload_lists(ctx, &g.lists);
+        let uniforms = self.frame_uniforms_for(
+            frame,
+            aspect,
+            &g.cascades,
+            g.shadows_on,
+            frame.reference.is_some(),
+        );
+        ctx.queue
+            .write_buffer(&self.frame_uniforms, 0, bytemuck::bytes_of(&uniforms));
+        self.meshes
+            .write_uniforms(ctx, &uniforms, &g.cascades, g.shadows_on);
+        let (Some(bindings), Some(depth), Some(voxel)) =
+            (&self.bindings, &self.depth, &self.voxel_pipeline)
+        else {
+            return Err(Error::Gpu("render targets were not created".into()));
+        };
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("voxelise"),
+            });
+        let mut stats = FrameStats::default();
+        let casters = g.shadows_on.then_some(&runs[1..]);
+        let studio = frame.stage == Stage::Studio;
+        encode_cascades(
+            &mut encoder,
+            bindings,
+            &self.meshes,
+            &self.world,
+            casters,
+            !studio,
+            None,
+            false,
+            None,
+            &mut stats,
+        );
+        self.studio_cascades = None;
+        target.clear(&mut encoder);
+        {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("voxelise"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth.view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(0.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, &bindings.bind_group, &[]);
+            pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
+            pass.set_bind_group(3, &target.bind_group, &[]);
+            MeshPasses::draw_with(&mut pass, &self.world, &runs[0], voxel.meshes(), !studio);
+        }
+        target.copy_out(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+        if let Some(e) = ctx.take_error() {
+            return Err(Error::Gpu(e));
+        }
+        Ok(())
     }
 }

@@ -11,10 +11,14 @@ use glam::{Mat4, Vec3};
 use super::btf::{
     BillboardGpu, BillboardMode, BtfAssets, BtfFrame, BtfScene, BtfStats, PrepareView,
 };
+use super::interface::{Bake, DrawCx, Plan, PrepareCx, RenderMethod, SunWork};
+use super::kind::Method;
+use crate::Result;
 use crate::model::mesh::Aabb;
 use crate::render::GpuContext;
-use crate::render::world_gpu::TreeGpu;
-use crate::render::world_gpu::WorldGpu;
+use crate::render::frame::FrameStats;
+use crate::render::pipelines::Layouts;
+use crate::render::world_gpu::{TreeGpu, TreeRun, WorldGpu};
 use crate::sphere::billboard_axes;
 
 /// The side the single image is taken from, in the tree's frame (horizontal).
@@ -144,6 +148,74 @@ pub fn prepare(
         far: false,
         records,
         stats,
+    }
+}
+
+/// The `billboard` method: its frame, the geometry runs (the terrain's) and its pipeline
+/// (the `btf` method's).
+#[derive(Default)]
+pub struct Billboard {
+    frame: Option<BtfFrame>,
+    runs: Vec<Vec<TreeRun>>,
+    pipeline: Option<wgpu::RenderPipeline>,
+}
+
+impl RenderMethod for Billboard {
+    fn method(&self) -> Method {
+        Method::Billboard
+    }
+
+    fn check(&self, bake: &Bake) -> Result<()> {
+        bake.need_btf(Method::Billboard).map(|_| ())
+    }
+
+    fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
+        bake.need_btf(Method::Billboard)?;
+        let Some(b) = bake.btf.as_mut() else {
+            return Err(crate::Error::Gpu("the BTF images are not loaded".into()));
+        };
+        let bf = prepare_frame(b, cx.ctx, cx.world, &cx.visible, &cx.view);
+        let (runs, plan) =
+            super::btf::method::plan_geometry(cx.ctx, cx.world, cx.frame, &bf, SunWork::default());
+        self.runs = runs;
+        self.frame = Some(bf);
+        Ok(plan)
+    }
+
+    fn ensure_pipelines(
+        &mut self,
+        bake: &mut Bake,
+        ctx: &GpuContext,
+        layouts: &Layouts,
+        format: wgpu::TextureFormat,
+    ) -> Result<()> {
+        if let Some(b) = bake.btf.as_mut() {
+            self.pipeline = Some(b.pipeline(&ctx.device, &layouts.frame, format).clone());
+        }
+        Ok(())
+    }
+
+    fn draw(
+        &self,
+        bake: &Bake,
+        pass: &mut wgpu::RenderPass<'_>,
+        cx: &DrawCx<'_>,
+        stats: &mut FrameStats,
+    ) {
+        if let (Some(bf), Some(b)) = (&self.frame, &bake.btf) {
+            b.draw_main(
+                pass,
+                cx.world,
+                &self.runs,
+                cx.pipes,
+                self.pipeline.as_ref(),
+                bf,
+                cx.terrain,
+                stats,
+            );
+        }
+        // The btf knobs do not apply.
+        stats.btf = None;
     }
 }
 

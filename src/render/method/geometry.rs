@@ -2,21 +2,14 @@
 //! through cascaded shadow maps that follow the camera and are drawn every frame, and by the
 //! hemispherical sky. The ground truth every other method is measured against.
 
-use super::super::frame::{FrameDesc, FrameStats, FrameUniforms, Stage};
-use super::super::pipelines::{self, ColorPipelines, Layouts};
-use super::super::shadow::{CASCADES, Cascades};
-use super::super::world_gpu::{PartKind, TreeRun, WorldGpu};
-use super::super::{Frustum, GpuContext};
+use super::interface::{Bake, DrawCx, Plan, PrepareCx, RenderMethod, SunWork};
+use super::kind::Method;
 use crate::Result;
-
-pub(crate) const ALL_PARTS: [PartKind; 3] = [PartKind::Trunk, PartKind::Limbs, PartKind::Twigs];
-
-/// The pipelines and buffers of the method's shadow cascades.
-pub struct GeometryMethod {
-    shadow_pipeline: wgpu::RenderPipeline,
-    /// Per cascade: the frame uniforms with the cascade's light matrix, and their group 0.
-    cascade_uniforms: Vec<(wgpu::Buffer, wgpu::BindGroup)>,
-}
+use crate::render::camera::Frustum;
+use crate::render::frame::{FrameDesc, FrameStats, Stage};
+use crate::render::meshes::MeshPasses;
+use crate::render::shadow::Cascades;
+use crate::render::world_gpu::{TreeRun, WorldGpu};
 
 /// The CPU side of one frame: where the cascades are and what each one draws.
 #[derive(Clone, Debug)]
@@ -79,103 +72,53 @@ impl GeometryFrame {
     }
 }
 
-impl GeometryMethod {
-    pub fn new(ctx: &GpuContext, layouts: &Layouts) -> Result<Self> {
-        let device = &ctx.device;
-        let shadow_pipeline = ctx.checked("building the shadow pipeline", || {
-            pipelines::shadow_pipeline(device, layouts)
-        })?;
-        let cascade_uniforms = (0..CASCADES)
-            .map(|i| {
-                let buf = device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some(&format!("shadow cascade {i} uniforms")),
-                    size: std::mem::size_of::<FrameUniforms>() as u64,
-                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                });
-                let bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("shadow cascade"),
-                    layout: &layouts.shadow_frame,
-                    entries: &[wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: buf.as_entire_binding(),
-                    }],
-                });
-                (buf, bg)
-            })
-            .collect();
-        Ok(Self {
-            shadow_pipeline,
-            cascade_uniforms,
+/// The `geometry` method: the trees' meshes whole, shaded by cascades fitted to the view.
+#[derive(Default)]
+pub struct Geometry {
+    /// The frame's instance runs: the camera's, then each cascade's.
+    runs: Vec<Vec<TreeRun>>,
+}
+
+impl RenderMethod for Geometry {
+    fn method(&self) -> Method {
+        Method::Geometry
+    }
+
+    fn check(&self, _bake: &Bake) -> Result<()> {
+        Ok(())
+    }
+
+    fn prepare(&mut self, _bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
+        let frame = cx.frame;
+        let g = GeometryFrame::prepare(cx.world, frame, cx.aspect, cx.visible);
+        self.runs = cx.world.upload_lists(cx.ctx, &g.lists);
+        let studio = frame.stage == Stage::Studio;
+        let self_maps = frame.reference.is_some_and(|r| r.self_map_size > 0);
+        Ok(Plan {
+            cascades: g.cascades,
+            shadows_on: g.shadows_on,
+            casters: g.shadows_on.then(|| self.runs[1..].to_vec()),
+            terrain_casts: !studio,
+            geometry_tree_cascades: false,
+            ground_excluded: Vec::new(),
+            self_shadowed: (g.shadows_on && self_maps && !studio)
+                .then(|| (self.runs[0].clone(), g.lists[0].clone())),
+            studio_casters: (studio && g.shadows_on).then(|| g.lists[1..].to_vec()),
+            sun: SunWork::default(),
         })
     }
 
-    /// Uploads each cascade's uniforms (the frame's, seen from the cascade's light), when
-    /// the cascades are on.
-    pub fn write_uniforms(
+    fn draw(
         &self,
-        ctx: &GpuContext,
-        uniforms: &FrameUniforms,
-        cascades: &Cascades,
-        shadows_on: bool,
-    ) {
-        if !shadows_on {
-            return;
-        }
-        for (i, (buf, _)) in self.cascade_uniforms.iter().enumerate() {
-            let u = uniforms.for_light(cascades.matrices[i]);
-            ctx.queue.write_buffer(buf, 0, bytemuck::bytes_of(&u));
-        }
-    }
-
-    /// Draws cascade `c`'s casters (`runs` of its list) into its pass, with the shadow
-    /// pipeline or `pipeline` (the reference's, which keeps the trees' keys too).
-    #[allow(clippy::too_many_arguments)]
-    pub fn draw_cascade(
-        &self,
+        _bake: &Bake,
         pass: &mut wgpu::RenderPass<'_>,
-        c: usize,
-        world: &WorldGpu,
-        runs: &[TreeRun],
-        terrain: bool,
-        pipeline: Option<&wgpu::RenderPipeline>,
+        cx: &DrawCx<'_>,
         stats: &mut FrameStats,
     ) {
-        pass.set_pipeline(pipeline.unwrap_or(&self.shadow_pipeline));
-        pass.set_bind_group(0, &self.cascade_uniforms[c].1, &[]);
-        pass.set_bind_group(1, &world.trees_bind_group, &[]);
-        let (tris, casters, calls) = world.draw(pass, runs, None, terrain, &ALL_PARTS);
-        stats.shadow_triangles += tris;
-        stats.shadow_casters += casters;
-        stats.draw_calls += calls;
-    }
-
-    /// Draws the trees of `runs` whole (and the terrain when asked) with `pipes` (the
-    /// texel bake's voxelisation).
-    pub fn draw_with(
-        pass: &mut wgpu::RenderPass<'_>,
-        world: &WorldGpu,
-        runs: &[TreeRun],
-        pipes: pipelines::MeshPipelines<'_>,
-        terrain: bool,
-    ) {
-        world.draw(pass, runs, Some(pipes), terrain, &ALL_PARTS);
-    }
-
-    /// Draws the camera's trees (`runs`), whole, and the terrain when asked, in the main
-    /// pass.
-    pub fn draw_main(
-        pass: &mut wgpu::RenderPass<'_>,
-        world: &WorldGpu,
-        runs: &[TreeRun],
-        pipes: &ColorPipelines,
-        terrain: bool,
-        stats: &mut FrameStats,
-    ) {
-        let (tris, trees, calls) =
-            world.draw(pass, runs, Some(pipes.meshes()), terrain, &ALL_PARTS);
-        stats.triangles = tris;
-        stats.trees_drawn = trees;
-        stats.draw_calls += calls;
+        let runs = match self.runs.first() {
+            Some(r) if !cx.trees_after => &r[..],
+            _ => &[],
+        };
+        MeshPasses::draw_main(pass, cx.world, runs, cx.pipes, cx.terrain, stats);
     }
 }

@@ -8,8 +8,9 @@
 
 mod billboard;
 pub mod far;
+pub mod method;
 pub mod prepare;
-mod settings;
+pub mod settings;
 pub mod shading;
 
 use std::collections::HashMap;
@@ -20,9 +21,7 @@ pub use billboard::{BillboardGpu, BillboardMode};
 pub use prepare::{
     BtfFrame, BtfScene, LevelChoice, NearDrawGpu, PrepareView, SortedBillboards, choose_level,
 };
-pub use settings::{
-    BtfSettings, BtfStats, FETCHES_AT_MOST, GEOMETRY_COLOUR, LOD_COLOURS, PlaneMode,
-};
+pub use settings::{BtfSettings, BtfStats, FETCHES_AT_MOST, GEOMETRY_COLOR, LOD_COLORS, PlaneMode};
 
 use crate::format::Baked;
 use crate::lod::LevelTexels;
@@ -650,12 +649,7 @@ fn make_bind_group(
     })
 }
 
-/// Images per side of one texture layer: the images are packed [`ATLAS_SIDE`]² to a layer
-/// (image `i` in layer `i / ATLAS_SIDE²`, square `i % ATLAS_SIDE²` row by row), so that a
-/// scene of many prototypes fits the 2048 layers most GPUs allow (three species of three
-/// variants at 18 views x 7 lights are 3,402 images). `shaders/billboard.wgsl`'s
-/// `btf_sample` reads them, keeping half a texel inside the square at the level sampled.
-pub const ATLAS_SIDE: u32 = 4;
+pub use crate::render::consts::ATLAS_SIDE;
 
 /// Texture layers holding `images` images.
 pub fn atlas_layers(images: u64) -> u64 {

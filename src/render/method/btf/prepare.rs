@@ -18,7 +18,6 @@ use crate::format::{Baked, BtfImageSet};
 use crate::lod::{self, LevelTexels};
 use crate::model::mesh::Aabb;
 use crate::model::{Level, PerLevel, World};
-use crate::render::camera::{Camera, Frustum};
 use crate::render::world_gpu::TreeGpu;
 use crate::sphere::{DirectionSet, billboard_axes};
 use crate::vcm::CORNERS;
@@ -55,16 +54,7 @@ pub struct BtfScene {
     resolution: u32,
 }
 
-/// Where the camera and sun are for [`BtfScene::prepare`].
-#[derive(Clone, Copy)]
-pub struct PrepareView<'a> {
-    pub camera: &'a Camera,
-    /// Focal length in pixels (the texel criterion's scale).
-    pub focal_px: f32,
-    /// Unit direction to the sun.
-    pub to_sun: Vec3,
-    pub frustum: &'a Frustum,
-}
+pub use crate::render::method::view::PrepareView;
 
 /// One frame's billboards and the trees the `btf` method draws partly as geometry.
 pub struct BtfFrame {
@@ -1133,7 +1123,8 @@ impl Pusher<'_, '_> {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::render::btf::LOD_COLOURS;
+    use crate::render::btf::LOD_COLORS;
+    use crate::render::camera::Camera;
 
     const BRANCHES: usize = 4;
     const BRANCH_TWIGS: usize = 5;
@@ -1587,7 +1578,7 @@ pub(crate) mod tests {
         assert_eq!(f.stats.billboards.twig as usize, TRUNK_TWIGS);
         for r in &f.records {
             assert_eq!(r.mode, BillboardMode::Tint as u32);
-            assert_eq!(r.tint, LOD_COLOURS[Level::Branch]);
+            assert_eq!(r.tint, LOD_COLORS[Level::Branch]);
         }
     }
 

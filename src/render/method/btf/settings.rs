@@ -1,6 +1,7 @@
 //! The knobs of the `btf` method and what it reports per frame.
 
 use crate::model::{Level, PerLevel};
+use crate::scene::Scene;
 
 /// How each billboard is drawn.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -91,11 +92,25 @@ impl Default for BtfSettings {
 }
 
 impl BtfSettings {
+    /// The knobs a scene starts from: its `[render]` table over the defaults.
+    pub fn from_scene(scene: &Scene) -> Self {
+        let mut s = Self::default();
+        if let Some(r) = &scene.render {
+            s.lod_scale = r.lod_scale.unwrap_or(s.lod_scale);
+            s.weight_threshold = r.weight_threshold.unwrap_or(s.weight_threshold);
+            s.lod_fade = r.lod_fade.unwrap_or(s.lod_fade);
+            if let Some(p) = r.planes.as_deref().and_then(PlaneMode::parse) {
+                s.planes = p;
+            }
+        }
+        s
+    }
+
     /// What a billboard of `level` shows instead of its images, with its colour, when an
     /// overlay is on (the LOD level before the VCM sun factor); None without one.
     pub(super) fn overlay(&self, level: Level) -> Option<([f32; 3], super::BillboardMode)> {
         if self.show_lod {
-            Some((LOD_COLOURS[level], super::BillboardMode::Tint))
+            Some((LOD_COLORS[level], super::BillboardMode::Tint))
         } else if self.show_shadow {
             Some(([1.0; 3], super::BillboardMode::SunFactor))
         } else {
@@ -165,7 +180,7 @@ impl BtfStats {
 }
 
 /// Colours of the 'show LOD level' overlay.
-pub const LOD_COLOURS: PerLevel<[f32; 3]> = PerLevel {
+pub const LOD_COLORS: PerLevel<[f32; 3]> = PerLevel {
     twig: [0.9, 0.2, 0.15],
     branch: [0.95, 0.8, 0.1],
     tree: [0.2, 0.45, 0.95],
@@ -173,4 +188,4 @@ pub const LOD_COLOURS: PerLevel<[f32; 3]> = PerLevel {
 
 /// The show-level overlay's colour of `hybrid`'s trees drawn as geometry (their foliage
 /// tint; white on the leaves' own colour reads as pale, so a strong magenta).
-pub const GEOMETRY_COLOUR: [f32; 3] = [1.6, 0.3, 1.8];
+pub const GEOMETRY_COLOR: [f32; 3] = [1.6, 0.3, 1.8];

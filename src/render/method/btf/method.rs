@@ -1,0 +1,271 @@
+//! The `btf` and `hybrid` methods through the renderer's one interface: the BTF hierarchy's
+//! billboards, with the finer levels' trunks and limbs as geometry, and (`hybrid`) whole
+//! trees as geometry where even the twig level is too coarse.
+
+use std::time::Instant;
+
+use super::prepare::BtfFrame;
+use super::settings::GEOMETRY_COLOR;
+use crate::Result;
+use crate::model::mesh::Aabb;
+use crate::render::GpuContext;
+use crate::render::frame::{FrameDesc, FrameStats};
+use crate::render::method::interface::{
+    Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork,
+};
+use crate::render::method::kind::Method;
+use crate::render::pipelines::Layouts;
+use crate::render::shadow::Cascades;
+use crate::render::world_gpu::{TreeRun, WorldGpu};
+
+/// `btf` (or `hybrid`): its frame, the geometry runs it draws and its pipeline.
+pub struct BtfMethod {
+    hybrid: bool,
+    frame: Option<BtfFrame>,
+    runs: Vec<Vec<TreeRun>>,
+    pipeline: Option<wgpu::RenderPipeline>,
+}
+
+impl BtfMethod {
+    /// `btf`, or with `hybrid`, `hybrid`.
+    pub fn new(hybrid: bool) -> Self {
+        Self {
+            hybrid,
+            frame: None,
+            runs: Vec::new(),
+            pipeline: None,
+        }
+    }
+}
+
+/// Uploads the geometry a BTF frame draws (the trunks of the trees at the main-branch
+/// level, the trunks and limbs of those at the twig level, `hybrid`'s whole trees with their
+/// twigs fading) and plans its sun cascades: fitted to `hybrid`'s geometry trees alone, which
+/// then cast and receive through them and are left out of the ground alpha map.
+pub(crate) fn plan_geometry(
+    ctx: &GpuContext,
+    world: &WorldGpu,
+    frame: &FrameDesc,
+    bf: &BtfFrame,
+    sun: SunWork,
+) -> (Vec<Vec<TreeRun>>, Plan) {
+    let t0 = Instant::now();
+    let whole: Vec<Vec<(u32, f32)>> = bf
+        .twigs
+        .iter()
+        .map(|l| l.iter().map(|&(t, _)| (t, 1.0)).collect())
+        .collect();
+    let runs = world.upload_lists_faded(
+        ctx,
+        &[bf.trunk_only.clone(), bf.trunk_and_limbs.clone()],
+        &[&whole, &bf.twigs],
+        frame.btf.show_lod.then_some(GEOMETRY_COLOR),
+    );
+    let cascades = geometry_tree_cascades(world, frame, &bf.twigs);
+    log::debug!(
+        "btf prepare: the trunks' and limbs' lists ({} and {} trees) in {:.2} ms",
+        bf.trunk_only.iter().map(Vec::len).sum::<usize>(),
+        bf.trunk_and_limbs.iter().map(Vec::len).sum::<usize>(),
+        t0.elapsed().as_secs_f64() * 1e3
+    );
+    let on = cascades.is_some();
+    let mut excluded: Vec<u32> = if on {
+        bf.twigs.iter().flatten().map(|&(t, _)| t).collect()
+    } else {
+        Vec::new()
+    };
+    excluded.sort_unstable();
+    let plan = Plan {
+        cascades: cascades.unwrap_or_else(Cascades::none),
+        shadows_on: on,
+        // One map: the geometry trees, whole (the terrain has its own map).
+        casters: on.then(|| vec![runs[2].clone()]),
+        terrain_casts: false,
+        geometry_tree_cascades: on,
+        ground_excluded: excluded,
+        self_shadowed: None,
+        studio_casters: None,
+        sun,
+    };
+    (runs, plan)
+}
+
+/// One sun shadow map around the trees drawn as geometry (`trees`, per species; every
+/// cascade the same, the first one used), so that its texels stay small, reaching down
+/// past them to the lowest ground their shadows can fall on; None when there are none,
+/// shadows are off or the sun is down.
+fn geometry_tree_cascades(
+    world: &WorldGpu,
+    frame: &FrameDesc,
+    trees: &[Vec<(u32, f32)>],
+) -> Option<Cascades> {
+    if !frame.shadows.enabled || frame.sun.elevation_deg <= 0.0 {
+        return None;
+    }
+    let bounds = trees
+        .iter()
+        .flatten()
+        .filter_map(|&(t, _)| world.tree_bounds.get(t as usize))
+        .fold(None, |u: Option<Aabb>, b| {
+            Some(u.map_or(*b, |u| u.union(*b)))
+        })?;
+    let to_sun = frame.sun.direction();
+    let radius = 0.5 * bounds.extent().length();
+    // The shadow of the top reaches the ground at most this far along the sun's ray.
+    let scene = &world.scene_bounds;
+    let drop = (bounds.max.y - scene.min.y).max(0.0);
+    let below = (drop / to_sun.y.max(0.05)).min(2000.0);
+    Some(Cascades::fit_sphere_reaching(
+        to_sun,
+        bounds.center(),
+        radius,
+        below,
+        frame.shadows.map_size,
+    ))
+}
+
+/// The BTF billboards as the sun sees them, for the ground alpha shadow map (`btf`,
+/// `hybrid` and `billboard` alike).
+pub(crate) fn billboard_casters(
+    bake: &mut Bake,
+    ctx: &GpuContext,
+    layouts: &Layouts,
+    world: &WorldGpu,
+    to_sun: glam::Vec3,
+    excluded: &[u32],
+) -> Option<GroundCasters> {
+    let b = bake.btf.as_mut()?;
+    let count = b.prepare_sun(ctx, world, to_sun, excluded);
+    Some(GroundCasters {
+        pipeline: b
+            .opacity_pipeline(&ctx.device, &layouts.shadow_frame)
+            .clone(),
+        bind_group: b.sun_bind_group().clone(),
+        count,
+        vertices: 6,
+    })
+}
+
+impl RenderMethod for BtfMethod {
+    fn method(&self) -> Method {
+        if self.hybrid {
+            Method::Hybrid
+        } else {
+            Method::Btf
+        }
+    }
+
+    fn check(&self, bake: &Bake) -> Result<()> {
+        bake.need_btf(self.method()).map(|_| ())
+    }
+
+    fn culls_itself(&self, bake: &Bake, frame: &FrameDesc) -> bool {
+        bake.btf.as_ref().is_some_and(|b| b.takes_far(&frame.btf))
+    }
+
+    fn shades_ground(&self) -> bool {
+        true
+    }
+
+    fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
+        let method = self.method();
+        bake.need_btf(method)?;
+        let Some(b) = bake.btf.as_mut() else {
+            return Err(crate::Error::Gpu("the BTF images are not loaded".into()));
+        };
+        let frame = cx.frame;
+        let mut sun = SunWork::default();
+        if frame.btf.vcm && frame.trees {
+            let t0 = Instant::now();
+            if b.update_sun(cx.view.to_sun) {
+                sun.moved = true;
+                sun.ms += t0.elapsed().as_secs_f64() * 1e3;
+            }
+        }
+        let culls = b.takes_far(&frame.btf);
+        let (bf, shade_ms) = b.prepare(
+            cx.ctx,
+            cx.world,
+            (!culls).then_some(&cx.visible[..]),
+            frame.trees,
+            cx.view.camera,
+            cx.view.focal_px,
+            cx.view.to_sun,
+            cx.view.frustum,
+            &frame.btf,
+            self.hybrid,
+        );
+        // The far trees' VCM factors, uploaded after the sun moved.
+        sun.ms += shade_ms;
+        let (runs, plan) = plan_geometry(cx.ctx, cx.world, frame, &bf, sun);
+        self.runs = runs;
+        self.frame = Some(bf);
+        Ok(plan)
+    }
+
+    fn ground_casters(
+        &mut self,
+        bake: &mut Bake,
+        ctx: &GpuContext,
+        layouts: &Layouts,
+        world: &WorldGpu,
+        to_sun: glam::Vec3,
+        excluded: &[u32],
+    ) -> Option<GroundCasters> {
+        billboard_casters(bake, ctx, layouts, world, to_sun, excluded)
+    }
+
+    fn ensure_pipelines(
+        &mut self,
+        bake: &mut Bake,
+        ctx: &GpuContext,
+        layouts: &Layouts,
+        format: wgpu::TextureFormat,
+    ) -> Result<()> {
+        if let Some(b) = bake.btf.as_mut() {
+            self.pipeline = Some(b.pipeline(&ctx.device, &layouts.frame, format).clone());
+        }
+        Ok(())
+    }
+
+    fn encode_compute(
+        &self,
+        bake: &Bake,
+        encoder: &mut wgpu::CommandEncoder,
+        timestamp: Option<&wgpu::QuerySet>,
+    ) -> bool {
+        match (&self.frame, &bake.btf) {
+            (Some(bf), Some(b)) if bf.far => b.encode_far(encoder, timestamp),
+            _ => false,
+        }
+    }
+
+    fn draw(
+        &self,
+        bake: &Bake,
+        pass: &mut wgpu::RenderPass<'_>,
+        cx: &DrawCx<'_>,
+        stats: &mut FrameStats,
+    ) {
+        if let (Some(bf), Some(b)) = (&self.frame, &bake.btf) {
+            b.draw_main(
+                pass,
+                cx.world,
+                &self.runs,
+                cx.pipes,
+                self.pipeline.as_ref(),
+                bf,
+                cx.terrain,
+                stats,
+            );
+        }
+    }
+
+    fn finish(&self, bake: &Bake, ctx: &GpuContext, wait: bool, stats: &mut FrameStats) {
+        if let (Some(bf), Some(b)) = (&self.frame, &bake.btf)
+            && bf.far
+        {
+            b.add_far_stats(ctx, wait, stats);
+        }
+    }
+}

@@ -1,0 +1,228 @@
+//! The one interface every method implements ([`RenderMethod`]), what the core lends a
+//! method for each step of a frame, and what a method hands back ([`Plan`]).
+//!
+//! A frame runs the same steps whatever the method: the core culls the trees (unless the
+//! method finds its own), the method does its CPU work and uploads what it draws
+//! ([`RenderMethod::prepare`]), the core rebuilds the ground shadow maps when the sun moved
+//! (asking the method for its casters, [`RenderMethod::ground_casters`]), then encodes the
+//! method's compute passes, the sun cascades with the casters the plan names, the sky, the
+//! method's draws ([`RenderMethod::draw`]), and after the submission lets the method read
+//! back what it counted ([`RenderMethod::finish`]).
+
+use super::btf::BtfAssets;
+use super::kind::Method;
+use super::texel::TexelAssets;
+use super::view::PrepareView;
+use crate::format::Baked;
+use crate::model::World;
+use crate::render::GpuContext;
+use crate::render::frame::{FrameDesc, FrameStats};
+use crate::render::pipelines::{ColorPipelines, Layouts};
+use crate::render::shadow::Cascades;
+use crate::render::world_gpu::{TreeRun, WorldGpu};
+use crate::{Error, Result};
+
+/// What a bake gives the image-based methods once on the GPU. Several methods draw from
+/// the same assets (`btf`, `billboard` and `hybrid` from the BTF images; `texel` reads the
+/// trees' visibility cube maps beside its volumes), so the renderer holds them once and
+/// lends them to whichever method draws.
+#[derive(Default)]
+pub struct Bake {
+    /// The BTF image sets and the visibility cube maps.
+    pub btf: Option<BtfAssets>,
+    /// The texel volumes, when the bake has them and they could be loaded.
+    pub texel: Option<TexelAssets>,
+    /// Why the bake's texel volumes could not be loaded (the other methods still draw).
+    pub texel_problem: Option<String>,
+}
+
+impl Bake {
+    /// Loads `baked` for `world`. Volumes that cannot be loaded leave `btf` and `billboard`
+    /// working (the reason is kept for the `texel` method's error).
+    pub fn load(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
+        let mut bake = Self {
+            btf: Some(BtfAssets::new(ctx, baked, world)?),
+            ..Default::default()
+        };
+        if !baked.texels.is_empty() {
+            match TexelAssets::new(ctx, baked, world) {
+                Ok(t) => bake.texel = Some(t),
+                Err(e) => {
+                    log::warn!("the texel method is unavailable: {e}");
+                    bake.texel_problem = Some(e.to_string());
+                }
+            }
+        }
+        Ok(bake)
+    }
+
+    /// The BTF assets, or the error a method that needs them gives.
+    pub fn need_btf(&self, method: Method) -> Result<&BtfAssets> {
+        self.btf.as_ref().ok_or_else(|| {
+            Error::BadInput(format!(
+                "the {} method needs baked BTF images: run `canopy bake` (the viewer bakes on first use)",
+                method.name()
+            ))
+        })
+    }
+}
+
+/// What the core lends a method for its CPU work.
+pub struct PrepareCx<'a> {
+    pub ctx: &'a GpuContext,
+    pub world: &'a WorldGpu,
+    /// The frame, as the core draws it (the reference's larger shadow reach applied).
+    pub frame: &'a FrameDesc,
+    pub view: PrepareView<'a>,
+    /// Width over height of the target.
+    pub aspect: f32,
+    /// The trees in the camera's view, per species; every list empty when the method
+    /// finds its own trees ([`RenderMethod::culls_itself`]) or the frame draws none.
+    pub visible: Vec<Vec<u32>>,
+}
+
+/// Sun-dependent work a method did while preparing (the trees' VCM reads): timed apart,
+/// as the sun update, not as the frame's preparation.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SunWork {
+    pub moved: bool,
+    pub ms: f64,
+}
+
+/// What the core needs from a method's CPU work to run the frame's shared passes.
+pub struct Plan {
+    /// The sun cascades the method's geometry is shaded with.
+    pub cascades: Cascades,
+    /// The cascades are drawn and sampled.
+    pub shadows_on: bool,
+    /// Each cascade's casters (None: nothing is drawn into the cascades).
+    pub casters: Option<Vec<Vec<TreeRun>>>,
+    /// The terrain casts into the cascades too.
+    pub terrain_casts: bool,
+    /// The cascades hold the method's geometry trees alone, whose shadows then fall on the
+    /// rest of the scene through them (`hybrid`); those trees are in `ground_excluded`.
+    pub geometry_tree_cascades: bool,
+    /// Trees left out of the ground alpha shadow map (they cast through the cascades).
+    pub ground_excluded: Vec<u32>,
+    /// The reference's trees that shade themselves through maps of their own: the main
+    /// view's runs and its trees per species (the `geometry` method with shadows on).
+    pub self_shadowed: Option<(Vec<TreeRun>, Vec<Vec<u32>>)>,
+    /// In the studio, each cascade's casters per species: a frame with the same casters
+    /// and matrices keeps the maps the last one drew.
+    pub studio_casters: Option<Vec<Vec<Vec<u32>>>>,
+    pub sun: SunWork,
+}
+
+impl Plan {
+    /// A plan with no sun cascades and no reference: the cascades stay clear.
+    pub fn without_cascades(sun: SunWork) -> Self {
+        Self {
+            cascades: Cascades::none(),
+            shadows_on: false,
+            casters: None,
+            terrain_casts: false,
+            geometry_tree_cascades: false,
+            ground_excluded: Vec::new(),
+            self_shadowed: None,
+            studio_casters: None,
+            sun,
+        }
+    }
+}
+
+/// The casters of the ground alpha shadow map: instanced boxes or quads seen from the sun.
+pub struct GroundCasters {
+    pub pipeline: wgpu::RenderPipeline,
+    pub bind_group: wgpu::BindGroup,
+    pub count: u32,
+    /// Vertices per instance (6 for a billboard's quad, 36 for a texel's box).
+    pub vertices: u32,
+}
+
+/// What the core lends a method to draw in the main pass (group 0 and the trees' group 1
+/// bound, the sky drawn).
+pub struct DrawCx<'a> {
+    pub world: &'a WorldGpu,
+    pub pipes: &'a ColorPipelines,
+    /// The frame's group 0, for a method that binds its own groups and must restore it.
+    pub frame_group: &'a wgpu::BindGroup,
+    /// Draw the terrain (not in the studio).
+    pub terrain: bool,
+    /// The reference draws its trees after the main pass, in batches: the main pass then
+    /// draws the terrain only.
+    pub trees_after: bool,
+}
+
+/// One way of drawing the forest. The renderer holds one of each ([`super::registry`]) and
+/// runs the frame's steps through the one the frame names.
+pub trait RenderMethod {
+    /// The method this draws.
+    fn method(&self) -> Method;
+
+    /// Fails with what to do when the method cannot draw with `bake` (nothing baked, no
+    /// volumes in the bake).
+    fn check(&self, bake: &Bake) -> Result<()>;
+
+    /// The method finds its own trees this frame (the core then skips its cull).
+    fn culls_itself(&self, _bake: &Bake, _frame: &FrameDesc) -> bool {
+        false
+    }
+
+    /// The method's trees shade the ground through the ground shadow maps and its ground
+    /// sees the sky visibility (its trees are not geometry the cascades could draw).
+    fn shades_ground(&self) -> bool {
+        false
+    }
+
+    /// The frame's CPU work: levels of detail, expansion, sorting, shading factors, and the
+    /// uploads of what the method draws.
+    fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan>;
+
+    /// The method's trees as the sun sees them, for the ground alpha shadow map (None: it
+    /// has none), leaving out `excluded` trees.
+    fn ground_casters(
+        &mut self,
+        _bake: &mut Bake,
+        _ctx: &GpuContext,
+        _layouts: &Layouts,
+        _world: &WorldGpu,
+        _to_sun: glam::Vec3,
+        _excluded: &[u32],
+    ) -> Option<GroundCasters> {
+        None
+    }
+
+    /// Builds (once per target format) the pipelines [`Self::draw`] uses.
+    fn ensure_pipelines(
+        &mut self,
+        _bake: &mut Bake,
+        _ctx: &GpuContext,
+        _layouts: &Layouts,
+        _format: wgpu::TextureFormat,
+    ) -> Result<()> {
+        Ok(())
+    }
+
+    /// Compute passes that open the frame, the first timed from `timestamp` when given;
+    /// false when there were none.
+    fn encode_compute(
+        &self,
+        _bake: &Bake,
+        _encoder: &mut wgpu::CommandEncoder,
+        _timestamp: Option<&wgpu::QuerySet>,
+    ) -> bool {
+        false
+    }
+
+    /// The method's draws in the main pass, after the sky.
+    fn draw(
+        &self,
+        bake: &Bake,
+        pass: &mut wgpu::RenderPass<'_>,
+        cx: &DrawCx<'_>,
+        stats: &mut FrameStats,
+    );
+
+    /// After the frame's submission: what the GPU counted (this frame's when `wait`).
+    fn finish(&self, _bake: &Bake, _ctx: &GpuContext, _wait: bool, _stats: &mut FrameStats) {}
+}
