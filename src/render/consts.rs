@@ -8,6 +8,9 @@ pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// Format of the sun's shadow maps.
 pub const SHADOW_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
+/// Sun shadow cascades that follow the camera.
+pub const CASCADES: usize = 3;
+
 /// Largest shadow-map side accepted.
 pub const MAX_SHADOW_MAP: u32 = 8192;
 

@@ -6,12 +6,9 @@ use super::pipelines::{self, ColorPipelines, Layouts};
 use super::self_shadow;
 use super::shadow::{CASCADES, Cascades};
 use super::uniforms::FrameUniforms;
-use super::world_gpu::{self, PartKind, TreeRun, WorldGpu};
+use super::world_gpu::{self, ALL_PARTS, TreeRun, WorldGpu};
 use super::{FrameStats, GpuContext};
 use crate::Result;
-
-/// Every part of a tree.
-pub(crate) const ALL_PARTS: [PartKind; 3] = [PartKind::Trunk, PartKind::Limbs, PartKind::Twigs];
 
 /// The pipeline and buffers of the sun cascades' pass, and the main pass's mesh draws.
 pub struct MeshPasses {

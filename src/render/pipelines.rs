@@ -1,8 +1,8 @@
 //! Bind group layouts and render pipelines of the geometry method, built once per colour
 //! format (a window surface is often BGRA, offscreen targets RGBA).
 
-use super::world_gpu::vertex_layout;
 use super::{DEPTH_FORMAT, SHADOW_FORMAT, shaders};
+use crate::model::mesh::Vertex;
 
 /// Layouts shared by every pipeline.
 pub struct Layouts {
@@ -488,4 +488,19 @@ pub fn blended_pipeline(device: &wgpu::Device, p: Blended<'_>) -> wgpu::RenderPi
         multiview_mask: None,
         cache: None,
     })
+}
+
+/// Vertex buffer layout of `model::mesh::Vertex`.
+pub fn vertex_layout() -> wgpu::VertexBufferLayout<'static> {
+    const ATTRS: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
+        0 => Float32x3,
+        1 => Float32x3,
+        2 => Float32x3,
+        3 => Float32,
+    ];
+    wgpu::VertexBufferLayout {
+        array_stride: std::mem::size_of::<Vertex>() as u64,
+        step_mode: wgpu::VertexStepMode::Vertex,
+        attributes: &ATTRS,
+    }
 }

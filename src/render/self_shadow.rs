@@ -352,7 +352,7 @@ impl SelfShadow {
             pass.set_bind_group(1, &world.trees_bind_group, &[]);
             pass.set_bind_group(3, &self.lights_group, &[]);
             tris += world
-                .draw(&mut pass, &[run], None, false, &super::meshes::ALL_PARTS)
+                .draw(&mut pass, &[run], None, false, &super::world_gpu::ALL_PARTS)
                 .0;
         }
         tris
@@ -396,7 +396,7 @@ impl SelfShadow {
                 batch,
                 Some(trees),
                 false,
-                &super::meshes::ALL_PARTS,
+                &super::world_gpu::ALL_PARTS,
             );
             stats.triangles += tris;
             stats.trees_drawn += drawn;

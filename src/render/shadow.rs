@@ -11,7 +11,7 @@ use super::frame::ShadowSettings;
 use super::{GpuContext, SHADOW_FORMAT};
 use crate::model::mesh::Aabb;
 
-pub const CASCADES: usize = 3;
+pub use super::consts::CASCADES;
 
 /// Light matrices and view-depth ranges of the cascades.
 #[derive(Clone, Copy, Debug, PartialEq)]

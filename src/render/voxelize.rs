@@ -10,8 +10,8 @@ use glam::{UVec3, Vec3};
 
 use super::meshes::{MeshPasses, encode_cascades};
 use super::method::geometry::GeometryFrame;
+use super::pipelines::vertex_layout;
 use super::pipelines::{Layouts, buffer_entry};
-use super::world_gpu::vertex_layout;
 use super::{DEPTH_FORMAT, FrameDesc, FrameStats, GpuContext, Stage, shaders, target};
 use crate::{Error, Result};
 

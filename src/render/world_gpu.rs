@@ -9,7 +9,7 @@ use super::GpuContext;
 use super::camera::Frustum;
 use super::pipelines::MeshPipelines;
 use crate::model::World;
-use crate::model::mesh::{Aabb, Mesh, Vertex};
+use crate::model::mesh::{Aabb, Mesh};
 use crate::{Error, Result};
 
 /// Largest forest the GPU buffers are sized for: the scene file's own limit.
@@ -82,6 +82,9 @@ pub enum PartKind {
     Limbs,
     Twigs,
 }
+
+/// Every part of a tree.
+pub(crate) const ALL_PARTS: [PartKind; 3] = [PartKind::Trunk, PartKind::Limbs, PartKind::Twigs];
 
 /// A mesh drawn once per part of a tree: the trunk (one part), the limbs (one per main
 /// branch) or the twigs (one per twig of the whole tree).
@@ -287,7 +290,7 @@ impl WorldGpu {
         }
 
         // Terrain identity + the camera list + one list per shadow cascade.
-        let capacity = 1 + (1 + super::shadow::CASCADES) * n.max(1);
+        let capacity = 1 + (1 + super::consts::CASCADES) * n.max(1);
         let trees_buffer = ctx.checked("allocating the tree instance buffer", || {
             ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("tree instances"),
@@ -449,19 +452,4 @@ fn append_runs<I: ExactSizeIterator<Item = TreeGpu>>(
         data.extend(trees);
     }
     runs
-}
-
-/// Vertex buffer layout of `model::mesh::Vertex`.
-pub fn vertex_layout() -> wgpu::VertexBufferLayout<'static> {
-    const ATTRS: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
-        0 => Float32x3,
-        1 => Float32x3,
-        2 => Float32x3,
-        3 => Float32,
-    ];
-    wgpu::VertexBufferLayout {
-        array_stride: std::mem::size_of::<Vertex>() as u64,
-        step_mode: wgpu::VertexStepMode::Vertex,
-        attributes: &ATTRS,
-    }
 }

@@ -189,9 +189,7 @@ impl RenderMethod for Billboard {
         layouts: &Layouts,
         format: wgpu::TextureFormat,
     ) -> Result<()> {
-        if let Some(b) = bake.btf.as_mut() {
-            self.pipeline = Some(b.pipeline(&ctx.device, &layouts.frame, format).clone());
-        }
+        self.pipeline = super::btf::method::billboard_pipeline(bake, ctx, layouts, format);
         Ok(())
     }
 
@@ -202,18 +200,8 @@ impl RenderMethod for Billboard {
         cx: &DrawCx<'_>,
         stats: &mut FrameStats,
     ) {
-        if let (Some(bf), Some(b)) = (&self.frame, &bake.btf) {
-            b.draw_main(
-                pass,
-                cx.world,
-                &self.runs,
-                cx.pipes,
-                self.pipeline.as_ref(),
-                bf,
-                cx.terrain,
-                stats,
-            );
-        }
+        let frame = (&self.frame, &self.runs[..]);
+        super::btf::method::draw_frame(bake, pass, cx, frame, self.pipeline.as_ref(), stats);
         // The btf knobs do not apply.
         stats.btf = None;
     }

@@ -146,6 +146,34 @@ pub(crate) fn billboard_casters(
     })
 }
 
+/// The billboards' pipeline for `format` (the `btf` method's, which `billboard` draws with
+/// too); None without BTF images.
+pub(crate) fn billboard_pipeline(
+    bake: &mut Bake,
+    ctx: &GpuContext,
+    layouts: &Layouts,
+    format: wgpu::TextureFormat,
+) -> Option<wgpu::RenderPipeline> {
+    let b = bake.btf.as_mut()?;
+    Some(b.pipeline(&ctx.device, &layouts.frame, format).clone())
+}
+
+/// A prepared BTF frame's draws in the main pass: its geometry `runs`, then its billboards.
+pub(crate) fn draw_frame(
+    bake: &Bake,
+    pass: &mut wgpu::RenderPass<'_>,
+    cx: &DrawCx<'_>,
+    (frame, runs): (&Option<BtfFrame>, &[Vec<TreeRun>]),
+    pipeline: Option<&wgpu::RenderPipeline>,
+    stats: &mut FrameStats,
+) {
+    if let (Some(bf), Some(b)) = (frame, &bake.btf) {
+        b.draw_main(
+            pass, cx.world, runs, cx.pipes, pipeline, bf, cx.terrain, stats,
+        );
+    }
+}
+
 impl RenderMethod for BtfMethod {
     fn method(&self) -> Method {
         if self.hybrid {
@@ -222,9 +250,7 @@ impl RenderMethod for BtfMethod {
         layouts: &Layouts,
         format: wgpu::TextureFormat,
     ) -> Result<()> {
-        if let Some(b) = bake.btf.as_mut() {
-            self.pipeline = Some(b.pipeline(&ctx.device, &layouts.frame, format).clone());
-        }
+        self.pipeline = billboard_pipeline(bake, ctx, layouts, format);
         Ok(())
     }
 
@@ -247,18 +273,14 @@ impl RenderMethod for BtfMethod {
         cx: &DrawCx<'_>,
         stats: &mut FrameStats,
     ) {
-        if let (Some(bf), Some(b)) = (&self.frame, &bake.btf) {
-            b.draw_main(
-                pass,
-                cx.world,
-                &self.runs,
-                cx.pipes,
-                self.pipeline.as_ref(),
-                bf,
-                cx.terrain,
-                stats,
-            );
-        }
+        draw_frame(
+            bake,
+            pass,
+            cx,
+            (&self.frame, &self.runs),
+            self.pipeline.as_ref(),
+            stats,
+        );
     }
 
     fn finish(&self, bake: &Bake, ctx: &GpuContext, wait: bool, stats: &mut FrameStats) {

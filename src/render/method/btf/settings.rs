@@ -108,11 +108,14 @@ impl BtfSettings {
 
     /// What a billboard of `level` shows instead of its images, with its colour, when an
     /// overlay is on (the LOD level before the VCM sun factor); None without one.
-    pub(super) fn overlay(&self, level: Level) -> Option<([f32; 3], super::BillboardMode)> {
+    pub(super) fn overlay(
+        &self,
+        level: Level,
+    ) -> Option<([f32; 3], super::billboard::BillboardMode)> {
         if self.show_lod {
-            Some((LOD_COLORS[level], super::BillboardMode::Tint))
+            Some((LOD_COLORS[level], super::billboard::BillboardMode::Tint))
         } else if self.show_shadow {
-            Some(([1.0; 3], super::BillboardMode::SunFactor))
+            Some(([1.0; 3], super::billboard::BillboardMode::SunFactor))
         } else {
             None
         }
