@@ -1,18 +1,15 @@
-//! Tree species prototypes: grows one [`TreeModel`] from [`SpeciesParams`] and a seed as a
-//! three-level hierarchy of instanced parts, kept un-flattened as in Meyer's thesis:
-//! a twig (level 0, a stem carrying leaves or needles), a main branch (level 1, a limb
-//! carrying twig instances) and a tree (level 2, a trunk carrying main-branch instances and
-//! a few twigs of its own). The same hierarchy drives the geometry, the BTF levels and the
-//! visibility cube maps.
+//! Grows a [`TreeModel`] from [`SpeciesParams`] and a seed: the twig, the main branch and
+//! the trunk with their instance transforms, all deterministic for the parameters and seed.
 
 use std::f32::consts::{FRAC_PI_2, PI, TAU};
 
 use glam::{Mat4, Vec3};
 
-use super::ModelError;
-use super::mesh::{Aabb, Mesh, Vertex};
-use super::rng::Rng;
-use super::species::{CrownShape, FoliageKind, SpeciesParams, TwigArrangement};
+use super::TreeModel;
+use crate::model::ModelError;
+use crate::model::mesh::{Mesh, Vertex};
+use crate::model::rng::Rng;
+use crate::model::species::{CrownShape, FoliageKind, SpeciesParams, TwigArrangement};
 
 /// The golden angle in radians: successive items rotated by it never line up.
 const GOLDEN_ANGLE: f32 = 2.399_963_3;
@@ -22,60 +19,6 @@ const LIMB_SEGMENTS: usize = 6;
 const TRUNK_SEGMENTS: usize = 10;
 /// How far the trunk reaches below the ground (m), so that it does not float on slopes.
 const TRUNK_SINK: f32 = 0.4;
-
-/// Triangles per level, each level including all its children.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct LevelCounts {
-    /// One twig.
-    pub twig: u64,
-    /// One main branch: its limb and all its twigs.
-    pub branch: u64,
-    /// The whole tree.
-    pub tree: u64,
-}
-
-/// Numbers of parts in one tree.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct PartCounts {
-    /// Main-branch instances.
-    pub main_branches: u64,
-    /// Twig instances in the whole tree (on branches and on the trunk).
-    pub twigs: u64,
-    /// Leaves or needles in the whole tree.
-    pub foliage: u64,
-}
-
-/// One species prototype: a hierarchy of instanced parts (not flattened).
-#[derive(Clone, Debug)]
-pub struct TreeModel {
-    /// Species name (set by [`crate::model::World::build`] from the scene; `generate` uses
-    /// `conifer` or `broadleaf`).
-    pub name: String,
-    /// What the twigs carry.
-    pub foliage: FoliageKind,
-    /// Leaves or needles on one twig.
-    pub foliage_per_twig: u32,
-    /// Level 0: a stem with leaves or needles, in the twig's own frame (origin at the twig's
-    /// base, growing along +Z, +Y its upper side).
-    pub twig: Mesh,
-    /// Level 1: the limb's own geometry in the main-branch frame (origin where it meets the
-    /// trunk's axis, growing along +Z, +Y its upper side).
-    pub branch_limb: Mesh,
-    /// Twig instances in the main-branch frame.
-    pub branch_twigs: Vec<Mat4>,
-    /// Level 2: the trunk in the tree frame (origin at the ground, +Y up).
-    pub trunk: Mesh,
-    /// Main-branch instances in the tree frame (rotation and uniform scale).
-    pub tree_branches: Vec<Mat4>,
-    /// Twigs directly on the trunk (the leader at the top and its neighbours), tree frame.
-    pub tree_twigs: Vec<Mat4>,
-    /// Bounds of the twig in its own frame.
-    pub twig_bounds: Aabb,
-    /// Bounds of a main branch (limb and twigs) in its own frame.
-    pub branch_bounds: Aabb,
-    /// Bounds of the whole tree in the tree frame.
-    pub tree_bounds: Aabb,
-}
 
 impl TreeModel {
     /// Grows the prototype of a species. Deterministic for `(params, seed)`; the parameters
@@ -124,66 +67,6 @@ impl TreeModel {
             branch_bounds,
             tree_bounds,
         })
-    }
-
-    /// Every twig instance of the tree in the tree frame: each branch transform times each
-    /// of the branch's twig transforms, then the twigs on the trunk.
-    pub fn twigs_in_tree_frame(&self) -> Vec<Mat4> {
-        let mut out = Vec::with_capacity(
-            self.tree_branches.len() * self.branch_twigs.len() + self.tree_twigs.len(),
-        );
-        for b in &self.tree_branches {
-            out.extend(self.branch_twigs.iter().map(|t| *b * *t));
-        }
-        out.extend_from_slice(&self.tree_twigs);
-        out
-    }
-
-    /// Triangles per level, each level including its children.
-    pub fn triangle_counts(&self) -> LevelCounts {
-        let twig = self.twig.triangle_count() as u64;
-        let branch =
-            self.branch_limb.triangle_count() as u64 + self.branch_twigs.len() as u64 * twig;
-        let tree = self.trunk.triangle_count() as u64
-            + self.tree_branches.len() as u64 * branch
-            + self.tree_twigs.len() as u64 * twig;
-        LevelCounts { twig, branch, tree }
-    }
-
-    /// Main branches, twigs and leaves/needles in the whole tree.
-    pub fn counts(&self) -> PartCounts {
-        let twigs = self.tree_branches.len() as u64 * self.branch_twigs.len() as u64
-            + self.tree_twigs.len() as u64;
-        PartCounts {
-            main_branches: self.tree_branches.len() as u64,
-            twigs,
-            foliage: twigs * u64::from(self.foliage_per_twig),
-        }
-    }
-
-    /// One main branch (limb and twigs) as a single mesh in the main-branch frame.
-    pub fn flatten_branch(&self) -> Mesh {
-        let mut m = self.branch_limb.clone();
-        for t in &self.branch_twigs {
-            m.append(&self.twig, *t);
-        }
-        m
-    }
-
-    /// The whole tree as a single mesh in the tree frame (the full-geometry reference).
-    pub fn flatten(&self) -> Mesh {
-        let counts = self.triangle_counts();
-        let mut m = Mesh::default();
-        m.indices.reserve(counts.tree as usize * 3);
-        m.append(&self.trunk, Mat4::IDENTITY);
-        let branch = self.flatten_branch();
-        for b in &self.tree_branches {
-            m.append(&branch, *b);
-        }
-        for t in &self.tree_twigs {
-            m.append(&self.twig, *t);
-        }
-        m
     }
 }
 
@@ -552,7 +435,9 @@ fn build_tree(p: &SpeciesParams, rng: &mut Rng, reach: f32) -> (Mesh, Vec<Mat4>,
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::mesh::Aabb;
     use crate::model::species::preset;
+    use crate::model::tree::PartCounts;
 
     fn model(name: &str) -> TreeModel {
         let p = preset(name).unwrap_or_default();
