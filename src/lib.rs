@@ -4,6 +4,7 @@
 //! the `canopy` binary drives.
 
 pub mod app;
+pub mod atomic_file;
 pub mod bake;
 pub mod bench;
 pub mod error;
