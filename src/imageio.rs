@@ -1,5 +1,5 @@
-//! Writing images without ever leaving half a file: encode to a temporary file beside the
-//! destination, then rename it into place.
+//! Writing images without ever leaving half a file (through [`crate::atomic_file`]), and
+//! the screenshots' file names.
 
 use std::path::{Path, PathBuf};
 
@@ -20,23 +20,11 @@ pub fn save_png(path: &Path, img: &RgbaImage) -> Result<()> {
         std::fs::create_dir_all(parent)
             .map_err(|e| fail(format!("cannot create {}: {e}", parent.display())))?;
     }
-    let tmp = temp_path(path);
-    let result = img
-        .save_with_format(&tmp, image::ImageFormat::Png)
-        .map_err(|e| fail(e.to_string()))
-        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| fail(e.to_string())));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
-}
-
-fn temp_path(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "image".into());
-    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+    crate::atomic_file::write_atomic(path, |w| {
+        img.write_with_encoder(image::codecs::png::PngEncoder::new(w))
+            .map_err(std::io::Error::other)
+    })
+    .map_err(|e| fail(format!("{} failed: {}", e.step, e.source)))
 }
 
 /// `screenshots/canopy-YYYYMMDD-HHMMSS.png` under `dir`, with a counter if that exists.

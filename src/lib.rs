@@ -1,11 +1,13 @@
 //! canopy: a real-time forest viewer. The library holds everything but the window: the
 //! scene file, the procedural tree hierarchies and terrain (`model`), the window-free GPU
-//! render core (`render`), image metrics (`metrics`) and the viewer shell (`app`), which
-//! the `canopy` binary drives.
+//! render core (`render`), image metrics (`metrics`), the viewer shell (`app`) and the
+//! command line (`cli`), which the `canopy` binary parses and runs.
 
 pub mod app;
+pub mod atomic_file;
 pub mod bake;
 pub mod bench;
+pub mod cli;
 pub mod error;
 pub mod forest_map;
 pub mod format;

@@ -92,31 +92,42 @@ pub fn summary_json(run: &RunInfo, results: &BenchResults) -> String {
     .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
 }
 
-/// The rows as CSV.
+/// The rows as CSV (the `csv` crate quotes and escapes each field as it needs).
 pub fn results_csv(results: &BenchResults) -> String {
-    let mut s = String::from(
-        "frame,configuration,method,ms,prepare_ms,mean_flip,p95_flip,change,truth_change,flicker_excess\n",
-    );
+    let mut w = csv::Writer::from_writer(Vec::new());
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
+    // Writing into a Vec cannot fail.
+    let _ = w.write_record([
+        "frame",
+        "configuration",
+        "method",
+        "ms",
+        "prepare_ms",
+        "mean_flip",
+        "p95_flip",
+        "change",
+        "truth_change",
+        "flicker_excess",
+    ]);
     for r in &results.rows {
         let c = &results.configs[r.config];
         let excess = r.change.zip(r.truth_change).map(|(m, t)| m - t);
-        let _ = writeln!(
-            s,
-            "{},\"{}\",{},{:.4},{:.4},{:.6},{:.6},{},{},{}",
-            r.frame,
-            c.label.replace('"', "'"),
-            c.method.name(),
-            r.ms,
-            r.prepare_ms,
-            r.mean_flip,
-            r.p95_flip,
+        let _ = w.write_record([
+            r.frame.to_string(),
+            c.label.clone(),
+            c.method.name().to_owned(),
+            format!("{:.4}", r.ms),
+            format!("{:.4}", r.prepare_ms),
+            format!("{:.6}", r.mean_flip),
+            format!("{:.6}", r.p95_flip),
             opt(r.change),
             opt(r.truth_change),
-            opt(excess)
-        );
+            opt(excess),
+        ]);
     }
-    s
+    w.into_inner()
+        .map(|bytes| String::from_utf8_lossy(&bytes).into_owned())
+        .unwrap_or_default()
 }
 
 /// A plain table of the summaries, for the terminal.
@@ -141,18 +152,10 @@ pub fn summary_table(results: &BenchResults) -> String {
     s
 }
 
-/// Writes `text` to `path` through a temporary file beside it, renamed into place.
+/// Writes `text` to `path` atomically ([`crate::atomic_file`]).
 pub(super) fn write_text(path: &Path, text: &str) -> Result<()> {
-    let fail = |e: std::io::Error| Error::BadInput(format!("cannot write {}: {e}", path.display()));
-    let name = path
-        .file_name()
-        .map_or("out".into(), |n| n.to_string_lossy().into_owned());
-    let tmp = path.with_file_name(format!(".{name}.tmp"));
-    let result = std::fs::write(&tmp, text).and_then(|()| std::fs::rename(&tmp, path));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.map_err(fail)
+    crate::atomic_file::write_atomic(path, |w| w.write_all(text.as_bytes()))
+        .map_err(|e| Error::BadInput(format!("cannot write {}: {}", path.display(), e.source)))
 }
 
 /// Truth, method and FLIP map side by side.

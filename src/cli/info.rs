@@ -1,0 +1,123 @@
+//! `canopy info`: a scene's species, triangles per level, trees, terrain and bake
+//! estimate; `--map` draws it from above.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context as _;
+
+use super::args::load_scene;
+use super::bake::estimate_line;
+use crate::model::summary::WorldSummary;
+
+#[derive(clap::Args)]
+pub struct InfoArgs {
+    scene: Option<PathBuf>,
+    #[arg(long)]
+    json: bool,
+    /// Write a map of the scene from above (terrain, stands, clearings, meadows, every
+    /// tree's crown in its species' colour) as a PNG.
+    #[arg(long, value_name = "MAP.png")]
+    map: Option<PathBuf>,
+    /// The map's side in pixels (16..8192).
+    #[arg(long, default_value_t = 1024, value_name = "PX")]
+    map_size: u32,
+}
+
+/// How the trees' own visibility cube maps are laid out and what they weigh.
+fn tree_vcm_line(e: &crate::bake::estimate::Estimate, world: &crate::model::World) -> String {
+    let per_1000 = if world.forest.instances.is_empty() {
+        0.0
+    } else {
+        e.tree_vcm_bytes as f64 / world.forest.instances.len() as f64 * 1000.0 / 1e6
+    };
+    let layout = match world.tree_vcm {
+        crate::model::TreeVcm::PerTree => format!("{} trees' own cube maps", e.tree_vcm_objects),
+        crate::model::TreeVcm::Cells => format!(
+            "{} forest cells of {:.1} m",
+            e.tree_vcm_objects,
+            crate::vcm::cells::ForestCells::side_for(world)
+        ),
+    };
+    format!(
+        "tree-level visibility cube maps: {layout}, {:.1} MB ({per_1000:.2} MB per 1,000 trees)",
+        e.tree_vcm_bytes as f64 / 1e6
+    )
+}
+
+pub fn info(args: InfoArgs) -> anyhow::Result<()> {
+    let InfoArgs {
+        scene,
+        json,
+        map,
+        map_size,
+    } = args;
+    if !(16..=crate::forest_map::MAX_MAP_SIZE).contains(&map_size) {
+        return Err(crate::Error::BadInput(format!(
+            "--map-size must be between 16 and {}, found {map_size}",
+            crate::forest_map::MAX_MAP_SIZE
+        ))
+        .into());
+    }
+    let scene = load_scene(scene.as_deref())?;
+    let t0 = Instant::now();
+    let world = scene.build_world().map_err(crate::Error::from)?;
+    if let Some(path) = &map {
+        let img = crate::forest_map::draw(&world, &scene.species, &scene.forest, map_size);
+        crate::imageio::save_png(path, &img)?;
+        eprintln!("map written to {}", path.display());
+    }
+    let r = WorldSummary::new(&world, t0.elapsed().as_secs_f64() * 1e3);
+    let settings = crate::bake::cache::settings_of(&scene);
+    // A bake the format cannot hold is reported here, not refused: `info` only describes.
+    let estimate = crate::bake::estimate::estimate(&settings, &world);
+    if json {
+        #[derive(serde::Serialize)]
+        struct Info<'a> {
+            #[serde(flatten)]
+            world: &'a WorldSummary,
+            bake_estimate: Option<crate::bake::estimate::Estimate>,
+            bake_refused: Option<String>,
+        }
+        let info = Info {
+            world: &r,
+            bake_estimate: estimate.as_ref().ok().copied(),
+            bake_refused: estimate.as_ref().err().map(|e| e.to_string()),
+        };
+        println!("{}", serde_json::to_string(&info).context("encoding JSON")?);
+    } else {
+        println!(
+            "{} trees on a {} m terrain ({}x{} heights), built in {:.0} ms",
+            r.trees, r.terrain.size_m, r.terrain.resolution, r.terrain.resolution, r.build_ms
+        );
+        if let Some(c) = r.terrain.far_forest_cover {
+            println!(
+                "  past the square, the forest goes on to the horizon as a canopy surface (crowns cover up to {:.0} % of its stands)",
+                100.0 * c
+            );
+        }
+        for s in &r.species {
+            println!(
+                "  {:<10} {} trees; triangles: twig {}, main branch {}, tree {}; {} main branches, {} twigs, {} leaves/needles, {:.1} m tall, crown {:.0} % covered from the side",
+                s.name,
+                s.trees,
+                s.triangles.twig,
+                s.triangles.main_branch,
+                s.triangles.tree,
+                s.main_branches,
+                s.twigs,
+                s.leaves,
+                s.height_m,
+                100.0 * s.crown_coverage
+            );
+        }
+        match &estimate {
+            Ok(e) => {
+                println!("{}", estimate_line(e));
+                println!("  {}", tree_vcm_line(e, &world));
+            }
+            Err(e) => println!("bake refused: {e}"),
+        }
+    }
+    Ok(())
+}

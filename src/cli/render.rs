@@ -1,0 +1,307 @@
+//! `canopy render`: one frame of a scene to a PNG, timed, no window needed.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context as _;
+use glam::Vec3;
+
+use super::args::{
+    MethodArg, PlanesArg, TexelModeArg, adapter, load_scene, on_off, parse_positive, parse_size,
+    parse_sun, parse_unit, parse_vec3,
+};
+use crate::progress;
+use crate::render::measure::{self, FrameReport, MeasureOptions};
+use crate::render::method::texel::TexelSettings;
+use crate::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
+use crate::slices::SliceBounds;
+
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// Scene file (TOML). Omit for the embedded default forest (1,000 trees).
+    scene: Option<PathBuf>,
+    /// Output PNG.
+    #[arg(long)]
+    out: PathBuf,
+    /// Rendering method.
+    #[arg(long, value_enum, default_value_t = MethodArg::Geometry)]
+    method: MethodArg,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    size: (u32, u32),
+    /// Camera position X,Y,Z in metres (default: the scene's start camera).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true, requires = "look_at")]
+    camera: Option<Vec3>,
+    /// Point the camera looks at, X,Y,Z in metres.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true, requires = "camera")]
+    look_at: Option<Vec3>,
+    /// Sun azimuth and elevation in degrees, AZ,EL (default: the scene's sun).
+    #[arg(long, value_parser = parse_sun, allow_hyphen_values = true)]
+    sun: Option<(f32, f32)>,
+    /// Render N times larger on each side and average down (ground-truth anti-aliasing).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=8))]
+    supersample: u32,
+    /// Frames rendered to time (the median is reported).
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    frames: u32,
+    /// Side of each shadow cascade's map, in texels.
+    #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(16..=8192))]
+    shadow_map: u32,
+    /// btf / billboard: use this baked file (from `canopy bake --out`) instead of the cache;
+    /// it must have been baked from this scene, and is never re-baked.
+    #[arg(long)]
+    baked: Option<PathBuf>,
+    /// geometry: draw the reference the bench measures against (sky hidden by trees and
+    /// hills, sun shadows over the whole scene from 4096² cascades); slower.
+    #[arg(long)]
+    reference: bool,
+    /// geometry: draw each pixel's class instead of its colour (sky black, ground red,
+    /// trees nearer than 100 m green, farther blue), for `compare --classes`.
+    #[arg(long)]
+    pixel_classes: bool,
+    /// geometry --reference: directions over the sky whose depth maps give the sky
+    /// visibility.
+    #[arg(long, default_value_t = crate::render::sky_visibility::SKY_DIRECTIONS,
+          value_parser = clap::value_parser!(u32).range(1..=1024), requires = "reference")]
+    sky_directions: u32,
+    /// With --reference: side in texels of each tree's own sun map (its shadows on
+    /// itself, fine at any distance); 0: none, the cascades alone.
+    #[arg(long, default_value_t = crate::render::self_shadow::SELF_MAP_SIZE,
+          value_parser = clap::value_parser!(u32).range(0..=8192), requires = "reference")]
+    self_map: u32,
+    /// btf: a level is used while its largest texel projects below this many pixels
+    /// (default: the scene's [render] table, else 1).
+    #[arg(long, value_parser = parse_positive)]
+    lod_scale: Option<f32>,
+    /// btf: images whose blending weight is below this are skipped, 0..1 (default: the
+    /// scene's [render] table, else 0).
+    #[arg(long, value_parser = parse_unit)]
+    weight_threshold: Option<f32>,
+    /// btf: one camera-facing plane per billboard, or three crossed planes (default: the
+    /// scene's [render] table, else single).
+    #[arg(long, value_enum)]
+    planes: Option<PlanesArg>,
+    /// btf: colour billboards by level (twig red, main branch yellow, tree blue).
+    #[arg(long)]
+    show_lod: bool,
+    /// btf: tree shadows on the ground (alpha shadow map) and terrain self-shadows: on or off.
+    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
+    ground_shadows: bool,
+    /// btf, hybrid, texel: the ground sees the sky only where the trees leave it open (the
+    /// reference's sky visibility, computed once before the first frame): on or off.
+    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
+    ground_sky: bool,
+    /// btf: shade billboards by the visibility cube maps (trees shading each other): on or off.
+    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
+    vcm: bool,
+    /// btf: weight the sky light by the cube maps' mean visibility too: on or off (off: the
+    /// cube maps shade the sun light only).
+    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
+    vcm_sky: bool,
+    /// btf: how far to brighten the blend of the 3 nearest light samples towards the sun's
+    /// strength (their weighted directions fall short of it, to 1/sqrt(3) with 6 lights),
+    /// 0..1: 0 = the plain blend, 1 = the whole gain (default: 0.5)
+    #[arg(long, value_parser = parse_unit)]
+    light_gain: Option<f32>,
+    /// btf, hybrid: build the billboards of the trees far enough to be one tree-level
+    /// billboard each on the GPU (compute passes), the CPU preparing only the near trees:
+    /// on or off.
+    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
+    gpu_far: bool,
+    /// btf, hybrid, with --gpu-far on: expand the near trees' billboards on the GPU too (the
+    /// CPU choosing their levels and cross-fades only): on or off.
+    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
+    gpu_near: bool,
+    /// btf: draw the VCM sun factor alone, in grey (white = fully lit).
+    #[arg(long)]
+    show_shadow: bool,
+    /// btf: cross-fade band before each level's bound, as a fraction of it, 0 = pop
+    /// (default: the scene's [render] table, else 0.2).
+    #[arg(long, value_parser = parse_unit)]
+    lod_fade: Option<f32>,
+    /// texel: how volumes are sliced (slices3d: parallel to the screen through a 3D
+    /// texture; stacks: the seeds' three axis stacks of 2D slices with pre-composited
+    /// power-of-two levels; polygons: slices3d's slices drawn as polygons).
+    #[arg(long, value_enum, default_value_t = TexelModeArg::Slices3d)]
+    texel_mode: TexelModeArg,
+    /// texel: largest visible depth between slices, metres (criterion C1).
+    #[arg(long, default_value_t = SliceBounds::default().d0, value_parser = parse_positive)]
+    slice_d0: f32,
+    /// texel: largest projected spacing between slices, pixels (criterion C2).
+    #[arg(long, default_value_t = SliceBounds::default().d1, value_parser = parse_positive)]
+    slice_d1: f32,
+    /// texel: most slices per texel.
+    #[arg(long, default_value_t = SliceBounds::default().max_slices,
+          value_parser = clap::value_parser!(u32).range(1..=1024))]
+    max_slices: u32,
+    /// texel: colour each texel by its slice count (blue 1, green about 11, red 128 or more).
+    #[arg(long)]
+    show_slices: bool,
+    /// texel: draw the trees of far tiles as forest-cover tiles (on or off).
+    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
+    texel_tiles: bool,
+    /// texel: distance (m) beyond which a whole tile is drawn as one forest-cover volume.
+    #[arg(long, default_value_t = TexelSettings::default().tile_distance, value_parser = parse_positive)]
+    tile_distance: f32,
+    /// Prefer the CPU (software) adapter.
+    #[arg(long)]
+    cpu: bool,
+    /// Print one JSON object with the frame's statistics on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn render(args: RenderArgs) -> anyhow::Result<()> {
+    let method = Method::from(args.method);
+    let scene = load_scene(args.scene.as_deref())?;
+    let world = scene.build_world().map_err(crate::Error::from)?;
+    let mut frame = FrameDesc::from_scene(&scene);
+    frame.method = method;
+    frame.shadows.map_size = args.shadow_map;
+    frame.ground_shadows = args.ground_shadows;
+    frame.ground_sky = args.ground_sky;
+    if args.pixel_classes {
+        if method != Method::Geometry {
+            return Err(crate::Error::BadInput(
+                "--pixel-classes draws the geometry's pixel classes; use --method geometry".into(),
+            )
+            .into());
+        }
+        frame.pixel_classes = true;
+    }
+    if args.reference {
+        if method != Method::Geometry {
+            return Err(crate::Error::BadInput(
+                "--reference draws the geometry method as the truth; drop it or use --method geometry"
+                    .into(),
+            )
+            .into());
+        }
+        frame.reference = Some(crate::render::Reference {
+            sky_directions: args.sky_directions,
+            self_map_size: args.self_map,
+            ..Default::default()
+        });
+    }
+    if let (Some(pos), Some(target)) = (args.camera, args.look_at) {
+        frame.camera = Camera::look_at(pos, target, frame.camera.fov_y_deg);
+    }
+    let eye = frame.camera.position;
+    let ground = world.terrain.height_at(eye.x, eye.z);
+    if eye.y < ground {
+        eprintln!(
+            "warning: the camera is {:.1} m below the terrain (ground at y = {ground:.1} m there)",
+            ground - eye.y
+        );
+    }
+    if let Some((az, el)) = args.sun {
+        frame.sun.azimuth_deg = az;
+        frame.sun.elevation_deg = el;
+    }
+    let start = frame.btf;
+    frame.btf = crate::render::btf::BtfSettings {
+        lod_scale: args.lod_scale.unwrap_or(start.lod_scale),
+        weight_threshold: args.weight_threshold.unwrap_or(start.weight_threshold),
+        planes: args.planes.map_or(start.planes, Into::into),
+        show_lod: args.show_lod,
+        lod_fade: args.lod_fade.unwrap_or(start.lod_fade),
+        vcm: args.vcm,
+        show_shadow: args.show_shadow,
+        vcm_sky: args.vcm_sky,
+        light_gain: args.light_gain.unwrap_or(start.light_gain),
+        gpu_far: args.gpu_far,
+        gpu_near: args.gpu_near,
+    };
+    frame.texel = TexelSettings {
+        mode: args.texel_mode.into(),
+        bounds: SliceBounds {
+            d0: args.slice_d0,
+            d1: args.slice_d1,
+            max_slices: args.max_slices,
+        },
+        vcm: args.vcm,
+        show_slices: args.show_slices,
+        tiles: args.texel_tiles,
+        tile_distance: args.tile_distance,
+    };
+    let (w, h) = args.size;
+    crate::render::target::check_size(
+        w.saturating_mul(args.supersample),
+        h.saturating_mul(args.supersample),
+        None,
+    )?;
+    let ctx = GpuContext::headless(adapter(args.cpu))?;
+    let mut renderer = Renderer::new(&ctx, &world)?;
+    if frame.ground_sky && (method.is_btf() || method == Method::Texel) {
+        let t0 = Instant::now();
+        renderer.prepare_sky(&ctx, &world)?;
+        log::info!(
+            "the ground's sky visibility in {:.1} s",
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    if let Some(r) = frame.reference {
+        let t0 = Instant::now();
+        renderer.prepare_reference(&ctx, &world, r.sky_directions, true)?;
+        log::info!(
+            "sky visibility from {} directions in {:.1} s",
+            r.sky_directions,
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    if let Some(path) = &args.baked {
+        if !method.needs_bake() {
+            return Err(crate::Error::BadInput(format!(
+                "--baked is for the methods that draw baked images (btf, billboard, texel, hybrid), not {}",
+                method.name()
+            ))
+            .into());
+        }
+        let baked = crate::bake::open_baked(path, &scene)?;
+        renderer.attach_btf(&ctx, &baked, &world)?;
+    } else if method.needs_bake() {
+        let bar = progress::bar(true, 0, progress::BAKE_BAR);
+        let baked =
+            crate::bake::load_or_bake(&ctx, &scene, &world, &mut |p| progress::show_bake(&bar, p));
+        bar.finish_and_clear();
+        renderer.attach_btf(&ctx, &baked?.0, &world)?;
+    }
+
+    let opts = MeasureOptions {
+        frames: args.frames,
+        supersample: args.supersample,
+    };
+    let bar = progress::bar(
+        true,
+        u64::from(args.frames) + 1,
+        "{msg} [{bar:30}] {pos}/{len} frames ({elapsed})",
+    );
+    bar.set_message(format!("rendering {w}x{h} with {}", method.name()));
+    let m =
+        measure::measure_frame_with(&mut renderer, &ctx, &frame, w, h, &opts, &mut || bar.inc(1));
+    bar.finish_and_clear();
+    let m = m?;
+    crate::imageio::save_png(&args.out, &m.image)?;
+    if args.json {
+        let mut report = FrameReport::new(&m, &frame, &opts, &renderer, &ctx);
+        report.out = Some(args.out.display().to_string());
+        println!(
+            "{}",
+            serde_json::to_string(&report).context("encoding JSON")?
+        );
+    } else {
+        println!(
+            "wrote {} ({w}x{h}, {}): {:.2} ms/frame ({}, median of {}), CPU prepare {:.2} ms, {} trees, {} triangles, on {}",
+            args.out.display(),
+            method.name(),
+            m.frame_ms,
+            m.source.name(),
+            m.frames_timed,
+            m.prepare_ms,
+            m.stats.trees_drawn,
+            m.stats.triangles,
+            ctx.adapter_name()
+        );
+    }
+    Ok(())
+}

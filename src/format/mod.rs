@@ -1,0 +1,548 @@
+//! The `.canopy` file: everything one bake produces (BTF image sets, visibility cube maps,
+//! texel volumes),
+//! in one versioned, checksummed file that the viewer caches and validates on load.
+//!
+//! # Byte layout (format version 5)
+//!
+//! All integers are little-endian, `f32` is IEEE 754 binary32 (little-endian bits). Offsets
+//! are in bytes. There is no padding anywhere.
+//!
+//! ```text
+//! HEADER (64 + 16*N bytes)
+//!   off  size  field
+//!    0     8   magic           "CANOPY\r\n" (43 41 4E 4F 50 59 0D 0A); the CR LF pair catches
+//!                              a file whose line endings were converted in transfer
+//!    8     4   version         u32, 5
+//!   12     4   section_count   u32 N, at most MAX_SECTIONS (4096)
+//!   16     8   file_size       u64, total length of the file in bytes, header included
+//!   24     8   scene_hash      u64, hash of the scene text + bake settings (from the caller)
+//!   32     4   views           u32, one of 6, 18, 66, 258 (twig and   \
+//!                              main-branch sets)                     |
+//!   36     4   lights          u32, one of 6, 18, 66, 258           |
+//!   40     4   resolution      u32, one of 32, 64, 128              | BakeSettings
+//!   44     4   supersample     u32, 1..=8                           |
+//!   48     4   vcm_resolution  u32, 8..=128                         |
+//!   52     4   texel_resolution u32, 0 (no texel volumes) or 16..=256: voxels along the
+//!                              longest side of each species' box    |
+//!   56     4   tree_views      u32, one of 6, 18, 66, 258 (tree-   /
+//!                              level sets)
+//!   60  16*N   section table, one 16-byte entry per section, in file order:
+//!                +0  u32 kind      1 = BTF image sets, 2 = VCM sets, 3 = texel volumes
+//!                                  (0 and others invalid)
+//!                +4  u32 crc32     CRC-32 (IEEE, as crc32fast) of the section's payload
+//!                +8  u64 length    payload length in bytes, 4..=MAX_SECTION_BYTES (1 GiB)
+//!   60+16N  4  header_crc      u32, CRC-32 of header bytes [0, 60+16N)
+//!
+//! PAYLOADS: the N section payloads, back to back in table order, starting right after
+//! header_crc; their lengths sum to exactly file_size - (64 + 16N) and the file ends there.
+//!
+//! SECTION PAYLOAD (either kind)
+//!    0     4   record_count    u32 R
+//!    4     ..  R records of the section's kind, back to back, filling the payload exactly
+//!
+//! BTF IMAGE SET RECORD (kind 1; 56 bytes + image data)
+//!    0     4   species         u32
+//!    4     1   level           u8, 0 = twig, 1 = branch, 2 = tree
+//!    5     3   reserved        must be 0
+//!    8     4   views           u32, one of 6, 18, 66, 258
+//!   12     4   lights          u32, one of 6, 18, 66, 258
+//!   16     4   resolution      u32, one of 32, 64, 128
+//!   20    12   center          3 x f32, finite (bounding-sphere centre, object frame)
+//!   32     4   radius          f32, finite, > 0
+//!   36     4   texel_size      f32, finite, > 0
+//!   40     8   direct_len      u64, must equal views*lights*resolution²*4
+//!   48     D   direct          RGBA8 premultiplied, view-major: image (v, l) at
+//!                              (v*lights + l) * resolution² * 4
+//!   48+D   8   ambient_len     u64, must equal 2*views*resolution²*4
+//!   56+D   A   ambient         RGBA8 premultiplied: the sky-lit image of each view, then
+//!                              the ground-lit image of each view (v at v, and at views + v)
+//!
+//! VCM SET RECORD (kind 2; 56 bytes + opacity data)
+//!    0     4   species         u32; 0xFFFFFFFF (VCM_CELL_SPECIES, level tree) marks the cube
+//!                              maps of a forest cell (`crate::vcm::cells`)
+//!    4     4   owner           u32, the object within its level: the tree instance (or the
+//!                              forest cell); the main branch of the species' tree; the
+//!                              twig of its reference main branch, numbered on past them
+//!                              through the trunk's twigs
+//!    8     1   level           u8, 0 = twig, 1 = branch, 2 = tree
+//!    9     3   reserved        must be 0
+//!   12     4   resolution      u32, 8..=128
+//!   16    32   mean_opacity    8 x f32, finite, in [0, 1], one per corner
+//!   48     8   opacity_len     u64, must equal 8*6*resolution²
+//!   56     O   opacity         u8 per texel: 8 corners x 6 cube faces x resolution², each
+//!                              face res rows of res texels (see `crate::vcm` for the layout)
+//!
+//! TEXEL VOLUME RECORD (kind 3; 44 bytes + voxel data)
+//!    0     4   species         u32
+//!    4     4   lights          u32, one of 6, 18, 66, 258
+//!    8    12   dims            3 x u32 (x, y, z voxels), each 1..=256
+//!   20    12   box_min         3 x f32, finite (the volume's lowest corner, object frame)
+//!   32     4   voxel           f32, finite, > 0: side of one (cubic) voxel, m
+//!   36     8   voxels_len      u64, must equal (lights+1)*x*y*z*4
+//!   44     V   voxels          RGBA8 premultiplied, lights+1 volumes back to back: volume k
+//!                              (k < lights) lit by light sample k alone (sun only, self-
+//!                              shadowed), volume `lights` by the sky alone; in a volume,
+//!                              voxel (i, j, k) at ((k*y + j)*x + i)*4, j = 0 the lowest row;
+//!                              alpha is the coverage of one voxel-thick slab
+//! ```
+//!
+//! A set's own views, lights and resolution are checked against the allowed values but need
+//! not equal the header's settings. A BTF set of one `(species, level)` appears at most once,
+//! a texel volume of one species too. Records of one kind keep their
+//! order across sections; the writer puts all BTF sections first, then all VCM sections,
+//! packing records greedily so no section exceeds [`MAX_SECTION_BYTES`] (one record must
+//! fit in one section). A reader accepts the sections of both kinds in any order.
+//!
+//! # Reading
+//!
+//! Every length is checked against a hard limit and against the bytes actually left before
+//! anything is sized from it, so a truncated or corrupt file gives a [`FormatError`], never
+//! a panic, an endless loop or an allocation beyond the file's own size (plus a few KiB).
+//! Order of checks: magic, version, fixed header, section count, header checksum, file size,
+//! scene hash (with [`read_expecting`]), settings, table entries; then per section: its
+//! records (sizes against the section), its checksum. When a section fails to decode, its
+//! checksum is still checked first, so a flipped byte reports a checksum mismatch.
+//! [`read`] streams the file: the decoded data is the only large allocation.
+//!
+//!
+//! # Writing
+//!
+//! [`write_atomic`] validates, then writes through [`crate::atomic_file`]: a temporary file
+//! in the target's directory, synced and renamed over the target, so the target is either
+//! the old file or the complete new one; the temporary file is removed on error.
+//!
+//! # Files
+//!
+//! This file holds the constants, the error and the data types; `check.rs` validates them,
+//! `plan.rs` sizes records and packs them into sections, `write.rs` encodes and `read.rs`
+//! decodes. The public paths are all here (`crate::format::read`, ...).
+
+use std::io;
+use std::ops::RangeInclusive;
+use std::path::PathBuf;
+
+use crate::model::Level;
+
+mod check;
+mod plan;
+mod read;
+#[cfg(test)]
+mod test_support;
+mod write;
+
+pub use plan::{btf_record_bytes, file_bytes_for, texel_record_bytes, vcm_record_bytes};
+pub use read::{from_bytes, read, read_expecting};
+pub use write::{to_bytes, write_atomic};
+
+/// The first 8 bytes of every `.canopy` file.
+pub const MAGIC: [u8; 8] = *b"CANOPY\r\n";
+/// The `species` of a VCM set that holds a forest cell's cube maps (level tree, owner the
+/// cell's index in `crate::vcm::cells::ForestCells`), not one tree's.
+pub const VCM_CELL_SPECIES: u32 = u32::MAX;
+/// The format version this code writes and the only one it reads.
+pub const VERSION: u32 = 5;
+/// Ambient images per view in a BTF image set: lit by the sky alone, then by the light the
+/// ground sends up alone (the two halves of the renderer's hemispherical ambient).
+pub const AMBIENT_IMAGES_PER_VIEW: u32 = 2;
+/// Most sections a file may have.
+pub const MAX_SECTIONS: u32 = 4096;
+/// Largest payload of one section (1 GiB).
+pub const MAX_SECTION_BYTES: u64 = 1 << 30;
+/// Allowed numbers of view and of light directions (octahedron subdivisions).
+pub const DIRECTION_COUNTS: [u32; 4] = [6, 18, 66, 258];
+/// Allowed BTF image resolutions (square images).
+pub const BTF_RESOLUTIONS: [u32; 3] = [32, 64, 128];
+/// Allowed supersampling factors.
+pub const SUPERSAMPLE_RANGE: RangeInclusive<u32> = 1..=8;
+/// Allowed visibility-cube-map face resolutions.
+pub const VCM_RESOLUTION_RANGE: RangeInclusive<u32> = 8..=128;
+/// Bounding-box corners per VCM set.
+pub const VCM_CORNERS: usize = 8;
+/// Allowed texel resolutions (voxels along a box's longest side); 0 means no texels.
+pub const TEXEL_RESOLUTION_RANGE: RangeInclusive<u32> = 16..=256;
+/// Allowed voxel counts along each axis of a texel volume.
+pub const TEXEL_DIM_RANGE: RangeInclusive<u32> = 1..=256;
+/// Cube faces per visibility cube map.
+pub const CUBE_FACES: usize = 6;
+
+/// Bytes of the header before the section table.
+const FIXED_HEADER_BYTES: usize = 60;
+/// Bytes of one section-table entry.
+const SECTION_ENTRY_BYTES: usize = 16;
+/// Bytes of a section payload before its records (the record count).
+const SECTION_PREFIX_BYTES: u64 = 4;
+/// Bytes of a BTF record besides its image data.
+const BTF_RECORD_FIXED_BYTES: u64 = 56;
+/// Bytes of a VCM record besides its opacity data.
+const VCM_RECORD_FIXED_BYTES: u64 = 56;
+/// Fixed part of a texel volume record (before the voxels).
+const TEXEL_RECORD_FIXED_BYTES: u64 = 44;
+
+const SETTINGS_DIRECTIONS: &str = "6, 18, 66 or 258";
+const SETTINGS_RESOLUTIONS: &str = "32, 64 or 128";
+const SETTINGS_SUPERSAMPLE: &str = "1 to 8";
+const SETTINGS_VCM_RESOLUTION: &str = "8 to 128";
+const SETTINGS_TEXEL_RESOLUTION: &str = "0 (none) or 16 to 256";
+
+/// Everything that can go wrong reading or writing a `.canopy` file. Every variant but
+/// [`FormatError::Io`] means the file (or the data given to write) is unusable and the
+/// scene must be baked again; see [`FormatError::needs_rebake`].
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum FormatError {
+    /// The operating system refused a read, write, sync or rename.
+    #[error("{action} {}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        /// What was being done, e.g. "could not open".
+        action: &'static str,
+        #[source]
+        source: io::Error,
+    },
+
+    /// The file does not start with [`MAGIC`].
+    #[error(
+        "not a canopy file: it starts with \"{}\" where a .canopy file starts with \"CANOPY\\r\\n\" \
+         (a file whose line endings were converted in transfer looks like this too); \
+         give a file written by `canopy bake`, or re-bake with `canopy bake`",
+        found.escape_ascii()
+    )]
+    NotCanopy {
+        /// The first bytes of the file (up to 8).
+        found: Vec<u8>,
+    },
+
+    /// The file has another format version.
+    #[error(
+        "the .canopy file has format version {found}, but this canopy reads version {supported}; \
+         re-bake with `canopy bake`"
+    )]
+    UnsupportedVersion { found: u32, supported: u32 },
+
+    /// The file ends before something it declares.
+    #[error(
+        "the .canopy file is truncated: {what} needs {needed} bytes but only {available} are \
+         there (an interrupted copy or download?); copy it again or re-bake with `canopy bake`"
+    )]
+    Truncated {
+        what: String,
+        needed: u64,
+        available: u64,
+    },
+
+    /// A checksum does not match its bytes.
+    #[error(
+        "the .canopy file is corrupt: the checksum of the {section} does not match its bytes \
+         (stored {stored:08x}, computed {computed:08x}); re-bake with `canopy bake`"
+    )]
+    ChecksumMismatch {
+        /// "header", or "section 3 (btf image sets)".
+        section: String,
+        stored: u32,
+        computed: u32,
+    },
+
+    /// A size or count is beyond what the format allows.
+    #[error(
+        "size out of range: {field} is {value}, over the limit of {limit} (a corrupt file, or a \
+         bake too large for the format); re-bake with `canopy bake`, with fewer views or lights \
+         or a lower resolution if the bake itself is too large"
+    )]
+    AbsurdSize {
+        field: String,
+        value: u64,
+        limit: u64,
+    },
+
+    /// A section (or the data given to write) does not decode to what its header promises.
+    #[error(
+        "malformed canopy data in {section}: {reason}; re-bake with `canopy bake` \
+         (a bake that produces this is a bug)"
+    )]
+    MalformedContent { section: String, reason: String },
+
+    /// A bake setting is outside the allowed values.
+    #[error(
+        "invalid bake setting {field} = {value} (allowed: {allowed}); fix the bake settings \
+         and re-bake with `canopy bake`"
+    )]
+    InvalidSettings {
+        field: &'static str,
+        value: u32,
+        allowed: &'static str,
+    },
+
+    /// The file was baked from another scene or with other settings.
+    #[error(
+        "the .canopy file was baked for another scene or other bake settings (scene hash \
+         {found:016x}, expected {expected:016x}); re-bake with `canopy bake`"
+    )]
+    SceneMismatch { found: u64, expected: u64 },
+}
+
+impl FormatError {
+    /// True when the file exists but cannot be used as it is (corrupt, truncated, stale,
+    /// another version): a cache should bake again and overwrite it. False for I/O errors.
+    pub fn needs_rebake(&self) -> bool {
+        !matches!(self, FormatError::Io { .. })
+    }
+
+    /// True for an I/O error saying the file does not exist.
+    pub fn is_not_found(&self) -> bool {
+        matches!(self, FormatError::Io { source, .. } if source.kind() == io::ErrorKind::NotFound)
+    }
+}
+
+/// Everything one bake produces.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Baked {
+    /// Hash of the scene file text + bake settings (computed by the caller).
+    pub scene_hash: u64,
+    pub settings: BakeSettings,
+    pub btf: Vec<BtfImageSet>,
+    /// Visibility cube maps.
+    pub vcm: Vec<VcmSet>,
+    /// Texel volumes, one per species (none when the settings' texel resolution is 0).
+    pub texels: Vec<TexelVolume>,
+}
+
+/// The bake parameters stored in the header.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BakeSettings {
+    /// View directions per twig and main-branch BTF set: one of [`DIRECTION_COUNTS`].
+    pub views: u32,
+    /// View directions per tree-level BTF set: one of [`DIRECTION_COUNTS`].
+    pub tree_views: u32,
+    /// Light directions per BTF set: one of [`DIRECTION_COUNTS`].
+    pub lights: u32,
+    /// BTF image resolution: one of [`BTF_RESOLUTIONS`].
+    pub resolution: u32,
+    /// Supersampling factor: in [`SUPERSAMPLE_RANGE`].
+    pub supersample: u32,
+    /// VCM face resolution: in [`VCM_RESOLUTION_RANGE`].
+    pub vcm_resolution: u32,
+    /// Voxels along the longest side of each species' texel volume: 0 (no texels) or in
+    /// [`TEXEL_RESOLUTION_RANGE`].
+    pub texel_resolution: u32,
+}
+
+/// The billboard images of one species at one level.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BtfImageSet {
+    pub species: u32,
+    pub level: Level,
+    pub views: u32,
+    pub lights: u32,
+    pub resolution: u32,
+    /// Billboard frame: the object's bounding-sphere centre (object frame) and radius; an
+    /// image covers a square of side 2*radius centred on the centre, seen from its view
+    /// direction.
+    pub center: [f32; 3],
+    pub radius: f32,
+    /// Largest world size of one texel of this level's images (G_max in the thesis' LOD
+    /// criterion).
+    pub texel_size: f32,
+    /// RGBA8 premultiplied, views*lights images of resolution², view-major: image (v, l)
+    /// starts at ((v*lights + l) * res*res*4).
+    pub direct: Vec<u8>,
+    /// RGBA8 premultiplied, [`AMBIENT_IMAGES_PER_VIEW`] x views images of resolution²:
+    /// each view's image under the sky light only, then each view's under the ground's
+    /// light only.
+    pub ambient: Vec<u8>,
+}
+
+/// The visibility cube maps at the 8 bounding-box corners of one object.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VcmSet {
+    pub species: u32,
+    /// The object within its level (see the record layout above).
+    pub owner: u32,
+    pub level: Level,
+    pub resolution: u32,
+    /// 8 corners x 6 faces x resolution² opacity bytes, corner-major then face-major.
+    pub opacity: Vec<u8>,
+    /// Mean opacity of each corner's cube map, in [0, 1].
+    pub mean_opacity: [f32; 8],
+}
+
+/// One species' whole tree as RGBA volumes in its box (object frame): one per baked light
+/// and one lit by the sky.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TexelVolume {
+    pub species: u32,
+    /// Light samples (the BTF's direction set of this count).
+    pub lights: u32,
+    /// Voxels along x, y, z.
+    pub dims: [u32; 3],
+    /// Lowest corner of the volume in the object frame.
+    pub box_min: [f32; 3],
+    /// Side of one cubic voxel (m).
+    pub voxel: f32,
+    /// RGBA8 premultiplied, lights+1 volumes (see the record layout above).
+    pub voxels: Vec<u8>,
+}
+
+/// The kind tag of a section.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum SectionKind {
+    /// [`BtfImageSet`] records.
+    Btf = 1,
+    /// [`VcmSet`] records.
+    Vcm = 2,
+    /// [`TexelVolume`] records.
+    Texel = 3,
+}
+
+impl SectionKind {
+    /// The kind with this tag, if any.
+    pub fn from_u32(tag: u32) -> Option<SectionKind> {
+        match tag {
+            1 => Some(SectionKind::Btf),
+            2 => Some(SectionKind::Vcm),
+            3 => Some(SectionKind::Texel),
+            _ => None,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            SectionKind::Btf => "btf image sets",
+            SectionKind::Vcm => "vcm sets",
+            SectionKind::Texel => "texel volumes",
+        }
+    }
+}
+
+/// The byte that stores `level` in a record: 0 twig, 1 branch, 2 tree.
+fn level_tag(level: Level) -> u8 {
+    match level {
+        Level::Twig => 0,
+        Level::Branch => 1,
+        Level::Tree => 2,
+    }
+}
+
+/// The level stored as `tag`, if any.
+fn level_from_tag(tag: u8) -> Option<Level> {
+    match tag {
+        0 => Some(Level::Twig),
+        1 => Some(Level::Branch),
+        2 => Some(Level::Tree),
+        _ => None,
+    }
+}
+
+impl BakeSettings {
+    /// View directions of the image sets of `level`: the tree level has its own count.
+    pub fn views_of(&self, level: Level) -> u32 {
+        match level {
+            Level::Tree => self.tree_views,
+            Level::Twig | Level::Branch => self.views,
+        }
+    }
+}
+
+impl BtfImageSet {
+    /// The length `direct` must have: views*lights*resolution²*4, or None on overflow.
+    pub fn expected_direct_len(&self) -> Option<u64> {
+        image_bytes(self.resolution)?
+            .checked_mul(u64::from(self.views))?
+            .checked_mul(u64::from(self.lights))
+    }
+
+    /// The length `ambient` must have: 2*views*resolution²*4, or None on overflow.
+    pub fn expected_ambient_len(&self) -> Option<u64> {
+        image_bytes(self.resolution)?
+            .checked_mul(u64::from(self.views))?
+            .checked_mul(u64::from(AMBIENT_IMAGES_PER_VIEW))
+    }
+}
+
+impl VcmSet {
+    /// The length `opacity` must have: 8*6*resolution², or None on overflow.
+    pub fn expected_opacity_len(&self) -> Option<u64> {
+        u64::from(self.resolution)
+            .checked_mul(u64::from(self.resolution))?
+            .checked_mul((VCM_CORNERS * CUBE_FACES) as u64)
+    }
+}
+
+impl TexelVolume {
+    /// Voxels in one of its volumes, or None on overflow.
+    pub fn voxel_count(&self) -> Option<u64> {
+        u64::from(self.dims[0])
+            .checked_mul(u64::from(self.dims[1]))?
+            .checked_mul(u64::from(self.dims[2]))
+    }
+
+    /// The length `voxels` must have: (lights+1)*x*y*z*4, or None on overflow.
+    pub fn expected_voxels_len(&self) -> Option<u64> {
+        self.voxel_count()?
+            .checked_mul(4)?
+            .checked_mul(u64::from(self.lights).checked_add(1)?)
+    }
+
+    /// The volume's highest corner in the object frame.
+    pub fn box_max(&self) -> [f32; 3] {
+        std::array::from_fn(|i| self.box_min[i] + self.dims[i] as f32 * self.voxel)
+    }
+}
+
+impl Baked {
+    /// Bytes of BTF image data (direct + ambient) over all sets.
+    pub fn btf_bytes(&self) -> u64 {
+        self.btf
+            .iter()
+            .map(|s| s.direct.len() as u64 + s.ambient.len() as u64)
+            .sum()
+    }
+
+    /// Bytes of VCM opacity data over all sets.
+    pub fn vcm_bytes(&self) -> u64 {
+        self.vcm.iter().map(|s| s.opacity.len() as u64).sum()
+    }
+
+    /// Bytes of texel voxels over all volumes.
+    pub fn texel_bytes(&self) -> u64 {
+        self.texels.iter().map(|t| t.voxels.len() as u64).sum()
+    }
+}
+
+fn image_bytes(resolution: u32) -> Option<u64> {
+    u64::from(resolution)
+        .checked_mul(u64::from(resolution))?
+        .checked_mul(4)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::format::test_support::*;
+
+    #[test]
+    fn level_tags_are_the_documented_bytes() {
+        for (tag, level) in [(0, Level::Twig), (1, Level::Branch), (2, Level::Tree)] {
+            assert_eq!(level_tag(level), tag);
+            assert_eq!(level_from_tag(tag), Some(level));
+        }
+        assert_eq!(level_from_tag(3), None);
+    }
+
+    #[test]
+    fn sizes_are_counted() {
+        let baked = sample();
+        assert_eq!(baked.btf_bytes(), 2 * (6 * 6 + 2 * 6) * 32 * 32 * 4);
+        assert_eq!(baked.vcm_bytes(), 48 * 64 + 48 * 256);
+        let set = &baked.btf[0];
+        assert_eq!(set.expected_direct_len(), Some(set.direct.len() as u64));
+        assert_eq!(set.expected_ambient_len(), Some(set.ambient.len() as u64));
+        let huge = BtfImageSet {
+            views: u32::MAX,
+            lights: u32::MAX,
+            resolution: u32::MAX,
+            ..set.clone()
+        };
+        assert_eq!(huge.expected_direct_len(), None);
+    }
+}

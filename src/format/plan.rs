@@ -1,0 +1,155 @@
+//! Sizes: the bytes of each record and of a whole file, and the packing of records into
+//! sections of at most [`MAX_SECTION_BYTES`] that the writer follows.
+
+use super::*;
+
+/// One section the writer will emit: `count` records of `kind` starting at record `first`.
+#[derive(Debug)]
+pub(super) struct PlannedSection {
+    pub(super) kind: SectionKind,
+    pub(super) first: usize,
+    pub(super) count: usize,
+    /// Payload length in bytes.
+    pub(super) len: u64,
+}
+
+pub(super) fn btf_record_len(set: &BtfImageSet) -> u64 {
+    BTF_RECORD_FIXED_BYTES + set.direct.len() as u64 + set.ambient.len() as u64
+}
+
+pub(super) fn vcm_record_len(set: &VcmSet) -> u64 {
+    VCM_RECORD_FIXED_BYTES + set.opacity.len() as u64
+}
+
+pub(super) fn texel_record_len(t: &TexelVolume) -> u64 {
+    TEXEL_RECORD_FIXED_BYTES + t.voxels.len() as u64
+}
+
+/// Bytes of a BTF image-set record of these sizes.
+pub fn btf_record_bytes(views: u32, lights: u32, resolution: u32) -> u64 {
+    let image = u64::from(resolution).pow(2) * 4;
+    let per_view = u64::from(lights) + u64::from(AMBIENT_IMAGES_PER_VIEW);
+    BTF_RECORD_FIXED_BYTES + u64::from(views) * per_view * image
+}
+
+/// Bytes of a VCM set record (8 corners x 6 faces) of this face resolution.
+pub fn vcm_record_bytes(resolution: u32) -> u64 {
+    VCM_RECORD_FIXED_BYTES + 8 * 6 * u64::from(resolution).pow(2)
+}
+
+/// Bytes of a texel volume record with `lights` light volumes (and the sky's) of `dims`.
+pub fn texel_record_bytes(lights: u32, dims: [u32; 3]) -> u64 {
+    let voxels: u64 = dims.iter().map(|&d| u64::from(d)).product();
+    TEXEL_RECORD_FIXED_BYTES + (u64::from(lights) + 1) * voxels * 4
+}
+
+/// The length of the file the writer makes of records of these sizes (each list in file
+/// order: BTF sets, VCM sets, texel volumes), or `Err` with the size of a record too
+/// large for any section ([`MAX_SECTION_BYTES`]).
+pub fn file_bytes_for(btf: &[u64], vcm: &[u64], texel: &[u64]) -> Result<u64, u64> {
+    if let Some(&big) = btf
+        .iter()
+        .chain(vcm)
+        .chain(texel)
+        .find(|&&s| s.saturating_add(SECTION_PREFIX_BYTES) > MAX_SECTION_BYTES)
+    {
+        return Err(big);
+    }
+    let mut plans = Vec::new();
+    for (kind, sizes) in [
+        (SectionKind::Btf, btf),
+        (SectionKind::Vcm, vcm),
+        (SectionKind::Texel, texel),
+    ] {
+        pack(kind, sizes.iter().copied(), MAX_SECTION_BYTES, &mut plans);
+    }
+    let payloads: u64 = plans.iter().map(|p| p.len).sum();
+    Ok((FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * plans.len() + 4) as u64 + payloads)
+}
+
+/// Packs records into sections greedily, each at most `limit` bytes unless one record alone
+/// is larger (which [`Baked::validate`] rejects).
+pub(super) fn plan_sections(baked: &Baked, limit: u64) -> Vec<PlannedSection> {
+    let mut plans = Vec::new();
+    pack(
+        SectionKind::Btf,
+        baked.btf.iter().map(btf_record_len),
+        limit,
+        &mut plans,
+    );
+    pack(
+        SectionKind::Vcm,
+        baked.vcm.iter().map(vcm_record_len),
+        limit,
+        &mut plans,
+    );
+    pack(
+        SectionKind::Texel,
+        baked.texels.iter().map(texel_record_len),
+        limit,
+        &mut plans,
+    );
+    plans
+}
+
+fn pack(
+    kind: SectionKind,
+    sizes: impl Iterator<Item = u64>,
+    limit: u64,
+    out: &mut Vec<PlannedSection>,
+) {
+    let mut current: Option<PlannedSection> = None;
+    for (i, size) in sizes.enumerate() {
+        match &mut current {
+            Some(c) if c.len.saturating_add(size) <= limit && c.count < u32::MAX as usize => {
+                c.count += 1;
+                c.len += size;
+            }
+            _ => {
+                out.extend(current.take());
+                current = Some(PlannedSection {
+                    kind,
+                    first: i,
+                    count: 1,
+                    len: SECTION_PREFIX_BYTES.saturating_add(size),
+                });
+            }
+        }
+    }
+    out.extend(current);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::format::test_support::*;
+    use crate::format::to_bytes;
+
+    #[test]
+    fn the_file_size_is_known_from_the_record_sizes_alone() {
+        for b in [sample(), small()] {
+            let btf: Vec<u64> = b
+                .btf
+                .iter()
+                .map(|s| btf_record_bytes(s.views, s.lights, s.resolution))
+                .collect();
+            let vcm: Vec<u64> = b
+                .vcm
+                .iter()
+                .map(|s| vcm_record_bytes(s.resolution))
+                .collect();
+            let texel: Vec<u64> = b
+                .texels
+                .iter()
+                .map(|t| texel_record_bytes(t.lights, t.dims))
+                .collect();
+            assert_eq!(
+                file_bytes_for(&btf, &vcm, &texel),
+                Ok(to_bytes(&b).len() as u64)
+            );
+        }
+        // 258 views x 258 lights at 128² is one 4.4 GB record: no section holds it.
+        let huge = btf_record_bytes(258, 258, 128);
+        assert_eq!(file_bytes_for(&[huge], &[], &[]), Err(huge));
+    }
+}

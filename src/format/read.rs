@@ -1,0 +1,500 @@
+//! Decoding a `.canopy` file, streamed from disk ([`read`], [`read_expecting`]) or from
+//! bytes ([`from_bytes`]), with every size checked before it is used (see the module docs
+//! of [`crate::format`] for the order of the checks).
+
+use std::fs::File;
+use std::io::{BufReader, Read};
+use std::path::Path;
+
+use super::check::{check_unique_btf, check_unique_texels, show_len};
+use super::*;
+
+/// Reads and validates a `.canopy` file.
+pub fn read(path: impl AsRef<Path>) -> Result<Baked, FormatError> {
+    read_file(path.as_ref(), None)
+}
+
+/// Like [`read`], but fails with [`FormatError::SceneMismatch`] when the file was baked
+/// for another scene hash (checked right after the header, before the data is read).
+pub fn read_expecting(path: impl AsRef<Path>, scene_hash: u64) -> Result<Baked, FormatError> {
+    read_file(path.as_ref(), Some(scene_hash))
+}
+
+/// Decodes and validates the bytes of a `.canopy` file.
+pub fn from_bytes(bytes: &[u8]) -> Result<Baked, FormatError> {
+    let mut input = Input {
+        reader: bytes,
+        pos: 0,
+        len: bytes.len() as u64,
+        path: Path::new("<memory>"),
+    };
+    decode(&mut input, None)
+}
+
+fn read_file(path: &Path, expected_hash: Option<u64>) -> Result<Baked, FormatError> {
+    let io_error = |action| {
+        move |source| FormatError::Io {
+            path: path.to_owned(),
+            action,
+            source,
+        }
+    };
+    let file = File::open(path).map_err(io_error("could not open"))?;
+    let len = file.metadata().map_err(io_error("could not read"))?.len();
+    let mut input = Input {
+        reader: BufReader::new(file),
+        pos: 0,
+        len,
+        path,
+    };
+    decode(&mut input, expected_hash)
+}
+
+/// A reader that knows how many bytes it has left.
+struct Input<'p, R> {
+    reader: R,
+    pos: u64,
+    len: u64,
+    path: &'p Path,
+}
+
+impl<R: Read> Input<'_, R> {
+    fn available(&self) -> u64 {
+        self.len - self.pos
+    }
+
+    /// Fills `buf`, or fails with `Truncated` (checked before reading).
+    fn fill(&mut self, buf: &mut [u8], what: &str) -> Result<(), FormatError> {
+        let needed = buf.len() as u64;
+        if needed > self.available() {
+            return Err(FormatError::Truncated {
+                what: what.to_owned(),
+                needed,
+                available: self.available(),
+            });
+        }
+        self.reader
+            .read_exact(buf)
+            .map_err(|source| FormatError::Io {
+                path: self.path.to_owned(),
+                action: "could not read",
+                source,
+            })?;
+        self.pos += needed;
+        Ok(())
+    }
+
+    fn array<const N: usize>(&mut self, what: &str) -> Result<[u8; N], FormatError> {
+        let mut a = [0; N];
+        self.fill(&mut a, what)?;
+        Ok(a)
+    }
+}
+
+pub(super) fn u32_at(bytes: &[u8], at: usize) -> u32 {
+    let mut a = [0; 4];
+    a.copy_from_slice(&bytes[at..at + 4]);
+    u32::from_le_bytes(a)
+}
+
+pub(super) fn u64_at(bytes: &[u8], at: usize) -> u64 {
+    let mut a = [0; 8];
+    a.copy_from_slice(&bytes[at..at + 8]);
+    u64::from_le_bytes(a)
+}
+
+fn decode<R: Read>(
+    input: &mut Input<'_, R>,
+    expected_hash: Option<u64>,
+) -> Result<Baked, FormatError> {
+    // Magic: a short file that matches so far is truncated, anything else is not ours.
+    let mut magic = [0u8; 8];
+    let got = input.available().min(8) as usize;
+    input.fill(&mut magic[..got], "the magic bytes")?;
+    if magic[..got] != MAGIC[..got] {
+        return Err(FormatError::NotCanopy {
+            found: magic[..got].to_vec(),
+        });
+    }
+    if got < MAGIC.len() {
+        return Err(FormatError::Truncated {
+            what: "the magic bytes".into(),
+            needed: MAGIC.len() as u64,
+            available: got as u64,
+        });
+    }
+    let version_bytes = input.array::<4>("the format version")?;
+    let version = u32::from_le_bytes(version_bytes);
+    if version != VERSION {
+        return Err(FormatError::UnsupportedVersion {
+            found: version,
+            supported: VERSION,
+        });
+    }
+
+    // The rest of the fixed header; `rest` starts at file offset 12.
+    let rest = input.array::<{ FIXED_HEADER_BYTES - 12 }>("the header")?;
+    let section_count = u32_at(&rest, 0);
+    if section_count > MAX_SECTIONS {
+        return Err(FormatError::AbsurdSize {
+            field: "section count".into(),
+            value: section_count.into(),
+            limit: MAX_SECTIONS.into(),
+        });
+    }
+    let table_len = section_count as usize * SECTION_ENTRY_BYTES;
+    if table_len as u64 + 4 > input.available() {
+        return Err(FormatError::Truncated {
+            what: format!("the section table ({section_count} entries) and header checksum"),
+            needed: table_len as u64 + 4,
+            available: input.available(),
+        });
+    }
+    let mut table = vec![0u8; table_len];
+    input.fill(&mut table, "the section table")?;
+    let stored = u32::from_le_bytes(input.array::<4>("the header checksum")?);
+    let mut hasher = crc32fast::Hasher::new();
+    hasher.update(&magic);
+    hasher.update(&version_bytes);
+    hasher.update(&rest);
+    hasher.update(&table);
+    let computed = hasher.finalize();
+    if stored != computed {
+        return Err(FormatError::ChecksumMismatch {
+            section: "header".into(),
+            stored,
+            computed,
+        });
+    }
+
+    // The header is intact: check what it says.
+    let header_len = input.pos;
+    let file_size = u64_at(&rest, 4);
+    if file_size > input.len {
+        return Err(FormatError::Truncated {
+            what: "the whole file (size from its header)".into(),
+            needed: file_size,
+            available: input.len,
+        });
+    }
+    if file_size < input.len {
+        return Err(FormatError::MalformedContent {
+            section: "the file".into(),
+            reason: format!(
+                "{} unexpected bytes follow the declared end of the file ({file_size} bytes)",
+                input.len - file_size
+            ),
+        });
+    }
+    let scene_hash = u64_at(&rest, 12);
+    if let Some(expected) = expected_hash
+        && expected != scene_hash
+    {
+        return Err(FormatError::SceneMismatch {
+            found: scene_hash,
+            expected,
+        });
+    }
+    let settings = BakeSettings {
+        views: u32_at(&rest, 20),
+        lights: u32_at(&rest, 24),
+        resolution: u32_at(&rest, 28),
+        supersample: u32_at(&rest, 32),
+        vcm_resolution: u32_at(&rest, 36),
+        texel_resolution: u32_at(&rest, 40),
+        tree_views: u32_at(&rest, 44),
+    };
+    settings.validate()?;
+
+    let mut entries = Vec::with_capacity(section_count as usize);
+    let mut total: u64 = 0;
+    for (i, entry) in table.chunks_exact(SECTION_ENTRY_BYTES).enumerate() {
+        let tag = u32_at(entry, 0);
+        let crc = u32_at(entry, 4);
+        let len = u64_at(entry, 8);
+        let Some(kind) = SectionKind::from_u32(tag) else {
+            return Err(FormatError::MalformedContent {
+                section: format!("section {i}"),
+                reason: format!("unknown section kind {tag} (known: 1 = btf, 2 = vcm, 3 = texel)"),
+            });
+        };
+        if len > MAX_SECTION_BYTES {
+            return Err(FormatError::AbsurdSize {
+                field: format!("the length of section {i} ({})", kind.name()),
+                value: len,
+                limit: MAX_SECTION_BYTES,
+            });
+        }
+        if len < SECTION_PREFIX_BYTES {
+            return Err(FormatError::MalformedContent {
+                section: format!("section {i} ({})", kind.name()),
+                reason: format!("its length is {len}, too short for a record count"),
+            });
+        }
+        // At most 4096 * 2^30: cannot overflow.
+        total += len;
+        entries.push((kind, crc, len));
+    }
+    if total != file_size - header_len {
+        return Err(FormatError::MalformedContent {
+            section: "the section table".into(),
+            reason: format!(
+                "the sections hold {total} bytes but the file has {} bytes after the header",
+                file_size - header_len
+            ),
+        });
+    }
+
+    let mut baked = Baked {
+        scene_hash,
+        settings,
+        btf: Vec::new(),
+        vcm: Vec::new(),
+        texels: Vec::new(),
+    };
+    for (i, &(kind, stored, len)) in entries.iter().enumerate() {
+        let name = format!("section {i} ({})", kind.name());
+        let mut section = Section {
+            input: &mut *input,
+            remaining: len,
+            hasher: crc32fast::Hasher::new(),
+            name: &name,
+        };
+        let mut result = match kind {
+            SectionKind::Btf => decode_btf(&mut section, &mut baked.btf),
+            SectionKind::Vcm => decode_vcm(&mut section, &mut baked.vcm),
+            SectionKind::Texel => decode_texels(&mut section, &mut baked.texels),
+        };
+        if result.is_ok() && section.remaining != 0 {
+            result = Err(section.malformed(format!(
+                "{} bytes are left after the last record",
+                section.remaining
+            )));
+        }
+        match result {
+            Ok(()) => {}
+            // The content does not decode: unless it is corrupt, report that.
+            Err(FormatError::MalformedContent { .. }) => section.drain()?,
+            Err(e) => return Err(e),
+        }
+        let computed = section.hasher.finalize();
+        if stored != computed {
+            return Err(FormatError::ChecksumMismatch {
+                section: name,
+                stored,
+                computed,
+            });
+        }
+        result?;
+    }
+    check_unique_btf(&baked.btf)?;
+    check_unique_texels(&baked.texels)?;
+    Ok(baked)
+}
+
+/// The payload of one section: reads never go past its end, and everything read is hashed.
+struct Section<'a, 'p, R> {
+    input: &'a mut Input<'p, R>,
+    remaining: u64,
+    hasher: crc32fast::Hasher,
+    name: &'a str,
+}
+
+impl<R: Read> Section<'_, '_, R> {
+    fn malformed(&self, reason: String) -> FormatError {
+        FormatError::MalformedContent {
+            section: self.name.to_owned(),
+            reason,
+        }
+    }
+
+    fn fill(&mut self, buf: &mut [u8], what: &str) -> Result<(), FormatError> {
+        let needed = buf.len() as u64;
+        if needed > self.remaining {
+            return Err(self.malformed(format!(
+                "{what} needs {needed} bytes but the section has only {} left",
+                self.remaining
+            )));
+        }
+        self.input.fill(buf, self.name)?;
+        self.hasher.update(buf);
+        self.remaining -= needed;
+        Ok(())
+    }
+
+    fn array<const N: usize>(&mut self, what: &str) -> Result<[u8; N], FormatError> {
+        let mut a = [0; N];
+        self.fill(&mut a, what)?;
+        Ok(a)
+    }
+
+    fn u32(&mut self, what: &str) -> Result<u32, FormatError> {
+        self.array(what).map(u32::from_le_bytes)
+    }
+
+    fn u64(&mut self, what: &str) -> Result<u64, FormatError> {
+        self.array(what).map(u64::from_le_bytes)
+    }
+
+    fn f32(&mut self, what: &str) -> Result<f32, FormatError> {
+        self.array(what).map(f32::from_le_bytes)
+    }
+
+    /// The level byte and the 3 reserved bytes after it.
+    fn level(&mut self) -> Result<Level, FormatError> {
+        let [tag, r0, r1, r2] = self.array("a level")?;
+        if [r0, r1, r2] != [0; 3] {
+            return Err(self.malformed(format!(
+                "the reserved bytes after a level are {:?}, not zero",
+                [r0, r1, r2]
+            )));
+        }
+        level_from_tag(tag).ok_or_else(|| {
+            self.malformed(format!(
+                "level {tag} is not 0 (twig), 1 (branch) or 2 (tree)"
+            ))
+        })
+    }
+
+    /// A byte vector of `len` bytes, checked against the section before allocating.
+    fn bytes(&mut self, len: u64, what: &str) -> Result<Vec<u8>, FormatError> {
+        if len > self.remaining {
+            return Err(self.malformed(format!(
+                "{what} needs {len} bytes but the section has only {} left",
+                self.remaining
+            )));
+        }
+        // len <= remaining <= MAX_SECTION_BYTES, so it fits in usize.
+        let mut v = vec![0; len as usize];
+        self.fill(&mut v, what)?;
+        Ok(v)
+    }
+
+    /// Reads a record count, checked against the smallest record size.
+    fn record_count(&mut self, min_record: u64) -> Result<u32, FormatError> {
+        let count = self.u32("the record count")?;
+        if u64::from(count) > self.remaining / min_record {
+            return Err(self.malformed(format!(
+                "{count} records cannot fit in the {} bytes left",
+                self.remaining
+            )));
+        }
+        Ok(count)
+    }
+
+    /// Consumes (and hashes) the rest of the section.
+    fn drain(&mut self) -> Result<(), FormatError> {
+        let mut buf = [0u8; 8192];
+        while self.remaining > 0 {
+            let n = self.remaining.min(buf.len() as u64) as usize;
+            self.fill(&mut buf[..n], "the rest of the section")?;
+        }
+        Ok(())
+    }
+}
+
+fn decode_btf<R: Read>(
+    s: &mut Section<'_, '_, R>,
+    out: &mut Vec<BtfImageSet>,
+) -> Result<(), FormatError> {
+    let count = s.record_count(BTF_RECORD_FIXED_BYTES)?;
+    for index in 0..count {
+        let mut set = BtfImageSet {
+            species: s.u32("species")?,
+            level: s.level()?,
+            views: s.u32("views")?,
+            lights: s.u32("lights")?,
+            resolution: s.u32("resolution")?,
+            center: [s.f32("center")?, s.f32("center")?, s.f32("center")?],
+            radius: s.f32("radius")?,
+            texel_size: s.f32("texel_size")?,
+            direct: Vec::new(),
+            ambient: Vec::new(),
+        };
+        let direct_len = s.u64("direct length")?;
+        // The ambient length comes after the direct images; check what is known so far.
+        let ambient_len = set.expected_ambient_len().unwrap_or(0);
+        if let Some(reason) = set.problem(direct_len, ambient_len) {
+            return Err(s.malformed(format!(
+                "btf record {index} (species {}, {:?}): {reason}",
+                set.species, set.level
+            )));
+        }
+        set.direct = s.bytes(direct_len, "the direct images")?;
+        let ambient_len = s.u64("ambient length")?;
+        // Everything else was checked above.
+        let expected = set.expected_ambient_len();
+        if expected != Some(ambient_len) {
+            return Err(s.malformed(format!(
+                "btf record {index} (species {}, {:?}): ambient holds {ambient_len} bytes, \
+                 expected {}",
+                set.species,
+                set.level,
+                show_len(expected)
+            )));
+        }
+        set.ambient = s.bytes(ambient_len, "the ambient images")?;
+        out.push(set);
+    }
+    Ok(())
+}
+
+fn decode_vcm<R: Read>(
+    s: &mut Section<'_, '_, R>,
+    out: &mut Vec<VcmSet>,
+) -> Result<(), FormatError> {
+    let count = s.record_count(VCM_RECORD_FIXED_BYTES)?;
+    for index in 0..count {
+        let mut set = VcmSet {
+            species: s.u32("species")?,
+            owner: s.u32("owner")?,
+            level: s.level()?,
+            resolution: s.u32("resolution")?,
+            opacity: Vec::new(),
+            mean_opacity: [0.0; 8],
+        };
+        for m in &mut set.mean_opacity {
+            *m = s.f32("mean_opacity")?;
+        }
+        let opacity_len = s.u64("opacity length")?;
+        if let Some(reason) = set.problem(opacity_len) {
+            return Err(s.malformed(format!(
+                "vcm record {index} (owner {}, {:?}): {reason}",
+                set.owner, set.level
+            )));
+        }
+        set.opacity = s.bytes(opacity_len, "the opacity maps")?;
+        out.push(set);
+    }
+    Ok(())
+}
+
+fn decode_texels<R: Read>(
+    s: &mut Section<'_, '_, R>,
+    out: &mut Vec<TexelVolume>,
+) -> Result<(), FormatError> {
+    let count = s.record_count(TEXEL_RECORD_FIXED_BYTES)?;
+    for index in 0..count {
+        let mut t = TexelVolume {
+            species: s.u32("species")?,
+            lights: s.u32("lights")?,
+            dims: [s.u32("dims")?, s.u32("dims")?, s.u32("dims")?],
+            box_min: [s.f32("box_min")?, s.f32("box_min")?, s.f32("box_min")?],
+            voxel: s.f32("voxel")?,
+            voxels: Vec::new(),
+        };
+        let len = s.u64("voxels length")?;
+        if let Some(reason) = t.problem(len) {
+            return Err(s.malformed(format!(
+                "texel record {index} (species {}): {reason}",
+                t.species
+            )));
+        }
+        t.voxels = s.bytes(len, "the voxels")?;
+        out.push(t);
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;

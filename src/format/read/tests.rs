@@ -1,0 +1,359 @@
+//! The decoder's tests: every corrupt, truncated or absurd input is an error, never a panic
+//! or an allocation beyond the input's size.
+
+use super::*;
+use crate::format::test_support::*;
+use crate::format::to_bytes;
+use std::fs;
+
+#[test]
+fn flipped_payload_byte_is_a_checksum_mismatch() {
+    let mut bytes = to_bytes(&sample());
+    // In the middle of the first BTF set's direct images.
+    let at = payload_start(&bytes, 0) + 4 + 48 + 1000;
+    bytes[at] ^= 0x10;
+    match from_bytes(&bytes) {
+        Err(FormatError::ChecksumMismatch { section, .. }) => {
+            assert_eq!(section, "section 0 (btf image sets)")
+        }
+        other => panic!("expected a checksum mismatch, got {other:?}"),
+    }
+    // And in the VCM section, inside a length field (the decode fails, the checksum
+    // is still what is reported).
+    let mut bytes = to_bytes(&sample());
+    let at = payload_start(&bytes, 1) + 4 + 44 + 2;
+    bytes[at] ^= 0x01;
+    assert!(matches!(
+        from_bytes(&bytes),
+        Err(FormatError::ChecksumMismatch { section, .. }) if section == "section 1 (vcm sets)"
+    ));
+}
+
+#[test]
+fn flipped_header_byte_is_a_checksum_mismatch() {
+    let clean = to_bytes(&sample());
+    // scene hash, settings, a section crc, a section length, the header crc itself
+    for at in [24, 33, 48, 57, 60 + 5, 60 + 16 + 8, header_end(&clean) + 1] {
+        let mut bytes = clean.clone();
+        bytes[at] ^= 0x01;
+        match from_bytes(&bytes) {
+            Err(FormatError::ChecksumMismatch { section, .. }) => {
+                assert_eq!(section, "header", "byte {at}")
+            }
+            other => panic!("byte {at}: expected a header checksum mismatch, got {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn every_flipped_byte_of_a_small_file_is_detected() {
+    let clean = to_bytes(&small());
+    let header_end = header_end(&clean) + 4;
+    for at in 0..clean.len() {
+        for mask in [0x01, 0x80] {
+            let mut bytes = clean.clone();
+            bytes[at] ^= mask;
+            let (result, peak) = peak_during(|| from_bytes(&bytes));
+            assert!(peak <= bytes.len() + SMALL_OVERHEAD);
+            let ok = match (&result, at) {
+                (Err(FormatError::NotCanopy { .. }), 0..8) => true,
+                (Err(FormatError::UnsupportedVersion { .. }), 8..12) => true,
+                (
+                    Err(
+                        FormatError::AbsurdSize { .. }
+                        | FormatError::Truncated { .. }
+                        | FormatError::ChecksumMismatch { .. },
+                    ),
+                    12..16,
+                ) => true,
+                (Err(FormatError::ChecksumMismatch { section, .. }), _) if at < header_end => {
+                    section == "header"
+                }
+                (Err(FormatError::ChecksumMismatch { section, .. }), _) => {
+                    section.starts_with("section ")
+                }
+                _ => false,
+            };
+            assert!(ok, "byte {at} ^ {mask:#x}: {result:?}");
+        }
+    }
+}
+
+#[test]
+fn every_truncation_is_an_error() {
+    for bytes in [to_bytes(&small()), to_bytes(&sample())] {
+        for len in 0..bytes.len() {
+            let prefix = &bytes[..len];
+            let (result, peak) = peak_during(|| from_bytes(prefix));
+            assert!(
+                matches!(result, Err(FormatError::Truncated { .. })),
+                "prefix of {len} bytes: {result:?}"
+            );
+            assert!(peak <= len + SMALL_OVERHEAD, "prefix of {len}: held {peak}");
+        }
+        assert!(from_bytes(&bytes).is_ok());
+    }
+}
+
+/// Truncations whose header, lengths and checksums were all made consistent again, so
+/// only the record decoding can notice.
+#[test]
+fn truncation_with_a_consistent_header_is_an_error() {
+    let bytes = to_bytes(&small());
+    let head = header_end(&bytes) + 4;
+    for len in head..bytes.len() {
+        let mut cut = bytes[..len].to_vec();
+        cut[16..24].copy_from_slice(&(len as u64).to_le_bytes());
+        let mut left = (len - head) as u64;
+        for i in 0..section_count(&cut) {
+            let at = FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * i + 8;
+            let section_len = u64_at(&cut, at).min(left);
+            cut[at..at + 8].copy_from_slice(&section_len.to_le_bytes());
+            left -= section_len;
+        }
+        reseal(&mut cut);
+        let (result, peak) = peak_during(|| from_bytes(&cut));
+        assert!(
+            matches!(result, Err(FormatError::MalformedContent { .. })),
+            "cut at {len}: {result:?}"
+        );
+        assert!(peak <= len + SMALL_OVERHEAD);
+    }
+}
+
+#[test]
+fn wrong_magic_is_not_a_canopy_file() {
+    let mut bytes = to_bytes(&small());
+    bytes[0] = b'X';
+    assert!(matches!(
+        from_bytes(&bytes),
+        Err(FormatError::NotCanopy { .. })
+    ));
+    assert!(matches!(
+        from_bytes(b"PNG\x89 not at all"),
+        Err(FormatError::NotCanopy { found }) if found == b"PNG\x89 not"
+    ));
+    // Line endings converted CRLF -> LF in transfer.
+    let clean = to_bytes(&small());
+    let mangled: Vec<u8> = clean[..6].iter().chain(&clean[7..]).copied().collect();
+    let err = from_bytes(&mangled).unwrap_err();
+    assert!(matches!(err, FormatError::NotCanopy { .. }), "{err:?}");
+    assert!(err.to_string().contains("canopy bake"), "{err}");
+    // A short file that is not ours is "not a canopy file", not "truncated".
+    assert!(matches!(
+        from_bytes(b"{}"),
+        Err(FormatError::NotCanopy { .. })
+    ));
+}
+
+#[test]
+fn wrong_version_is_unsupported() {
+    for version in [0u32, 1, 2, 3, 4, 6, u32::MAX] {
+        let mut bytes = to_bytes(&small());
+        bytes[8..12].copy_from_slice(&version.to_le_bytes());
+        reseal_header(&mut bytes);
+        match from_bytes(&bytes) {
+            Err(FormatError::UnsupportedVersion { found, supported }) => {
+                assert_eq!((found, supported), (version, VERSION))
+            }
+            other => panic!("version {version}: {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn absurd_section_length_is_rejected_before_allocating() {
+    let mut bytes = to_bytes(&sample());
+    let at = FIXED_HEADER_BYTES + 8; // length of section 0
+    bytes[at..at + 8].copy_from_slice(&0xFFFF_FFFF_FFFFu64.to_le_bytes());
+    reseal_header(&mut bytes);
+    let (result, peak) = peak_during(|| from_bytes(&bytes));
+    match result {
+        Err(FormatError::AbsurdSize {
+            field,
+            value,
+            limit,
+        }) => {
+            assert!(field.contains("section 0"), "{field}");
+            assert_eq!((value, limit), (0xFFFF_FFFF_FFFF, MAX_SECTION_BYTES));
+        }
+        other => panic!("expected an absurd size, got {other:?}"),
+    }
+    assert!(peak < SMALL_OVERHEAD, "held {peak} bytes");
+}
+
+#[test]
+fn absurd_section_count_is_rejected_before_allocating() {
+    let mut bytes = to_bytes(&small());
+    bytes[12..16].copy_from_slice(&u32::MAX.to_le_bytes());
+    let (result, peak) = peak_during(|| from_bytes(&bytes));
+    assert!(
+        matches!(result, Err(FormatError::AbsurdSize { value, .. }) if value == u32::MAX as u64),
+        "{result:?}"
+    );
+    assert!(peak < SMALL_OVERHEAD, "held {peak} bytes");
+}
+
+#[test]
+fn a_record_claiming_huge_images_is_malformed_without_allocating() {
+    // 258 views x 258 lights at 128²: a consistent 4.4 GB claim in a 350 KB file.
+    let mut bytes = to_bytes(&sample());
+    let record = payload_start(&bytes, 0) + 4;
+    let direct_len: u64 = 258 * 258 * 128 * 128 * 4;
+    bytes[record + 8..record + 12].copy_from_slice(&258u32.to_le_bytes());
+    bytes[record + 12..record + 16].copy_from_slice(&258u32.to_le_bytes());
+    bytes[record + 16..record + 20].copy_from_slice(&128u32.to_le_bytes());
+    bytes[record + 40..record + 48].copy_from_slice(&direct_len.to_le_bytes());
+    reseal(&mut bytes);
+    let (result, peak) = peak_during(|| from_bytes(&bytes));
+    assert!(
+        matches!(&result, Err(FormatError::MalformedContent { reason, .. })
+            if reason.contains(&direct_len.to_string())),
+        "{result:?}"
+    );
+    assert!(peak < SMALL_OVERHEAD, "held {peak} bytes");
+}
+
+#[test]
+fn absurd_record_count_is_malformed_without_allocating() {
+    let mut bytes = to_bytes(&small());
+    let at = payload_start(&bytes, 0);
+    bytes[at..at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    reseal(&mut bytes);
+    let (result, peak) = peak_during(|| from_bytes(&bytes));
+    assert!(
+        matches!(&result, Err(FormatError::MalformedContent { reason, .. }) if reason.contains("records cannot fit")),
+        "{result:?}"
+    );
+    assert!(peak < SMALL_OVERHEAD);
+}
+
+#[test]
+fn inconsistent_payload_with_valid_checksums_is_malformed() {
+    // direct one byte short: to_bytes writes it faithfully, with correct checksums.
+    let mut baked = sample();
+    baked.btf[1].direct.pop();
+    assert!(matches!(
+        baked.validate(),
+        Err(FormatError::MalformedContent { .. })
+    ));
+    let bytes = to_bytes(&baked);
+    match from_bytes(&bytes) {
+        Err(FormatError::MalformedContent { section, reason }) => {
+            assert_eq!(section, "section 0 (btf image sets)");
+            assert!(reason.contains("direct"), "{reason}");
+        }
+        other => panic!("expected malformed content, got {other:?}"),
+    }
+
+    // Ambient of the wrong size, radius not positive, texel size NaN, VCM too short,
+    // mean opacity out of range: each caught on write and on read.
+    // Texel volumes: voxels one byte short, a zero or huge dimension, a NaN corner, a
+    // negative voxel, a light count that is no direction set.
+    let breakers: [fn(&mut Baked); 11] = [
+        |b| b.texels[0].voxels.pop().map_or((), drop),
+        |b| b.texels[0].dims[1] = 0,
+        |b| b.texels[0].dims[2] = 100_000,
+        |b| b.texels[0].box_min[0] = f32::NAN,
+        |b| b.texels[0].voxel = -0.25,
+        |b| b.texels[0].lights = 5,
+        |b| b.btf[0].ambient.extend([0; 4]),
+        |b| b.btf[0].radius = 0.0,
+        |b| b.btf[1].texel_size = f32::NAN,
+        |b| b.vcm[1].opacity.truncate(10),
+        |b| b.vcm[0].mean_opacity[3] = 1.5,
+    ];
+    for (i, breaker) in breakers.iter().enumerate() {
+        let mut baked = sample();
+        breaker(&mut baked);
+        assert!(
+            matches!(baked.validate(), Err(FormatError::MalformedContent { .. })),
+            "breaker {i} on write"
+        );
+        let result = from_bytes(&to_bytes(&baked));
+        assert!(
+            matches!(result, Err(FormatError::MalformedContent { .. })),
+            "breaker {i} on read: {result:?}"
+        );
+    }
+
+    // A level byte that names no level, checksums recomputed.
+    let mut bytes = to_bytes(&small());
+    let at = payload_start(&bytes, 0) + 4 + 8; // record count, species, owner
+    bytes[at] = 3;
+    reseal(&mut bytes);
+    assert!(matches!(
+        from_bytes(&bytes),
+        Err(FormatError::MalformedContent { reason, .. }) if reason.contains("level 3")
+    ));
+
+    // A record count lower than the records present: bytes left over in the section.
+    let mut bytes = to_bytes(&small());
+    let at = payload_start(&bytes, 0);
+    bytes[at..at + 4].copy_from_slice(&1u32.to_le_bytes());
+    reseal(&mut bytes);
+    assert!(matches!(
+        from_bytes(&bytes),
+        Err(FormatError::MalformedContent { reason, .. }) if reason.contains("left after the last record")
+    ));
+
+    // The same species' texel volume twice.
+    let mut baked = sample();
+    baked.texels.push(baked.texels[0].clone());
+    assert!(baked.validate().is_err());
+    assert!(matches!(
+        from_bytes(&to_bytes(&baked)),
+        Err(FormatError::MalformedContent { reason, .. }) if reason.contains("twice")
+    ));
+
+    // The same BTF set twice.
+    let mut baked = sample();
+    baked.btf[1] = baked.btf[0].clone();
+    assert!(baked.validate().is_err());
+    assert!(matches!(
+        from_bytes(&to_bytes(&baked)),
+        Err(FormatError::MalformedContent { reason, .. }) if reason.contains("twice")
+    ));
+}
+
+#[test]
+fn trailing_bytes_are_malformed() {
+    let mut bytes = to_bytes(&small());
+    bytes.extend_from_slice(b"junk");
+    assert!(matches!(
+        from_bytes(&bytes),
+        Err(FormatError::MalformedContent { .. })
+    ));
+}
+
+#[test]
+fn read_expecting_another_hash_is_a_scene_mismatch() {
+    let dir = scratch_dir("mismatch");
+    let path = dir.join("a.canopy");
+    let baked = small();
+    write_atomic(&path, &baked).unwrap();
+    let err = read_expecting(&path, baked.scene_hash ^ 1).unwrap_err();
+    match &err {
+        FormatError::SceneMismatch { found, expected } => {
+            assert_eq!(
+                (*found, *expected),
+                (baked.scene_hash, baked.scene_hash ^ 1)
+            )
+        }
+        other => panic!("expected a scene mismatch, got {other:?}"),
+    }
+    assert!(err.needs_rebake());
+    assert!(err.to_string().contains("canopy bake"));
+    fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn reading_a_missing_file_is_an_io_error_naming_it() {
+    let dir = scratch_dir("missing");
+    let path = dir.join("absent.canopy");
+    let err = read(&path).unwrap_err();
+    assert!(err.is_not_found(), "{err:?}");
+    assert!(!err.needs_rebake());
+    assert!(err.to_string().contains(&*path.to_string_lossy()), "{err}");
+    fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,0 +1,241 @@
+//! What the format's tests share: a global allocator that measures the peak a closure
+//! holds, sample bakes, and helpers that edit and reseal encoded bytes.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use super::read::{u32_at, u64_at};
+use super::*;
+
+/// Counts the bytes allocated by the current thread while a closure runs, so tests can
+/// check that decoding never allocates from an unchecked size. Thread-local, so tests
+/// running in parallel do not disturb each other.
+mod alloc_track {
+    use std::alloc::{GlobalAlloc, Layout, System};
+    use std::cell::Cell;
+
+    thread_local! {
+        static ON: Cell<bool> = const { Cell::new(false) };
+        static LIVE: Cell<isize> = const { Cell::new(0) };
+        static PEAK: Cell<isize> = const { Cell::new(0) };
+    }
+
+    fn note(delta: isize) {
+        let _ = ON.try_with(|on| {
+            if on.get() {
+                let live = LIVE.get() + delta;
+                LIVE.set(live);
+                PEAK.set(PEAK.get().max(live));
+            }
+        });
+    }
+
+    pub struct Tracker;
+
+    // SAFETY: forwards every call to `System` unchanged; only counts sizes.
+    unsafe impl GlobalAlloc for Tracker {
+        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+            let p = unsafe { System.alloc(layout) };
+            if !p.is_null() {
+                note(layout.size() as isize);
+            }
+            p
+        }
+
+        unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+            let p = unsafe { System.alloc_zeroed(layout) };
+            if !p.is_null() {
+                note(layout.size() as isize);
+            }
+            p
+        }
+
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+            unsafe { System.dealloc(ptr, layout) };
+            note(-(layout.size() as isize));
+        }
+
+        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+            let p = unsafe { System.realloc(ptr, layout, new_size) };
+            if !p.is_null() {
+                note(new_size as isize - layout.size() as isize);
+            }
+            p
+        }
+    }
+
+    /// Runs `f` and returns its result and the most bytes it held allocated at once.
+    pub fn peak_during<T>(f: impl FnOnce() -> T) -> (T, usize) {
+        LIVE.set(0);
+        PEAK.set(0);
+        ON.set(true);
+        let out = f();
+        ON.set(false);
+        (out, PEAK.get().max(0) as usize)
+    }
+}
+
+#[global_allocator]
+static TRACKER: alloc_track::Tracker = alloc_track::Tracker;
+pub(crate) use alloc_track::peak_during;
+
+/// Allowance for error messages, the section table and the like.
+pub(crate) const SMALL_OVERHEAD: usize = 64 * 1024;
+
+pub(crate) fn noise(seed: u32, len: usize) -> Vec<u8> {
+    let mut x = seed.wrapping_mul(2_654_435_761).wrapping_add(12_345);
+    (0..len)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            (x >> 24) as u8
+        })
+        .collect()
+}
+
+pub(crate) fn settings() -> BakeSettings {
+    BakeSettings {
+        views: 6,
+        tree_views: 6,
+        lights: 6,
+        resolution: 32,
+        supersample: 2,
+        vcm_resolution: 8,
+        texel_resolution: 16,
+    }
+}
+
+pub(crate) fn texel_volume(species: u32, dims: [u32; 3]) -> TexelVolume {
+    let len = 7 * dims.iter().product::<u32>() as usize * 4;
+    TexelVolume {
+        species,
+        lights: 6,
+        dims,
+        box_min: [-1.5, 0.0, -1.5],
+        voxel: 0.25,
+        voxels: noise(species + 200, len),
+    }
+}
+
+pub(crate) fn btf_set(species: u32, level: Level) -> BtfImageSet {
+    let (views, lights, res) = (6u32, 6u32, 32u32);
+    let image = (res * res * 4) as usize;
+    BtfImageSet {
+        species,
+        level,
+        views,
+        lights,
+        resolution: res,
+        center: [0.5, -1.25, 3.0],
+        radius: 2.5 + species as f32,
+        texel_size: 0.01,
+        direct: noise(species * 7 + 1, image * (views * lights) as usize),
+        ambient: noise(
+            species * 7 + 2,
+            image * (views * AMBIENT_IMAGES_PER_VIEW) as usize,
+        ),
+    }
+}
+
+pub(crate) fn vcm_set(owner: u32, level: Level, resolution: u32) -> VcmSet {
+    VcmSet {
+        species: 0,
+        owner,
+        level,
+        resolution,
+        opacity: noise(owner + 100, 48 * (resolution * resolution) as usize),
+        mean_opacity: [0.0, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 1.0],
+    }
+}
+
+/// Two BTF sets and two VCM sets (about 350 KB).
+pub(crate) fn sample() -> Baked {
+    Baked {
+        scene_hash: 0x0123_4567_89ab_cdef,
+        settings: settings(),
+        btf: vec![btf_set(0, Level::Twig), btf_set(1, Level::Tree)],
+        vcm: vec![vcm_set(0, Level::Twig, 8), vcm_set(7, Level::Branch, 16)],
+        texels: vec![texel_volume(0, [8, 16, 8])],
+    }
+}
+
+/// A few KB: two small VCM sets, no BTF.
+pub(crate) fn small() -> Baked {
+    Baked {
+        scene_hash: 42,
+        settings: settings(),
+        btf: Vec::new(),
+        vcm: vec![vcm_set(3, Level::Twig, 8), vcm_set(4, Level::Tree, 8)],
+        texels: vec![texel_volume(1, [2, 3, 2])],
+    }
+}
+
+pub(crate) fn section_count(bytes: &[u8]) -> usize {
+    u32_at(bytes, 12) as usize
+}
+
+pub(crate) fn header_end(bytes: &[u8]) -> usize {
+    FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * section_count(bytes)
+}
+
+/// Recomputes the header checksum only.
+pub(crate) fn reseal_header(bytes: &mut [u8]) {
+    let end = header_end(bytes);
+    let crc = crc32fast::hash(&bytes[..end]);
+    bytes[end..end + 4].copy_from_slice(&crc.to_le_bytes());
+}
+
+/// Recomputes every section checksum and the header checksum (sections must lie inside
+/// the bytes).
+pub(crate) fn reseal(bytes: &mut [u8]) {
+    let mut pos = header_end(bytes) + 4;
+    for i in 0..section_count(bytes) {
+        let entry = FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * i;
+        let len = u64_at(bytes, entry + 8) as usize;
+        let crc = crc32fast::hash(&bytes[pos..pos + len]);
+        bytes[entry + 4..entry + 8].copy_from_slice(&crc.to_le_bytes());
+        pos += len;
+    }
+    reseal_header(bytes);
+}
+
+/// Offset of the first payload byte of section `i`.
+pub(crate) fn payload_start(bytes: &[u8], i: usize) -> usize {
+    let mut pos = header_end(bytes) + 4;
+    for j in 0..i {
+        pos += u64_at(bytes, FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * j + 8) as usize;
+    }
+    pos
+}
+
+pub(crate) fn scratch_dir(name: &str) -> PathBuf {
+    static N: AtomicU64 = AtomicU64::new(0);
+    let dir = std::env::temp_dir().join(format!(
+        "canopy-format-test-{}-{name}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    ));
+    let _ = fs::remove_dir_all(&dir);
+    fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+pub(crate) fn dir_entries(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+pub(crate) fn the_allocation_tracker_sees_allocations() {
+    let (v, peak) = peak_during(|| vec![1u8; 10_000_000]);
+    assert!(peak >= 10_000_000, "{peak}");
+    drop(v);
+    let ((), peak) = peak_during(|| ());
+    assert_eq!(peak, 0);
+}
