@@ -6,6 +6,7 @@
 pub mod app;
 pub mod bake;
 pub mod bench;
+pub mod color;
 pub mod error;
 pub mod forest_map;
 pub mod format;
