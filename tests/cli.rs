@@ -29,11 +29,9 @@ fn render_then_compare_end_to_end() {
         .args(["--size", "96x64", "--frames", "2", "--cpu", "--json"])
         .output()
         .unwrap();
-    assert!(
-        o.status.success(),
-        "render failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "render failed: {err}");
+    assert!(!err.contains("below the terrain"), "{err}");
     let json: serde_json::Value =
         serde_json::from_slice(&o.stdout).expect("stdout is one JSON object");
     assert_eq!(json["method"], "geometry");
@@ -165,6 +163,40 @@ fn render_then_compare_end_to_end() {
         text.contains("luminance") && text.contains("of A's"),
         "{text}"
     );
+}
+
+/// A camera under the hills is drawn (the terrain's underside) but `render` says so on
+/// stderr with the ground's height there; one above them draws without a word.
+#[test]
+fn render_warns_when_the_camera_is_below_the_terrain() {
+    let scene = common::data("small.toml");
+    let world = common::small_scene().build_world().unwrap();
+    let (x, z) = (0.0f32, -58.0f32);
+    let ground = world.terrain.height_at(x, z);
+    let render_from = |y: f32| {
+        let o = canopy()
+            .arg("render")
+            .arg(&scene)
+            .arg("--out")
+            .arg(tmp(&format!("below-{y}.png")))
+            .args(["--size", "32x24", "--frames", "1", "--cpu"])
+            .arg("--camera")
+            .arg(format!("{x},{y},{z}"))
+            .args(["--look-at", "0,6,8"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{err}");
+        err
+    };
+    let y = ground - 20.0;
+    let err = render_from(y);
+    let want = format!(
+        "warning: the camera is 20.0 m below the terrain (ground at y = {ground:.1} m there)"
+    );
+    assert!(err.contains(&want), "stderr {err:?} lacks {want:?}");
+    let err = render_from(ground + 2.0);
+    assert!(!err.contains("below the terrain"), "{err}");
 }
 
 #[test]
