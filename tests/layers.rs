@@ -30,7 +30,7 @@ const LAYERS: &[(&str, &[&str])] = &[
             "color",
             "progress",
             "forest_map",
-            // The one atomic-write helper (issue 35's split adds it): a leaf.
+            // The atomic-write helper: a leaf that imports nothing from the crate.
             "atomic_file",
         ],
     ),
