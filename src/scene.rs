@@ -1087,8 +1087,16 @@ fov_deg = 55.0
         let _ = std::fs::create_dir_all(&dir);
         let path = dir.join("s.toml");
         let _ = std::fs::write(&path, BASE);
-        let ok = Scene::load(&path);
-        assert!(ok.is_ok(), "{:?}", ok.err());
+        let ok = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        // What BASE says, read back.
+        assert_eq!(ok.forest.count, Some(30));
+        assert_eq!(ok.forest.mix, [0.6, 0.4]);
+        assert_eq!(ok.terrain.resolution, 33);
+        let names: Vec<_> = ok.species.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["fir", "oak"]);
+        assert_eq!(ok.species[1].preset.as_deref(), Some("broadleaf"));
+        assert_eq!(ok.camera.position, [0.0, 40.0, -90.0]);
+        assert_eq!(ok.sun.elevation, 35.0);
         let (bad, line) = edit("count = 30", "count = -5");
         let _ = std::fs::write(&path, bad);
         let msg = Scene::load(&path)
@@ -1332,8 +1340,12 @@ fov_deg = 55.0
         );
         assert!(msg.contains("expected one of needles, leaves"), "{msg}");
         // With a valid value the inline params are accepted.
-        let ok = Scene::parse(&text.replace("\"fronds\"", "\"leaves\""), "scene.toml");
-        assert!(ok.is_ok(), "{:?}", ok.err());
+        let ok = Scene::parse(&text.replace("\"fronds\"", "\"leaves\""), "scene.toml")
+            .unwrap_or_else(|e| panic!("{e}"));
+        // They are the broadleaf preset's, field for field, in place of the preset's name.
+        assert_eq!(ok.species[1].preset, None);
+        assert_eq!(ok.species[1].params, preset("broadleaf"));
+        assert!(ok.species[1].params.is_some());
         // An out-of-range inline parameter is reported at its own line.
         let bad = text
             .replace("\"fronds\"", "\"leaves\"")
@@ -1547,7 +1559,7 @@ fov_deg = 55.0
             mix: Vec::new(),
             ..ForestParams::default()
         };
-        assert!(p.check(0).is_ok());
+        assert_eq!(p.check(0), Ok(()));
     }
 
     #[test]
@@ -1555,8 +1567,9 @@ fov_deg = 55.0
         let dir = std::env::temp_dir().join(format!("canopy-scene-big-{}", std::process::id()));
         let _ = std::fs::create_dir_all(&dir);
         let path = dir.join("big.toml");
-        let made = std::fs::File::create(&path).and_then(|f| f.set_len(MAX_SCENE_BYTES + 1));
-        assert!(made.is_ok());
+        std::fs::File::create(&path)
+            .and_then(|f| f.set_len(MAX_SCENE_BYTES + 1))
+            .unwrap_or_else(|e| panic!("making {}: {e}", path.display()));
         let msg = Scene::load(&path)
             .err()
             .map(|e| e.to_string())
