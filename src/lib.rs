@@ -8,6 +8,7 @@ pub mod atomic_file;
 pub mod bake;
 pub mod bench;
 pub mod cli;
+pub mod color;
 pub mod error;
 pub mod forest_map;
 pub mod format;

@@ -178,7 +178,7 @@ impl ClassFlip {
 
 /// The linear luminance of an sRGB pixel (the sRGB curve undone, Rec. 709 weights), 0..1.
 pub fn linear_luminance(p: [u8; 3]) -> f64 {
-    let linear = |v: u8| f64::from(crate::render::target::srgb_to_linear(v));
+    let linear = |v: u8| f64::from(crate::color::srgb_to_linear(v));
     0.2126 * linear(p[0]) + 0.7152 * linear(p[1]) + 0.0722 * linear(p[2])
 }
 

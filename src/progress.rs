@@ -8,6 +8,14 @@ use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
 
+/// What a long piece of work (a bake step) reports: `done` of `total` steps, at `what`.
+#[derive(Clone, Debug)]
+pub struct Progress {
+    pub done: u64,
+    pub total: u64,
+    pub what: String,
+}
+
 /// How often a bake's progress is logged where no bar can be drawn.
 pub const LOG_EVERY: Duration = Duration::from_secs(5);
 
@@ -28,7 +36,7 @@ pub fn bar(show: bool, len: u64, template: &str) -> ProgressBar {
 
 /// Shows a bake's progress on `bar`, or, where stderr is not a terminal, logs it every
 /// [`LOG_EVERY`] with the time left.
-pub fn show_bake(bar: &ProgressBar, p: &crate::bake::Progress) {
+pub fn show_bake(bar: &ProgressBar, p: &Progress) {
     bar.set_length(p.total);
     bar.set_position(p.done);
     bar.set_message(p.what.clone());
@@ -44,7 +52,7 @@ pub fn show_bake(bar: &ProgressBar, p: &crate::bake::Progress) {
 
 /// `baking STAGE: DONE/TOTAL steps (P %), about S s left`, the time left extrapolated
 /// from the time so far.
-pub fn log_line(p: &crate::bake::Progress, elapsed: Duration) -> String {
+pub fn log_line(p: &Progress, elapsed: Duration) -> String {
     let f = p.done as f64 / p.total.max(1) as f64;
     let left = match seconds_left(p, elapsed) {
         Some(s) => format!(", about {s:.0} s left"),
@@ -61,7 +69,7 @@ pub fn log_line(p: &crate::bake::Progress, elapsed: Duration) -> String {
 
 /// The seconds a bake has left, extrapolated from the time so far (`None` before its first
 /// step).
-pub fn seconds_left(p: &crate::bake::Progress, elapsed: Duration) -> Option<f64> {
+pub fn seconds_left(p: &Progress, elapsed: Duration) -> Option<f64> {
     if p.done == 0 {
         return None;
     }
@@ -75,7 +83,7 @@ mod tests {
 
     #[test]
     fn a_log_line_says_the_stage_and_the_time_left() {
-        let p = crate::bake::Progress {
+        let p = Progress {
             done: 25,
             total: 100,
             what: "vcm tree 12".into(),
@@ -85,7 +93,7 @@ mod tests {
             l,
             "baking vcm tree 12: 25/100 steps (25 %), about 30 s left"
         );
-        let none = crate::bake::Progress { done: 0, ..p };
+        let none = Progress { done: 0, ..p };
         assert_eq!(seconds_left(&none, Duration::from_secs(10)), None);
         assert_eq!(
             log_line(&none, Duration::from_secs(10)),

@@ -473,7 +473,10 @@ fn a_lone_fir_as_a_texel_is_close_to_the_reference() {
     // Measured 0.031 (32 slices): the pre-composited levels keep each voxel's opacity
     // exactly along the stack's axis.
     assert!(f.stacks < 0.05, "{}", f.stacks);
-    assert!(f.btf > 0.0);
+    // Measured 0.0373 on lavapipe: btf's billboards against the same reference, the
+    // yardstick for the texel's figures. Near 0 btf would have drawn the geometry itself
+    // (a method that falls back); above 0.05 its billboards got worse.
+    assert!((0.025..0.05).contains(&f.btf), "btf {}", f.btf);
     // Measured 0.0026: the same slices, sampled at the same depths.
     assert!(f.polygons_vs_march < 0.01, "{}", f.polygons_vs_march);
 }

@@ -234,24 +234,25 @@ fn darkening_against_truth(ctx: &GpuContext) -> [(f32, f32); 2] {
     [0, 1].map(|k| (truth[k].0, btf[k].0))
 }
 
-/// What btf + VCM darkens, as a fraction of what geometry darkens over the same pixels, may
-/// not fall below this (half crown, whole crown). Measured on lavapipe (Mesa llvmpipe) with
-/// a cube map set per tree: geometry 0.5013 and 0.6100, btf + VCM 0.0041 and 0.0127:
-/// ratios 0.008 and 0.021; the floors are half of that. With forest cells (the default):
-/// 0.0106 and 0.0226, ratios 0.021 and 0.037. With VCM shading off the ratios are 0 (the
-/// test then fails). This guards what there is; the goal, about as much as the truth, is the ignored test
-/// below (issue 14).
-const DARKENING_FLOOR: [f32; 2] = [0.004, 0.01];
+/// What btf + VCM darkens, as a fraction of what geometry darkens over the same pixels
+/// (half crown, whole crown), must stay in these ranges. Measured on lavapipe (Mesa
+/// llvmpipe 15) with forest cells (the default layout): geometry 0.5015 and 0.6100 (over
+/// 184 and 755 pixels), btf + VCM 0.0120 and 0.0248 (598 and 1883): ratios 0.024 and 0.041;
+/// the ranges are those ratios from 2/3 to 4/3. With VCM shading off the ratios are 0,
+/// below the ranges. A change to the VCMs
+/// that moves the ratios out of range, either way, fails here: re-measure and move the
+/// range with it; the goal, about as much as the truth, is the ignored test below (issue 14).
+const DARKENING_RANGE: [(f32, f32); 2] = [(0.016, 0.032), (0.027, 0.055)];
 
 #[test]
 fn btf_with_vcm_darkens_a_tree_behind_another_a_measured_fraction_of_geometry() {
     let ctx = gpu();
     for (k, (truth, btf)) in darkening_against_truth(&ctx).into_iter().enumerate() {
         let ratio = btf / truth;
+        let (low, high) = DARKENING_RANGE[k];
         assert!(
-            ratio >= DARKENING_FLOOR[k] && ratio <= 1.5,
-            "window {k}: btf + VCM darkens by {btf:.4}, geometry by {truth:.4}: ratio {ratio:.4} outside {}..=1.5",
-            DARKENING_FLOOR[k]
+            (low..=high).contains(&ratio),
+            "window {k}: btf + VCM darkens by {btf:.4}, geometry by {truth:.4}: ratio {ratio:.4} outside {low}..={high}"
         );
     }
 }
@@ -262,8 +263,8 @@ fn btf_with_vcm_darkens_a_tree_behind_another_a_measured_fraction_of_geometry() 
 const DARKENING_RATIO: (f32, f32) = (0.5, 1.5);
 
 #[test]
-#[ignore = "btf + VCM darkens a fir behind another 27 to 48x less than geometry: 0.0106 vs \
-            0.5013 (half crown, ratio 0.021), 0.0226 vs 0.6100 (whole crown, ratio 0.037) on \
+#[ignore = "btf + VCM darkens a fir behind another 24 to 42x less than geometry: 0.0120 vs \
+            0.5015 (half crown, ratio 0.024), 0.0248 vs 0.6100 (whole crown, ratio 0.041) on \
             lavapipe with forest cells; the corners' rays towards the sun pass beside the \
             other crown"]
 fn btf_with_vcm_darkens_a_tree_behind_another_about_as_much_as_geometry() {

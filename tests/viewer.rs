@@ -1,14 +1,49 @@
 //! The viewer in a real window: started on the small scene, it renders frames and writes a
-//! screenshot of its 3D view, which must be a non-blank PNG. Needs an X display; CI runs it
-//! under Xvfb (.ci/run sets DISPLAY). Without a display the test says so and passes, so it
+//! screenshot of its 3D view, which must match `canopy render` of the same frame by FLIP.
+//! Needs an X display; CI runs it under Xvfb (.ci/run sets DISPLAY). Without a display the test says so and passes, so it
 //! is listed as run: set CANOPY_REQUIRE_DISPLAY=1 to make a missing display a failure.
 
 mod common;
 
 use std::process::Command;
 
+/// `canopy render` of the small scene's start frame (the viewer's first frame: the scene's
+/// camera, geometry) at `w` x `h` on the CPU adapter, with `extra` arguments.
+fn render_start_frame(name: &str, w: u32, h: u32, extra: &[&str]) -> image::RgbImage {
+    let out = std::env::temp_dir().join(format!("canopy-viewer-{name}-{}.png", std::process::id()));
+    let o = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .env("RUST_LOG", "error")
+        .arg("render")
+        .arg(common::data("small.toml"))
+        .arg("--out")
+        .arg(&out)
+        .args(["--size", &format!("{w}x{h}"), "--frames", "1", "--cpu"])
+        .args(["--method", "geometry"])
+        .args(extra)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "render failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let img = image::open(&out).expect("render wrote a PNG").to_rgb8();
+    let _ = std::fs::remove_file(&out);
+    img
+}
+
+/// The screenshot's mean FLIP against `canopy render` of the same frame (the scene's start
+/// camera and sun, geometry, the window's size) may not exceed this, the images-unchanged
+/// tolerance. Measured on lavapipe (Mesa llvmpipe 15, Xvfb, 1280x720): 0.0000, both
+/// draw the same frame with the same renderer.
+const SCREENSHOT_FLIP: f32 = 0.002;
+
+/// The failing counterpart: against a render with another sun (300°, 15°) the screenshot
+/// is far outside that bound. Measured on lavapipe: 0.2843.
+const OTHER_SUN_FLIP: f32 = 0.1;
+
 #[test]
-fn viewer_renders_and_writes_a_non_blank_screenshot() {
+fn viewer_screenshot_matches_a_render_of_the_same_frame() {
     if std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
         assert!(
             std::env::var_os("CANOPY_REQUIRE_DISPLAY").is_none(),
@@ -32,17 +67,26 @@ fn viewer_renders_and_writes_a_non_blank_screenshot() {
         "viewer failed: {}",
         String::from_utf8_lossy(&o.stderr)
     );
-    let img = image::open(&out).expect("screenshot is a PNG").to_rgb8();
-    assert!(img.width() > 100 && img.height() > 100);
-    // Non-blank: many distinct colours, not one flat fill.
-    let mut colours: Vec<[u8; 3]> = img.pixels().map(|p| p.0).collect();
-    colours.sort_unstable();
-    colours.dedup();
-    assert!(
-        colours.len() > 50,
-        "only {} colours in the screenshot",
-        colours.len()
+    let shot = image::open(&out).expect("screenshot is a PNG").to_rgb8();
+    let (w, h) = shot.dimensions();
+    assert!(w > 100 && h > 100, "{w}x{h}");
+    let flip = |img: &image::RgbImage| canopy::metrics::flip(img, &shot).unwrap().stats.mean;
+    let same = flip(&render_start_frame("same", w, h, &[]));
+    let other_sun = flip(&render_start_frame("other-sun", w, h, &["--sun", "300,15"]));
+    eprintln!(
+        "screenshot {w}x{h} against render: same frame {same:.4}, another sun {other_sun:.4}"
     );
+    assert!(
+        same <= SCREENSHOT_FLIP,
+        "the screenshot is {same:.4} mean FLIP from a render of its frame (> {SCREENSHOT_FLIP}); \
+         it is in {}",
+        out.display()
+    );
+    assert!(
+        other_sun > OTHER_SUN_FLIP,
+        "another sun is only {other_sun:.4} from the screenshot (<= {OTHER_SUN_FLIP})"
+    );
+    let _ = std::fs::remove_file(&out);
 }
 
 /// A lost GPU device (destroyed at frame 2 through the test hook) is replaced: the viewer

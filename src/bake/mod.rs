@@ -63,13 +63,8 @@ fn studio_world(object: TreeModel) -> World {
     World::lone(object, 1.0)
 }
 
-/// What a bake step reports to a progress bar.
-#[derive(Clone, Debug)]
-pub struct Progress {
-    pub done: u64,
-    pub total: u64,
-    pub what: String,
-}
+/// What a bake step reports to a progress bar (defined beside the bars that show it).
+pub use crate::progress::Progress;
 
 /// Number of images the bake renders for `species` species.
 pub fn image_count(settings: &BakeSettings, species: usize) -> u64 {

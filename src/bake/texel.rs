@@ -24,13 +24,13 @@
 
 use glam::{UVec3, Vec3};
 
+use crate::color::{linear_to_srgb, srgb_lut};
 use crate::format::TexelVolume;
 use crate::model::World;
 use crate::model::mesh::Aabb;
 use crate::model::params::{TexelParams, TexelSource};
 use crate::model::tree::TreeModel;
 use crate::render::sky_visibility::SKY_DIRECTIONS;
-use crate::render::target::{linear_to_srgb, srgb_lut};
 use crate::render::{Camera, GpuContext, Renderer};
 use crate::sphere::DirectionSet;
 use crate::{Error, Result};

@@ -187,8 +187,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
         frame.camera = Camera::look_at(pos, target, frame.camera.fov_y_deg);
     }
     let eye = frame.camera.position;
-    let ground = world.terrain.height_at(eye.x, eye.z);
-    if eye.y < ground {
+    if let Some(ground) = world.terrain.ground_above(eye) {
         eprintln!(
             "warning: the camera is {:.1} m below the terrain (ground at y = {ground:.1} m there)",
             ground - eye.y

@@ -459,6 +459,33 @@ impl BtfImageSet {
     }
 }
 
+impl crate::vcm::billboard::AlphaSet {
+    /// A BTF set's sky-lit images as occluders (see
+    /// [`AlphaSet::from_sky_lit`](crate::vcm::billboard::AlphaSet::from_sky_lit)), after
+    /// checking that its ambient images hold what its fields say. Defined here rather than
+    /// in `vcm`, which sits below this file format.
+    pub fn new(set: &BtfImageSet) -> crate::Result<Self> {
+        let expected = set.expected_ambient_len();
+        if expected != Some(set.ambient.len() as u64) {
+            return Err(crate::Error::BadInput(format!(
+                "BTF set of species {} level {:?}: ambient images hold {} bytes, expected {:?}",
+                set.species,
+                set.level,
+                set.ambient.len(),
+                expected
+            )));
+        }
+        Self::from_sky_lit(
+            set.views,
+            set.resolution,
+            &set.ambient,
+            glam::Vec3::from(set.center),
+            set.radius,
+        )
+        .map_err(|e| crate::Error::BadInput(format!("BTF set: {e}")))
+    }
+}
+
 impl VcmSet {
     /// The length `opacity` must have: 8*6*resolution², or None on overflow.
     pub fn expected_opacity_len(&self) -> Option<u64> {

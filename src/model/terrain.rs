@@ -248,6 +248,13 @@ impl Terrain {
         self.far.as_ref().and_then(|f| f.cover.as_ref())
     }
 
+    /// The ground's height at `p`'s `(x, z)` (as [`Terrain::height_at`]) when `p` lies below
+    /// it, as a camera placed under the hills; None when `p` is on or above the ground.
+    pub fn ground_above(&self, p: Vec3) -> Option<f32> {
+        let ground = self.height_at(p.x, p.z);
+        (p.y < ground).then_some(ground)
+    }
+
     /// Height at world `(x, z)`, bilinear between grid vertices; outside the square the
     /// horizon's drawn surface (hills and the far forest's canopy) where there is one, else
     /// clamped to the edge.
@@ -533,6 +540,20 @@ mod tests {
         );
         assert_eq!(b.min.x, -500.0);
         assert_eq!(b.max.z, 500.0);
+    }
+
+    #[test]
+    fn a_point_below_the_ground_gets_the_ground_height_there() {
+        let t = terrain(65);
+        let (x, z) = (120.0, -75.0);
+        let h = t.height_at(x, z);
+        assert!(h > 1.0, "hills here: {h}");
+        assert_eq!(t.ground_above(Vec3::new(x, h - 0.5, z)), Some(h));
+        assert_eq!(t.ground_above(Vec3::new(x, -1000.0, z)), Some(h));
+        // On or above the ground, or not a point at all: nothing to say.
+        assert_eq!(t.ground_above(Vec3::new(x, h, z)), None);
+        assert_eq!(t.ground_above(Vec3::new(x, h + 0.5, z)), None);
+        assert_eq!(t.ground_above(Vec3::new(x, f32::NAN, z)), None);
     }
 
     #[test]

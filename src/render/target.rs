@@ -5,6 +5,7 @@
 use image::RgbaImage;
 
 use super::GpuContext;
+pub use crate::color::{linear_to_srgb, srgb_lut, srgb_to_linear};
 use crate::{Error, Result};
 
 /// Colour format of offscreen targets: 8-bit sRGB, so shaders write linear values and the
@@ -163,30 +164,6 @@ pub fn map_read(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>> {
         .to_vec();
     buffer.unmap();
     Ok(data)
-}
-
-/// [`srgb_to_linear`] of every byte, for decoding many pixels.
-pub fn srgb_lut() -> Vec<f32> {
-    (0..=255u8).map(srgb_to_linear).collect()
-}
-
-pub fn srgb_to_linear(c: u8) -> f32 {
-    let c = f32::from(c) / 255.0;
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-pub fn linear_to_srgb(c: f32) -> u8 {
-    let c = c.clamp(0.0, 1.0);
-    let s = if c <= 0.003_130_8 {
-        c * 12.92
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0 + 0.5) as u8
 }
 
 /// Averages each `factor` x `factor` block of an sRGB image in linear light: the

@@ -462,7 +462,7 @@ mod tests {
             mix: Vec::new(),
             ..ForestParams::default()
         };
-        assert!(p.check(0).is_ok());
+        assert_eq!(p.check(0), Ok(()));
     }
 
     #[test]

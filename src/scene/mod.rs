@@ -283,8 +283,9 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("canopy-scene-big-{}", std::process::id()));
         let _ = std::fs::create_dir_all(&dir);
         let path = dir.join("big.toml");
-        let made = std::fs::File::create(&path).and_then(|f| f.set_len(MAX_SCENE_BYTES + 1));
-        assert!(made.is_ok());
+        std::fs::File::create(&path)
+            .and_then(|f| f.set_len(MAX_SCENE_BYTES + 1))
+            .unwrap_or_else(|e| panic!("making {}: {e}", path.display()));
         let msg = Scene::load(&path)
             .err()
             .map(|e| e.to_string())

@@ -6,9 +6,7 @@
 
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
-use crate::format::BtfImageSet;
 use crate::sphere::{Blend, DirectionSet, billboard_axes};
-use crate::{Error, Result};
 
 use super::Occluder;
 
@@ -24,26 +22,32 @@ pub struct AlphaSet {
 }
 
 impl AlphaSet {
-    pub fn new(set: &BtfImageSet) -> Result<Self> {
-        let views = DirectionSet::with_count(set.views as usize)
-            .map_err(|e| Error::BadInput(format!("BTF set: {e}")))?;
-        let res = set.resolution.max(1);
+    /// One level's occluders from its sky-lit images: the first `views` RGBA8 images of
+    /// `resolution`² pixels each in `images` (one per direction of
+    /// [`DirectionSet::with_count`]`(views)`, their alpha the coverage), the object's bounding
+    /// sphere at `center` with `radius`. The baked file's sets come through
+    /// `AlphaSet::new` (in `format`), which checks their lengths first. Err says what is
+    /// wrong: a view count no direction set has, or too few bytes.
+    pub fn from_sky_lit(
+        views: u32,
+        resolution: u32,
+        images: &[u8],
+        center: Vec3,
+        radius: f32,
+    ) -> Result<Self, String> {
+        let dirs = DirectionSet::with_count(views as usize).map_err(|e| e.to_string())?;
+        let res = resolution.max(1);
         let n = (res * res) as usize;
-        let expected = set.expected_ambient_len();
-        if expected != Some(set.ambient.len() as u64) {
-            return Err(Error::BadInput(format!(
-                "BTF set of species {} level {:?}: ambient images hold {} bytes, expected {:?}",
-                set.species,
-                set.level,
-                set.ambient.len(),
-                expected
-            )));
+        if images.len() / (n * 4) < views as usize {
+            return Err(format!(
+                "{} bytes hold fewer than {views} images of {res}² pixels",
+                images.len()
+            ));
         }
         // The sky-lit images (the first of each view's two): their alpha is the coverage.
-        let mips = set
-            .ambient
+        let mips = images
             .chunks_exact(n * 4)
-            .take(set.views as usize)
+            .take(views as usize)
             .map(|img| {
                 let mut level: Vec<f32> = img
                     .chunks_exact(4)
@@ -69,18 +73,18 @@ impl AlphaSet {
                 chain
             })
             .collect();
-        let view_axes = views
+        let view_axes = dirs
             .directions()
             .iter()
             .map(|&v| billboard_axes(v))
             .collect();
         Ok(Self {
-            views,
+            views: dirs,
             view_axes,
             mips,
             res,
-            center: Vec3::from(set.center),
-            radius: set.radius,
+            center,
+            radius,
         })
     }
 

@@ -195,12 +195,36 @@ pub fn cell_resolution(vcm_resolution: u32) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::{ForestParams, SpeciesEntry, TerrainParams};
 
+    /// `count` trees of two species on 100 m of gentle hills, as tests/data/small.toml
+    /// places them (its terrain and forest; the species from their presets).
     fn world(count: u32) -> World {
-        let mut scene =
-            crate::scene::Scene::parse(crate::scene::SMALL_TEST_SCENE_TOML, "small.toml").unwrap();
-        scene.forest.count = Some(count);
-        scene.build_world().unwrap()
+        let terrain = TerrainParams {
+            size: 100.0,
+            resolution: 33,
+            seed: 3,
+            relief: 8.0,
+            feature_size: 60.0,
+            octaves: 3,
+            roughness: 0.5,
+            ..TerrainParams::default()
+        };
+        let species = [
+            SpeciesEntry::from_preset("fir", "fir", 1),
+            SpeciesEntry::from_preset("broadleaf", "broadleaf", 2),
+        ];
+        let forest = ForestParams {
+            count: Some(count),
+            seed: 5,
+            min_spacing: 7.0,
+            mix: vec![0.5, 0.5],
+            scale_min: 0.8,
+            scale_max: 1.2,
+            random_yaw: true,
+            ..ForestParams::default()
+        };
+        World::build(&terrain, &species, &forest).unwrap()
     }
 
     #[test]

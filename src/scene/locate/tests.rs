@@ -1,6 +1,7 @@
 //! The messages of scene files with errors: each names the file, the line and the key.
 
 use super::*;
+use crate::model::species::preset;
 use crate::scene::Scene;
 use crate::scene::test_support::*;
 
@@ -10,8 +11,16 @@ fn load_reads_a_file() {
     let _ = std::fs::create_dir_all(&dir);
     let path = dir.join("s.toml");
     let _ = std::fs::write(&path, BASE);
-    let ok = Scene::load(&path);
-    assert!(ok.is_ok(), "{:?}", ok.err());
+    let ok = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    // What BASE says, read back.
+    assert_eq!(ok.forest.count, Some(30));
+    assert_eq!(ok.forest.mix, [0.6, 0.4]);
+    assert_eq!(ok.terrain.resolution, 33);
+    let names: Vec<_> = ok.species.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["fir", "oak"]);
+    assert_eq!(ok.species[1].preset.as_deref(), Some("broadleaf"));
+    assert_eq!(ok.camera.position, [0.0, 40.0, -90.0]);
+    assert_eq!(ok.sun.elevation, 35.0);
     let (bad, line) = edit("count = 30", "count = -5");
     let _ = std::fs::write(&path, bad);
     let msg = Scene::load(&path)
@@ -261,8 +270,12 @@ fn unknown_enum_value_in_inline_params() {
         "{msg}"
     );
     // With a valid value the inline params are accepted.
-    let ok = Scene::parse(&text.replace("\"fronds\"", "\"leaves\""), "scene.toml");
-    assert!(ok.is_ok(), "{:?}", ok.err());
+    let ok = Scene::parse(&text.replace("\"fronds\"", "\"leaves\""), "scene.toml")
+        .unwrap_or_else(|e| panic!("{e}"));
+    // They are the broadleaf preset's, field for field, in place of the preset's name.
+    assert_eq!(ok.species[1].preset, None);
+    assert_eq!(ok.species[1].params, preset("broadleaf"));
+    assert!(ok.species[1].params.is_some());
     // An out-of-range inline parameter is reported at its own line.
     let bad = text
         .replace("\"fronds\"", "\"leaves\"")
