@@ -18,9 +18,9 @@ use common::*;
 /// measures 0 there. Its shaders are compiled for the host CPU, though, and a CPU with other
 /// vector units rounds differently: `geometry` at the near view measures 0.0031 against
 /// references made on another CPU (2026-11-27, an AVX-512 Xeon; the code before and after the
-/// methods went behind one interface gave the same bytes there), `btf` at the near view
-/// 0.0035. The bound leaves room for
-/// that and nothing more: a change that moves what a frame shows measures well above it.
+/// methods went behind one interface gave the same bytes there), `btf` there 0.0035. The
+/// bound leaves room for that and nothing more: a change that moves what a frame shows
+/// measures well above it.
 const MAX_MEAN_FLIP: f32 = 0.005;
 
 const SIZE: (u32, u32) = (320, 180);
