@@ -11,7 +11,7 @@ use canopy::render::FrameDesc;
 use canopy::scene::Scene;
 use image::RgbaImage;
 
-/// The distances of the README's species sheet (m).
+/// The distances of the species sheet, `screenshots/species-distances.png` (m).
 const DISTANCES: [f32; 3] = [5.0, 50.0, 500.0];
 
 /// Each preset's three variants (as `variants = 3` makes them) keep their crowns covered
@@ -47,7 +47,7 @@ fn every_variant_of_every_preset_keeps_its_crown_covered() {
 /// broadleaf) alone on flat ground from 5, 50 and 500 m (rows), as the species gallery
 /// draws them. Run with `cargo test --release --test species -- --ignored`.
 #[test]
-#[ignore = "writes the README's picture; run by hand"]
+#[ignore = "writes the species sheet's picture; run by hand"]
 fn species_sheet_at_three_distances() {
     let gpu = common::gpu();
     let base = FrameDesc::from_scene(&Scene::default_scene());

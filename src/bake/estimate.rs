@@ -340,7 +340,7 @@ mod tests {
 
     /// Issue 13 item 6: the viewer opens the example forest at real density when given no
     /// scene, which it may only do while that forest bakes in at most 5 minutes on these
-    /// cores (measured: see the estimate's constants and the README).
+    /// cores (measured: see the estimate's constants and docs/RESULTS.md).
     #[test]
     fn the_viewers_default_is_a_dense_forest_that_bakes_within_five_minutes() {
         let scene = crate::scene::Scene::viewer_scene();
