@@ -12,25 +12,15 @@ use crate::render::scale::{MIN_SCALE, RenderScale};
 use crate::render::{AdapterPreference, Method};
 use crate::scene::Scene;
 
-/// `--method`: the rendering methods, named as [`Method::name`] names them.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum MethodArg {
-    Geometry,
-    Btf,
-    Billboard,
-    Texel,
-    Hybrid,
-}
+/// `--method` takes the renderer's own list: every method of [`Method::ALL`], named as
+/// [`Method::name`] names it (a new method needs nothing here).
+impl ValueEnum for Method {
+    fn value_variants<'a>() -> &'a [Self] {
+        Method::ALL
+    }
 
-impl From<MethodArg> for Method {
-    fn from(m: MethodArg) -> Method {
-        match m {
-            MethodArg::Geometry => Method::Geometry,
-            MethodArg::Btf => Method::Btf,
-            MethodArg::Billboard => Method::Billboard,
-            MethodArg::Texel => Method::Texel,
-            MethodArg::Hybrid => Method::Hybrid,
-        }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
     }
 }
 
@@ -196,12 +186,13 @@ mod tests {
 
     #[test]
     fn the_method_names_are_the_renderers() {
-        let names: Vec<String> = MethodArg::value_variants()
+        let names: Vec<String> = <Method as ValueEnum>::value_variants()
             .iter()
             .map(|m| {
                 let value = m.to_possible_value().map(|v| v.get_name().to_owned());
-                assert_eq!(value.as_deref(), Some(Method::from(*m).name()));
-                Method::from(*m).name().to_owned()
+                assert_eq!(value.as_deref(), Some(m.name()));
+                assert_eq!(Method::from_str(m.name(), false), Ok(*m));
+                m.name().to_owned()
             })
             .collect();
         let all: Vec<String> = Method::ALL.iter().map(|m| m.name().to_owned()).collect();

@@ -3,7 +3,8 @@
 
 use std::path::PathBuf;
 
-use super::args::{MethodArg, adapter, parse_size, parse_sweep};
+use super::args::{adapter, parse_size, parse_sweep};
+use crate::render::Method;
 
 #[derive(clap::Args)]
 pub struct BenchArgs {
@@ -19,7 +20,7 @@ pub struct BenchArgs {
         value_delimiter = ',',
         default_value = "geometry,btf,billboard,texel,hybrid"
     )]
-    methods: Vec<MethodArg>,
+    methods: Vec<Method>,
     /// Sweep a knob: KEY=V1,V2,... (btf and hybrid: lod_scale, weight_threshold, lod_fade, planes,
     /// vcm, light_gain, gpu_far, gpu_near; texel: slice_d0, slice_d1, max_slices, texel_mode, texel_tiles, tile_distance;
     /// all three: ground_sky); repeat for a grid.
@@ -53,7 +54,7 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<()> {
     let req = crate::bench::command::BenchRequest {
         scene: args.scene,
         flight: args.flight,
-        methods: args.methods.into_iter().map(Into::into).collect(),
+        methods: args.methods,
         sweeps: args.sweep,
         width,
         height,

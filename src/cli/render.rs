@@ -7,8 +7,8 @@ use anyhow::Context as _;
 use glam::Vec3;
 
 use super::args::{
-    MethodArg, PlanesArg, TexelModeArg, adapter, load_scene, on_off, parse_positive, parse_size,
-    parse_sun, parse_unit, parse_vec3,
+    PlanesArg, TexelModeArg, adapter, load_scene, on_off, parse_positive, parse_size, parse_sun,
+    parse_unit, parse_vec3,
 };
 use crate::progress;
 use crate::render::measure::{self, FrameReport, MeasureOptions};
@@ -24,8 +24,8 @@ pub struct RenderArgs {
     #[arg(long)]
     out: PathBuf,
     /// Rendering method.
-    #[arg(long, value_enum, default_value_t = MethodArg::Geometry)]
-    method: MethodArg,
+    #[arg(long, value_enum, default_value_t = Method::Geometry)]
+    method: Method,
     /// Image size, WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     size: (u32, u32),
@@ -152,7 +152,7 @@ pub struct RenderArgs {
 }
 
 pub fn render(args: RenderArgs) -> anyhow::Result<()> {
-    let method = Method::from(args.method);
+    let method = args.method;
     let scene = load_scene(args.scene.as_deref())?;
     let world = scene.build_world().map_err(crate::Error::from)?;
     let mut frame = FrameDesc::from_scene(&scene);

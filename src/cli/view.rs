@@ -2,8 +2,9 @@
 
 use std::path::PathBuf;
 
-use super::args::{MethodArg, parse_render_scale};
+use super::args::parse_render_scale;
 use crate::app::ViewOptions;
+use crate::render::Method;
 use crate::render::scale::RenderScale;
 
 #[derive(clap::Args)]
@@ -19,8 +20,8 @@ pub struct ViewArgs {
     #[arg(long, default_value_t = 3, requires = "screenshot")]
     after_frames: u32,
     /// Method to start with (btf shows terrain and sky until its bake is ready).
-    #[arg(long, value_enum, default_value_t = MethodArg::Btf)]
-    method: MethodArg,
+    #[arg(long, value_enum, default_value_t = Method::Btf)]
+    method: Method,
     /// Use this baked file (from `canopy bake --out`) instead of the cache; it must have
     /// been baked from the scene, and is never re-baked.
     #[arg(long)]
@@ -40,7 +41,7 @@ pub fn view(args: ViewArgs) -> anyhow::Result<()> {
     let options = ViewOptions {
         screenshot: args.screenshot,
         after_frames: args.after_frames,
-        method: args.method.into(),
+        method: args.method,
         baked: args.baked,
         script: args.script,
         render_scale: args.render_scale,

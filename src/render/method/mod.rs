@@ -7,7 +7,10 @@
 //! `render/consts.rs`.
 //!
 //! Adding a method: its module here (its settings and stats in its own folder), its arm in
-//! [`Method`] (`kind.rs`), and its entry in [`registry`].
+//! [`Method`] (`kind.rs`), its entry in [`registry`], and, when it draws from the bake, its
+//! slot in [`Bake`]. The command line (`--method`), the viewer's method buttons and the
+//! bench's chart follow [`Method::ALL`]; a method's own knobs are still wired by hand into
+//! [`crate::render::FrameDesc`], the command line, the panel and the bench's sweeps.
 
 pub mod billboard;
 pub mod btf;
