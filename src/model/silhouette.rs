@@ -2,7 +2,7 @@
 //! silhouette hull (the convex hull of everything drawn at or above the lowest leaf or
 //! needle) that the tree's triangles cover, seen orthographically from a few azimuths. A
 //! real conifer's crown reads as a solid cone from the side, a sapling's as a stick with
-//! sprays; this is the number that tells them apart (issue 12), computed on the CPU from the
+//! sprays; this is the number that tells them apart, computed on the CPU from the
 //! model alone.
 
 use glam::{Mat3, Vec2, Vec3};

@@ -1,5 +1,5 @@
 //! Forest cells: tree-level visibility cube maps whose number grows with the forest's area,
-//! not its tree count (issue 13, item 1).
+//! not its tree count.
 //!
 //! The thesis gives every tree instance its own 8 corner cube maps, each drawn with every
 //! other tree but the instance itself (48 KB a tree at 32² per face: 5 GB for 100,000

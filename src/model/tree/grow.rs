@@ -508,8 +508,7 @@ mod tests {
 
     /// Every preset's crown covers at least this share of its side silhouette's hull
     /// (mean of four azimuths): "from the side, foliage covers most of the crown". The
-    /// presets before issue 12 measured fir 0.24, broadleaf 0.43, pine 0.49; now about
-    /// 0.65, 0.67, 0.61.
+    /// presets measure about 0.65 (fir), 0.67 (broadleaf) and 0.61 (pine).
     const MIN_CROWN_COVERAGE: f32 = 0.55;
 
     #[test]

@@ -17,6 +17,7 @@ use std::collections::HashMap;
 
 use glam::Vec3;
 
+pub use crate::render::consts::ATLAS_SIDE;
 pub use billboard::{BillboardGpu, BillboardMode};
 pub use prepare::{
     BtfFrame, BtfScene, LevelChoice, NearDrawGpu, PrepareView, SortedBillboards, choose_level,
@@ -648,8 +649,6 @@ fn make_bind_group(
         ],
     })
 }
-
-pub use crate::render::consts::ATLAS_SIDE;
 
 /// Texture layers holding `images` images.
 pub fn atlas_layers(images: u64) -> u64 {
