@@ -556,7 +556,7 @@ mod tests {
     }
 
     #[test]
-    fn the_speed_accuracy_chart_is_a_png_of_the_asked_size_with_colour() {
+    fn the_speed_accuracy_chart_is_a_png_of_the_asked_size_with_color() {
         let path = out("speed.png");
         speed_accuracy_chart(&path, &sample_points(), (900, 600)).unwrap();
         let (dims, colours) = inspect(&path);
@@ -574,7 +574,7 @@ mod tests {
     }
 
     #[test]
-    fn the_flight_chart_is_a_png_of_the_asked_size_with_colour() {
+    fn the_flight_chart_is_a_png_of_the_asked_size_with_color() {
         let path = out("flight.png");
         let series: Vec<FlightSeries> = (0..3)
             .map(|i| FlightSeries {

@@ -336,7 +336,7 @@ impl Terrain {
         let valley = Vec3::new(0.05, 0.085, 0.028);
         let dry = Vec3::new(0.15, 0.125, 0.07);
         let rock = Vec3::new(0.2, 0.19, 0.175);
-        let colour_seed = 0xC0_10_55_EE_D5;
+        let color_seed = 0xC0_10_55_EE_D5;
         let mut vertices = Vec::with_capacity(res * res);
         for j in 0..res {
             for i in 0..res {
@@ -346,8 +346,8 @@ impl Terrain {
                 let n = self.grid_normal(i, j);
                 let slope = (1.0 - n.y * n.y).max(0.0).sqrt() / n.y.max(1e-3); // tan of the slope angle
                 let h01 = (y - lo) / span;
-                let patches = value_noise(colour_seed, Vec2::new(x, z) / 37.0);
-                let speck = unit_f32(hash2(colour_seed, i as i32, j as i32));
+                let patches = value_noise(color_seed, Vec2::new(x, z) / 37.0);
+                let speck = unit_f32(hash2(color_seed, i as i32, j as i32));
                 let mut c = valley.lerp(grass, smoothstep(0.0, 0.6, h01));
                 c = c.lerp(
                     dry,
@@ -380,7 +380,7 @@ impl Terrain {
             self.add_horizon(far, &mut mesh, |p, y, n| {
                 let slope = (1.0 - n.y * n.y).max(0.0).sqrt() / n.y.max(1e-3);
                 let h01 = ((y - lo) / span).clamp(0.0, 1.0);
-                let patches = value_noise(colour_seed, p / 37.0);
+                let patches = value_noise(color_seed, p / 37.0);
                 let mut c = valley.lerp(grass, smoothstep(0.0, 0.6, h01));
                 c = c.lerp(
                     dry,

@@ -117,7 +117,7 @@ impl DepthTarget {
     /// A pass drawing into `target` and this depth buffer: both cleared (the colour to
     /// `clear`, depth to the far plane) or, without `clear`, both loaded; the depth kept for
     /// a later pass when `keep_depth`. `end_timestamp`: the frame's timing ends with it.
-    pub fn colour_pass<'e>(
+    pub fn color_pass<'e>(
         &self,
         encoder: &'e mut wgpu::CommandEncoder,
         label: &str,

@@ -466,7 +466,7 @@ impl Renderer {
         // ends the frame's timing.
         let batches = self_batches.as_deref().unwrap_or(&[]);
         {
-            let mut pass = depth.colour_pass(
+            let mut pass = depth.color_pass(
                 &mut encoder,
                 "main",
                 target,

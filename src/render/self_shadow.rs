@@ -380,7 +380,7 @@ impl SelfShadow {
         for (i, batch) in batches.iter().enumerate() {
             stats.shadow_triangles += self.encode_maps(encoder, world, batch);
             let last = i + 1 == batches.len();
-            let mut pass = depth.colour_pass(
+            let mut pass = depth.color_pass(
                 encoder,
                 "reference trees",
                 target,

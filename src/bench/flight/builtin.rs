@@ -302,10 +302,10 @@ mod tests {
         let terrain = hilly();
         let ctx = context(&terrain);
         let frames = Flight::builtin("walk", &ctx).unwrap().frames(100);
-        let from_centre =
+        let from_center =
             |f: &FlightFrame| Vec2::new(f.position.x, f.position.z).distance(ctx.centre);
-        assert!(from_centre(&frames[0]) > ctx.half_size + 0.9 * WALK_OUTSIDE);
-        assert!(from_centre(&frames[99]) < ctx.half_size);
+        assert!(from_center(&frames[0]) > ctx.half_size + 0.9 * WALK_OUTSIDE);
+        assert!(from_center(&frames[99]) < ctx.half_size);
         let low = frames
             .iter()
             .all(|f| f.position.y - terrain.height_at(f.position.x, f.position.z) < 2.5);

@@ -274,7 +274,7 @@ impl FarGpu {
         let centres: Vec<Option<Vec3>> = trees
             .iter()
             .zip(species)
-            .map(|(t, &sp)| scene.tree_centre(sp as usize, t))
+            .map(|(t, &sp)| scene.tree_center(sp as usize, t))
             .collect();
         let grid = Grid::new(&centres);
         let max_scale = trees

@@ -281,7 +281,7 @@ impl BtfScene {
     }
 
     /// The centre of tree `data`'s bounds (species `sp`) in the world, for the near search.
-    pub fn tree_centre(&self, sp: usize, data: &TreeGpu) -> Option<Vec3> {
+    pub fn tree_center(&self, sp: usize, data: &TreeGpu) -> Option<Vec3> {
         let parts = self.species.get(sp)?;
         Some(Mat4::from_cols_array_2d(&data.model).transform_point3(parts.bounds.center()))
     }
@@ -620,7 +620,7 @@ impl BtfScene {
                     let sp = species.get(d.tree as usize).copied().unwrap_or(u32::MAX);
                     let dist = trees
                         .get(d.tree as usize)
-                        .and_then(|data| self.tree_centre(sp as usize, data))
+                        .and_then(|data| self.tree_center(sp as usize, data))
                         .map_or(f32::INFINITY, |c| c.distance_squared(cam));
                     by_tree.push((dist, d.tree, count));
                 }
