@@ -99,42 +99,23 @@ fn read_png(path: &Path, remedy: &str) -> Result<RgbaImage, String> {
 
 /// The run line and the rows of a `summary.json`.
 fn parse_summary(text: &str) -> Result<(String, Vec<BenchRow>), String> {
-    let json: serde_json::Value = serde_json::from_str(text).map_err(|e| e.to_string())?;
-    let configurations = json
-        .get("configurations")
-        .and_then(|c| c.as_array())
-        .ok_or("no `configurations` list")?;
-    let rows = configurations
-        .iter()
-        .enumerate()
-        .map(|(i, c)| {
-            let number = |key: &str| c.get(key).and_then(serde_json::Value::as_f64);
-            BenchRow {
-                label: c
-                    .get("label")
-                    .and_then(|l| l.as_str())
-                    .map_or_else(|| format!("configuration {i}"), str::to_string),
-                median_ms: number("median_ms"),
-                speedup_vs_geometry: number("speedup_vs_geometry"),
-                mean_flip: number("mean_flip"),
-                p95_flip: number("p95_flip"),
-                flicker_ratio: number("flicker_ratio"),
-            }
+    let summary = crate::bench::report::Summary::parse(text)?;
+    let rows = summary
+        .configurations
+        .into_iter()
+        .map(|c| BenchRow {
+            label: c.label,
+            median_ms: Some(c.median_ms),
+            speedup_vs_geometry: c.speedup_vs_geometry,
+            mean_flip: Some(c.mean_flip),
+            p95_flip: Some(c.p95_flip),
+            flicker_ratio: Some(c.flicker_ratio),
         })
         .collect();
-    let text_of = |key: &str| match json.get(key) {
-        Some(serde_json::Value::String(s)) => s.clone(),
-        Some(v) if !v.is_null() => v.to_string(),
-        _ => "?".to_string(),
-    };
+    let r = &summary.run;
     let run = format!(
         "{}, flight {}: {} frames at {}x{} on {}",
-        text_of("scene"),
-        text_of("flight"),
-        text_of("frames"),
-        text_of("width"),
-        text_of("height"),
-        text_of("device"),
+        r.scene, r.flight, r.frames, r.width, r.height, r.device
     );
     Ok((run, rows))
 }
@@ -316,14 +297,26 @@ mod tests {
             .unwrap();
     }
 
+    /// A `summary.json` as `bench` writes it (its run, and two configurations, one with
+    /// its btf knobs beside it).
     const SUMMARY: &str = r#"{
         "scene": "tests/data/btf.toml", "flight": "overview", "frames": 3,
-        "width": 96, "height": 64, "device": "llvmpipe",
+        "width": 96, "height": 64, "truth_supersample": 2, "repeats": 1,
+        "device": "llvmpipe", "time_source": "gpu-timestamps",
+        "truth_rendered": 3, "truth_cached": 0, "seconds": 12.5,
         "configurations": [
-            {"label": "geometry", "median_ms": 8.5, "speedup_vs_geometry": 1.0,
-             "mean_flip": 0.01, "p95_flip": 0.05, "flicker_ratio": 1.1},
-            {"label": "btf lod 2", "median_ms": 2.0, "speedup_vs_geometry": null,
-             "mean_flip": 0.08, "p95_flip": 0.2, "flicker_ratio": 1.6}
+            {"label": "geometry", "method": "geometry", "median_ms": 8.5,
+             "median_prepare_ms": 0.1, "speedup_vs_geometry": 1.0,
+             "mean_flip": 0.01, "p95_flip": 0.05, "flicker_ratio": 1.1,
+             "worst_pop": null, "worst_frame": 0, "worst_frame_flip": 0.02,
+             "settings": null},
+            {"label": "btf lod 2", "method": "btf", "median_ms": 2.0,
+             "median_prepare_ms": 0.4, "speedup_vs_geometry": null,
+             "mean_flip": 0.08, "p95_flip": 0.2, "flicker_ratio": 1.6,
+             "worst_pop": {"frame": 2, "excess": 0.03}, "worst_frame": 2,
+             "worst_frame_flip": 0.1,
+             "settings": {"lod_scale": 2.0, "weight_threshold": 0.1, "lod_fade": 0.2,
+                          "planes": "single", "vcm": true}}
         ]
     }"#;
 
@@ -389,7 +382,7 @@ mod tests {
         std::fs::write(dir.join("summary.json"), "{\"scene\": \"x\"}").unwrap();
         let e = BenchView::load(&dir).unwrap_err();
         assert!(
-            e.contains("summary.json") && e.contains("configurations"),
+            e.contains("summary.json") && e.contains("missing field"),
             "{e}"
         );
 

@@ -17,7 +17,7 @@ use crate::render::measure::TimeSource;
 use crate::{Error, Result};
 
 /// What the summary says about the run as a whole.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RunInfo {
     pub scene: String,
     pub flight: String,
@@ -71,6 +71,22 @@ struct SummaryJson<'a> {
     #[serde(flatten)]
     run: &'a RunInfo,
     configurations: Vec<ConfigJson<'a>>,
+}
+
+/// `summary.json` read back through the types that wrote it: the run, and each
+/// configuration's summary (its knobs, written beside it, are not read).
+#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
+pub struct Summary {
+    #[serde(flatten)]
+    pub run: RunInfo,
+    pub configurations: Vec<ConfigSummary>,
+}
+
+impl Summary {
+    /// Parses the text of a `summary.json`, or says what is wrong with it.
+    pub fn parse(text: &str) -> std::result::Result<Self, String> {
+        serde_json::from_str(text).map_err(|e| e.to_string())
+    }
 }
 
 /// The summary as `--json` prints it and `summary.json` holds it.
@@ -221,4 +237,79 @@ pub fn write_all(dir: &Path, run: &RunInfo, results: &BenchResults) -> Result<Ve
         }
     }
     Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::run::{Config, Knobs};
+    use crate::bench::temporal::Pop;
+    use crate::render::Method;
+
+    /// What `summary_json` writes, `Summary::parse` reads back, field for field.
+    #[test]
+    fn the_summary_reads_back_as_written() {
+        let run = RunInfo {
+            scene: "tests/data/btf.toml".into(),
+            flight: "overview".into(),
+            frames: 3,
+            width: 96,
+            height: 64,
+            truth_supersample: 2,
+            repeats: 1,
+            device: "llvmpipe".into(),
+            time_source: TimeSource::CpuWallClock,
+            truth_rendered: 3,
+            truth_cached: 0,
+            seconds: 12.5,
+        };
+        let summary = |method: Method, pop: Option<Pop>| ConfigSummary {
+            label: format!("{} label", method.name()),
+            method: method.name().into(),
+            median_ms: 8.5,
+            median_prepare_ms: 0.25,
+            speedup_vs_geometry: pop.is_none().then_some(1.0),
+            mean_flip: 0.01,
+            p95_flip: 0.05,
+            flicker_ratio: 1.1,
+            worst_pop: pop,
+            worst_frame: 2,
+            worst_frame_flip: 0.02,
+        };
+        let methods = [Method::Geometry, Method::Btf, Method::Texel];
+        let summaries: Vec<ConfigSummary> = methods
+            .iter()
+            .enumerate()
+            .map(|(i, &m)| {
+                let pop = (i > 0).then_some(Pop {
+                    frame: i,
+                    excess: 0.5 * i as f64,
+                });
+                summary(m, pop)
+            })
+            .collect();
+        let results = BenchResults {
+            configs: methods
+                .iter()
+                .map(|&m| Config {
+                    label: m.name().into(),
+                    method: m,
+                    knobs: Knobs::default(),
+                })
+                .collect(),
+            rows: Vec::new(),
+            summaries: summaries.clone(),
+            worst: Vec::new(),
+            frames: 3,
+            time_source: TimeSource::CpuWallClock,
+            truth_rendered: 3,
+            truth_cached: 0,
+        };
+        let back = Summary::parse(&summary_json(&run, &results)).unwrap();
+        assert_eq!(back.run, run);
+        assert_eq!(back.configurations, summaries);
+        // A summary without its configurations is refused, and says what is missing.
+        let e = Summary::parse("{\"scene\": \"x\"}").unwrap_err();
+        assert!(e.contains("missing field"), "{e}");
+    }
 }

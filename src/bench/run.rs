@@ -321,10 +321,10 @@ pub struct FrameRow {
 }
 
 /// One configuration along the whole flight.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ConfigSummary {
     pub label: String,
-    pub method: &'static str,
+    pub method: String,
     pub median_ms: f64,
     pub median_prepare_ms: f64,
     /// Median frame time of `geometry` over this one's (when geometry ran).
@@ -622,7 +622,7 @@ pub fn summarise(configs: &[Config], rows: &[FrameRow]) -> Result<Vec<ConfigSumm
             .copied();
         out.push(ConfigSummary {
             label: config.label.clone(),
-            method: config.method.name(),
+            method: config.method.name().to_string(),
             median_ms: median(&mut ms),
             median_prepare_ms: median(&mut prep),
             speedup_vs_geometry: None,

@@ -12,7 +12,7 @@ use crate::{Error, Result};
 pub const RATIO_FLOOR: f64 = 1e-4;
 
 /// The largest flicker excess of a flight and where it happened.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Pop {
     /// The frame (index into the flight, >= 1) that differs too much from the one before.
     pub frame: usize,

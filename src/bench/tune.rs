@@ -265,7 +265,7 @@ mod tests {
     fn summary(ms: f64, flip: f64, flicker: f64) -> ConfigSummary {
         ConfigSummary {
             label: format!("{ms} {flip}"),
-            method: "btf",
+            method: "btf".into(),
             median_ms: ms,
             median_prepare_ms: 0.0,
             speedup_vs_geometry: None,

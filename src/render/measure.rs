@@ -32,7 +32,7 @@ impl Default for MeasureOptions {
 }
 
 /// Where a frame time comes from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
 pub enum TimeSource {
     /// GPU timestamp queries around the frame.
     #[serde(rename = "gpu-timestamps")]
