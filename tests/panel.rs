@@ -255,9 +255,14 @@ fn the_bench_window_shows_a_folders_table_or_what_is_missing() {
         .unwrap();
     std::fs::write(
         dir.join("summary.json"),
-        r#"{"scene": "s.toml", "configurations": [
-            {"label": "billboard", "median_ms": 3.25, "speedup_vs_geometry": 4.5,
-             "mean_flip": 0.125, "p95_flip": 0.5, "flicker_ratio": 1.75}]}"#,
+        r#"{"scene": "s.toml", "flight": "walk", "frames": 2, "width": 96, "height": 64,
+            "truth_supersample": 1, "repeats": 1, "device": "llvmpipe",
+            "time_source": "cpu-wall-clock", "truth_rendered": 2, "truth_cached": 0,
+            "seconds": 3.0, "configurations": [
+            {"label": "billboard", "method": "billboard", "median_ms": 3.25,
+             "median_prepare_ms": 0.5, "speedup_vs_geometry": 4.5,
+             "mean_flip": 0.125, "p95_flip": 0.5, "flicker_ratio": 1.75,
+             "worst_pop": null, "worst_frame": 1, "worst_frame_flip": 0.2}]}"#,
     )
     .unwrap();
     harness.get_by_label("Load").click();
