@@ -364,10 +364,10 @@ fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
         }
         assert!(c["flicker_ratio"].as_f64().unwrap().is_finite(), "{c}");
     }
-    assert_eq!(configs[1]["settings"]["lod_scale"], 1.0);
-    assert_eq!(configs[6]["texel_settings"]["bounds"]["d1"], 4.0);
-    assert_eq!(configs[5]["texel_settings"]["mode"], "stacks");
-    assert_eq!(configs[6]["texel_settings"]["mode"], "slices3d");
+    assert_eq!(configs[1]["knobs"]["lod_scale"], 1.0);
+    assert_eq!(configs[6]["knobs"]["slice_d1"], 4.0);
+    assert_eq!(configs[5]["knobs"]["texel_mode"], "stacks");
+    assert_eq!(configs[6]["knobs"]["texel_mode"], "slices3d");
     assert_eq!(configs[0]["speedup_vs_geometry"], 1.0);
     assert_eq!(
         (

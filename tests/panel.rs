@@ -130,12 +130,26 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
         .click();
     harness.run();
     assert!(!harness.state().frame.btf.vcm);
-    harness.get_by_label("3 crossed planes").click();
+    harness.get_by_label("crossed").click();
     harness.run();
     assert_eq!(
         harness.state().frame.btf.planes,
         canopy::render::btf::PlaneMode::Crossed
     );
+    // The texel method's controls come from its own knob table.
+    assert!(harness.query_by_label("stacks").is_none());
+    harness.get_by_label("texel").click();
+    harness.run();
+    assert!(harness.query_by_label("show LOD level").is_none());
+    harness.get_by_label("stacks").click();
+    harness.run();
+    assert_eq!(
+        harness.state().frame.texel.mode,
+        canopy::render::method::texel::TexelMode::Stacks
+    );
+    harness.get_by_label("show slice count").click();
+    harness.run();
+    assert!(harness.state().frame.texel.show_slices);
 }
 
 #[test]

@@ -72,11 +72,9 @@ fn btf(label: &str, f: impl FnOnce(&mut BtfSettings)) -> Config {
         ..BtfSettings::default()
     };
     f(&mut btf);
-    Config {
-        label: label.into(),
-        method: Method::Btf,
-        knobs: run::Knobs::btf(btf),
-    }
+    let mut d = FrameDesc::from_scene(&Scene::default_scene());
+    d.btf = btf;
+    Config::from_frame(label, Method::Btf, &d)
 }
 
 /// The stand's frame for these flights: no fog, smaller shadow maps (the truth's cost).
@@ -495,7 +493,7 @@ fn hybrid_switches_a_near_tree_to_geometry_and_cross_fades_the_switch() {
     let mut at = |k: f32, fade: f32| {
         let mut d = b;
         d.method = Method::Hybrid;
-        d.btf = hybrid("", fade).knobs.btf;
+        hybrid("", fade).knobs.apply_to(&mut d);
         frame(0, centre + dir * bound * k, centre, None).apply(&mut d);
         let (_, stats) = renderer.render_image(&ctx, &d, size, size, 1).unwrap();
         stats.btf.expect("hybrid reports btf stats")

@@ -109,7 +109,9 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
     // --write: the scene now starts from the picked knobs.
     assert_eq!(o.written.as_deref(), Some(scene_path.as_path()));
     let start = FrameDesc::from_scene(&scene).btf;
-    let want = o.configs[i].knobs.btf;
+    let mut chosen = FrameDesc::from_scene(&scene);
+    o.configs[i].knobs.apply_to(&mut chosen);
+    let want = chosen.btf;
     assert_eq!(
         (
             start.lod_scale,

@@ -2,7 +2,7 @@
 //! screenshot buttons, the bench results button. Pure UI over plain state, so it is tested
 //! headless with egui_kittest.
 
-use crate::render::btf::PlaneMode;
+use crate::render::knob::{KnobKind, KnobValue};
 use crate::render::{FrameDesc, Method};
 
 /// What the panel shows that the app measured.
@@ -124,42 +124,8 @@ pub fn controls(
             ui.small("until it is done, the view is drawn less often, to leave the bake the cores");
         }
     }
+    knob_controls(ui, frame);
     if frame.method.is_btf() {
-        let b = &mut frame.btf;
-        ui.add(
-            egui::Slider::new(&mut b.lod_scale, 0.25..=16.0)
-                .logarithmic(true)
-                .text("LOD scale px"),
-        );
-        ui.add(egui::Slider::new(&mut b.weight_threshold, 0.0..=0.5).text("weight threshold"));
-        ui.add(egui::Slider::new(&mut b.lod_fade, 0.0..=1.0).text("LOD cross-fade band"));
-        ui.horizontal(|ui| {
-            ui.selectable_value(&mut b.planes, PlaneMode::Single, "single plane");
-            ui.selectable_value(&mut b.planes, PlaneMode::Crossed, "3 crossed planes");
-        });
-        ui.checkbox(&mut b.show_lod, "show LOD level");
-        ui.add(
-            egui::Slider::new(&mut b.light_gain, 0.0..=1.0)
-                .text("light gain between light samples"),
-        );
-        ui.checkbox(&mut b.vcm, "VCM shading (trees shade each other)");
-        ui.add_enabled_ui(b.vcm, |ui| {
-            ui.checkbox(&mut b.vcm_sky, "VCM sky occlusion");
-            ui.checkbox(&mut b.show_shadow, "show VCM shadow factor");
-        });
-        ui.checkbox(&mut b.gpu_far, "far trees' billboards on the GPU");
-        ui.add_enabled(
-            b.gpu_far,
-            egui::Checkbox::new(&mut b.gpu_near, "near trees' billboards on the GPU"),
-        );
-        ui.checkbox(
-            &mut frame.ground_shadows,
-            "ground shadows (alpha map + terrain)",
-        );
-        ui.checkbox(
-            &mut frame.ground_sky,
-            "ground sky visibility (through the trees)",
-        );
         if let Some(s) = &stats.btf {
             egui::Grid::new("btf stats").num_columns(2).show(ui, |ui| {
                 ui.label("billboards twig/branch/tree");
@@ -216,7 +182,7 @@ pub fn controls(
         }
     }
     if frame.method == Method::Texel {
-        texel_controls(ui, frame, stats);
+        texel_stats(ui, stats);
     }
     ui.separator();
 
@@ -347,41 +313,55 @@ fn format_count(n: u64) -> String {
     }
 }
 
-/// The `texel` method's knobs and what it drew.
-fn texel_controls(ui: &mut egui::Ui, frame: &mut FrameDesc, stats: &PanelStats) {
-    use crate::render::method::texel::TexelMode;
-    let t = &mut frame.texel;
-    ui.horizontal(|ui| {
-        ui.radio_value(&mut t.mode, TexelMode::Slices3d, "slices3d")
-            .on_hover_text("slices parallel to the screen through a 3D texture (Decaudin-Neyret 2009)");
-        ui.radio_value(&mut t.mode, TexelMode::Stacks, "stacks")
-            .on_hover_text("the seeds' three axis stacks of 2D slices, pre-composited power-of-two levels (Meyer-Neyret 1998)");
-    });
-    ui.add(
-        egui::Slider::new(&mut t.bounds.d0, 0.05..=5.0)
-            .logarithmic(true)
-            .text("slice depth d0 m"),
-    );
-    ui.add(
-        egui::Slider::new(&mut t.bounds.d1, 0.25..=16.0)
-            .logarithmic(true)
-            .text("slice spacing d1 px"),
-    );
-    ui.add(
-        egui::Slider::new(&mut t.bounds.max_slices, 1..=512)
-            .logarithmic(true)
-            .text("max slices"),
-    );
-    ui.checkbox(&mut t.vcm, "VCM shading (trees shade each other)");
-    ui.checkbox(&mut t.show_slices, "show slice count");
-    ui.checkbox(&mut t.tiles, "forest-cover tiles far away")
-        .on_hover_text("beyond the distance, the trees of a whole 64 m tile drawn as one volume that follows the ground");
-    ui.add_enabled(
-        t.tiles,
-        egui::Slider::new(&mut t.tile_distance, 50.0..=2000.0)
-            .logarithmic(true)
-            .text("tile distance m"),
-    );
+/// A control for each knob of the frame's method ([`crate::render::method::knobs_of`]):
+/// a slider for a number, a checkbox for on/off, buttons for a choice.
+fn knob_controls(ui: &mut egui::Ui, frame: &mut FrameDesc) {
+    for k in crate::render::method::knobs_of(frame.method) {
+        let enabled = (k.enabled)(frame);
+        let value = k.get(frame);
+        let mut next = value;
+        ui.add_enabled_ui(enabled, |ui| match (k.kind, value) {
+            (
+                KnobKind::Number {
+                    slider,
+                    log,
+                    integer,
+                    ..
+                },
+                KnobValue::Number(mut v),
+            ) => {
+                let mut s = egui::Slider::new(&mut v, slider.0..=slider.1)
+                    .logarithmic(log)
+                    .text(k.label);
+                if integer {
+                    s = s.integer();
+                }
+                ui.add(s).on_hover_text(k.help);
+                next = KnobValue::Number(v);
+            }
+            (KnobKind::Toggle { .. }, KnobValue::Toggle(mut on)) => {
+                ui.checkbox(&mut on, k.label).on_hover_text(k.help);
+                next = KnobValue::Toggle(on);
+            }
+            (KnobKind::Choice { names, .. }, KnobValue::Choice(mut c)) => {
+                ui.horizontal(|ui| {
+                    ui.label(k.label);
+                    for n in names {
+                        ui.selectable_value(&mut c, *n, *n).on_hover_text(k.help);
+                    }
+                });
+                next = KnobValue::Choice(c);
+            }
+            _ => {}
+        });
+        if next != value {
+            k.set(frame, next);
+        }
+    }
+}
+
+/// What the `texel` method drew.
+fn texel_stats(ui: &mut egui::Ui, stats: &PanelStats) {
     if let Some(s) = &stats.texel {
         egui::Grid::new("texel stats")
             .num_columns(2)

@@ -10,8 +10,8 @@
 //! ```
 //!
 //! Actions: `fly` (a few metres forward and a turn), `sun` (the sun swept 7 degrees),
-//! `method NAME`, `texel_mode NAME`, `lod_scale PX`, `resize WxH`, `screenshot` (written
-//! over one file in the temporary folder). Resident memory (from /proc, its floor and peak
+//! `method NAME`, `resize WxH`, `screenshot` (written over one file in the temporary
+//! folder), and `KNOB VALUE` for any method's knob (`lod_scale 2`, `texel_mode stacks`). Resident memory (from /proc, its floor and peak
 //! over each interval), the GPU memory the renderer holds, what wgpu has allocated on the
 //! device and the C heap are sampled; at the end the run fails if resident or GPU memory
 //! grew by more than [`MAX_GROWTH`] from the first sample after the warm-up (at least one
@@ -23,7 +23,8 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use crate::render::Method;
-use crate::render::method::texel::TexelMode;
+use crate::render::knob::KnobValue;
+use crate::render::method::knobs_named;
 use crate::{Error, Result};
 
 /// Largest growth allowed between the first sample after the warm-up and the last.
@@ -111,8 +112,8 @@ pub enum Action {
     Fly,
     Sun,
     Method(Method),
-    TexelMode(TexelMode),
-    LodScale(f32),
+    /// Set every method's knob of this name ([`crate::render::method::knobs_named`]).
+    Knob(&'static str, KnobValue),
     Resize(u32, u32),
     Screenshot,
 }
@@ -130,15 +131,10 @@ impl Action {
             ("method", Some(m)) => {
                 Action::Method(Method::parse(m).ok_or_else(|| need("a method name"))?)
             }
-            ("texel_mode", Some(m)) => Action::TexelMode(
-                TexelMode::parse(m).ok_or_else(|| need("slices3d, stacks or polygons"))?,
-            ),
-            ("lod_scale", Some(v)) => Action::LodScale(
-                v.parse::<f32>()
-                    .ok()
-                    .filter(|x| (0.05..=64.0).contains(x))
-                    .ok_or_else(|| need("a number in 0.05..=64"))?,
-            ),
+            (name, Some(v)) if !knobs_named(name).is_empty() => {
+                let k = knobs_named(name)[0];
+                Action::Knob(k.name, k.parse(v).map_err(|e| format!("`{s}`: {e}"))?)
+            }
             ("resize", Some(v)) => {
                 let (w, h) = v.split_once('x').ok_or_else(|| need("WIDTHxHEIGHT"))?;
                 let (w, h) = (w.parse::<u32>(), h.parse::<u32>());
@@ -151,7 +147,7 @@ impl Action {
             }
             _ => {
                 return Err(format!(
-                    "`{s}` is not an action; the actions are fly, sun, method NAME, texel_mode NAME, lod_scale PX, resize WxH, screenshot"
+                    "`{s}` is not an action; the actions are fly, sun, method NAME, resize WxH, screenshot, and KNOB VALUE for any knob (e.g. lod_scale 2, texel_mode stacks)"
                 ));
             }
         };
@@ -326,13 +322,18 @@ mod tests {
                 Action::Fly,
                 Action::Method(Method::Texel),
                 Action::Resize(900, 600),
-                Action::LodScale(2.0)
+                Action::Knob("lod_scale", KnobValue::Number(2.0))
             ]
         );
         for (text, want) in [
             ("seconds = 1\nactions = [\"jump\"]", "not an action"),
             ("seconds = 1\nactions = [\"resize 10x10\"]", "WIDTHxHEIGHT"),
             ("seconds = 1\nactions = [\"method photo\"]", "method name"),
+            ("seconds = 1\nactions = [\"lod_scale 100\"]", "0.05..=64"),
+            (
+                "seconds = 1\nactions = [\"texel_mode cubes\"]",
+                "slices3d, stacks, polygons",
+            ),
             ("seconds = -1\nactions = []", "seconds"),
             ("seconds = 1\nactons = []", "actons"),
         ] {

@@ -165,8 +165,11 @@ impl App {
                 self.frame.sun.azimuth_deg = (self.frame.sun.azimuth_deg + 7.0) % 360.0;
             }
             Some(soak::Action::Method(m)) => self.frame.method = m,
-            Some(soak::Action::TexelMode(m)) => self.frame.texel.mode = m,
-            Some(soak::Action::LodScale(v)) => self.frame.btf.lod_scale = v,
+            Some(soak::Action::Knob(name, v)) => {
+                for k in crate::render::method::knobs_named(name) {
+                    k.set(&mut self.frame, v);
+                }
+            }
             Some(soak::Action::Resize(w, h)) => {
                 let _ = r
                     .window

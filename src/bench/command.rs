@@ -63,9 +63,8 @@ pub fn plan(
             "--frames {n}: a bench needs 2 to {MAX_BENCH_FRAMES} frames (the temporal figures compare consecutive frames)"
         )));
     }
-    // The knobs start from the scene's `[render]` table.
-    let base = crate::render::btf::BtfSettings::from_scene(scene);
-    let configs = run::configurations(&req.methods, &req.sweeps, base)?;
+    // The knobs start from the scene's frame (its `[render]` table over the defaults).
+    let configs = run::configurations(&req.methods, &req.sweeps, &FrameDesc::from_scene(scene))?;
     Ok((flight, n, configs))
 }
 
@@ -298,7 +297,7 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
     )?;
     let frames = flight.frames(req.frames);
     let (ctx, mut renderer) = renderer(&scene, &world, req.adapter, !req.bake, req.progress)?;
-    let base = FrameDesc::from_scene(&scene).btf;
+    let base = FrameDesc::from_scene(&scene);
     let (results, bakes) = if req.bake {
         let mut all: Option<BenchResults> = None;
         let mut bakes = Vec::new();
@@ -338,7 +337,7 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
                 &bar(req.progress, 0, &template),
             )?;
             let bytes = renderer.btf_bytes();
-            let configs: Vec<Config> = bake_knob_candidates(base)
+            let configs: Vec<Config> = bake_knob_candidates(&base)
                 .into_iter()
                 .map(|mut c| {
                     c.label = format!(
@@ -367,7 +366,7 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
         let all = all.ok_or_else(|| Error::BadInput("no bake to try".into()))?;
         (all, bakes)
     } else {
-        let configs = candidates(base);
+        let configs = candidates(&base);
         let r = measure(
             &ctx,
             &mut renderer,
@@ -391,7 +390,9 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
                 path.display()
             ))
         })?;
-        let mut new = with_render_table(&text, &configs[i].knobs.btf);
+        let mut chosen = base;
+        configs[i].knobs.apply_to(&mut chosen);
+        let mut new = with_render_table(&text, &chosen.btf);
         if let Some((b, _)) = bakes[i] {
             new = with_table_keys(
                 &new,
@@ -427,14 +428,15 @@ impl TuneOutcome {
 
     /// What `canopy tune --json` prints.
     pub fn json(&self, target: &TuneTarget) -> String {
+        // The knobs tune varies, as chosen.
         let settings = self.chosen.map(|i| {
-            let b = &self.configs[i].knobs.btf;
-            serde_json::json!({
-                "lod_scale": b.lod_scale,
-                "weight_threshold": b.weight_threshold,
-                "lod_fade": b.lod_fade,
-                "planes": b.planes.name(),
-            })
+            let mut map = self.configs[i].knobs.to_map();
+            map.retain(|name, _| {
+                crate::render::method::knobs_named(name)
+                    .iter()
+                    .any(|k| !k.tune.is_empty())
+            });
+            map
         });
         let json = serde_json::json!({
             "max_error": target.max_error,

@@ -12,7 +12,6 @@ use super::chart::{
     ChartPoint, DEFAULT_CHART_SIZE, FlightSeries, flight_chart, speed_accuracy_chart,
 };
 use super::run::{BenchResults, ConfigSummary};
-use crate::render::btf::BtfSettings;
 use crate::render::measure::TimeSource;
 use crate::{Error, Result};
 
@@ -35,35 +34,11 @@ pub struct RunInfo {
 }
 
 #[derive(serde::Serialize)]
-struct Settings {
-    lod_scale: f32,
-    weight_threshold: f32,
-    lod_fade: f32,
-    planes: &'static str,
-    vcm: bool,
-}
-
-impl From<&BtfSettings> for Settings {
-    fn from(s: &BtfSettings) -> Self {
-        Self {
-            lod_scale: s.lod_scale,
-            weight_threshold: s.weight_threshold,
-            lod_fade: s.lod_fade,
-            planes: s.planes.name(),
-            vcm: s.vcm,
-        }
-    }
-}
-
-#[derive(serde::Serialize)]
 struct ConfigJson<'a> {
     #[serde(flatten)]
     summary: &'a ConfigSummary,
-    /// The btf knobs (absent for the other methods).
-    settings: Option<Settings>,
-    /// The texel knobs (absent for the other methods).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    texel_settings: Option<crate::render::method::texel::TexelSettings>,
+    /// Every knob of the configuration's method, by name.
+    knobs: std::collections::BTreeMap<&'static str, crate::render::knob::KnobValue>,
 }
 
 #[derive(serde::Serialize)]
@@ -97,8 +72,7 @@ pub fn summary_json(run: &RunInfo, results: &BenchResults) -> String {
         .zip(&results.configs)
         .map(|(summary, c)| ConfigJson {
             summary,
-            settings: c.method.is_btf().then(|| Settings::from(&c.knobs.btf)),
-            texel_settings: (c.method == crate::render::Method::Texel).then_some(c.knobs.texel),
+            knobs: c.knobs.to_map(),
         })
         .collect();
     serde_json::to_string_pretty(&SummaryJson {
@@ -242,7 +216,7 @@ pub fn write_all(dir: &Path, run: &RunInfo, results: &BenchResults) -> Result<Ve
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bench::run::{Config, Knobs};
+    use crate::bench::run::Config;
     use crate::bench::temporal::Pop;
     use crate::render::Method;
 
@@ -294,7 +268,7 @@ mod tests {
                 .map(|&m| Config {
                     label: m.name().into(),
                     method: m,
-                    knobs: Knobs::default(),
+                    knobs: Default::default(),
                 })
                 .collect(),
             rows: Vec::new(),

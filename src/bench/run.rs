@@ -11,254 +11,114 @@ use super::flight::FlightFrame;
 use super::temporal::{Flicker, Pop, flicker};
 use super::truth_key::{TruthKey, TruthLookup, TruthRequest};
 use crate::metrics;
-use crate::render::btf::{BtfSettings, PlaneMode};
+use crate::render::knob::{Knob, KnobValue, KnobValues};
 use crate::render::measure::TimeSource;
-use crate::render::method::texel::{TexelMode, TexelSettings};
+use crate::render::method::{all_knobs, knobs_of};
 use crate::render::{FrameDesc, GpuContext, Method, Renderer};
 use crate::{Error, Result};
 
-/// A knob the bench can sweep.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Knob {
-    LodScale,
-    WeightThreshold,
-    LodFade,
-    Planes,
-    Vcm,
-    /// btf: how far the light blend is brightened by its gain (0..1).
-    LightGain,
-    /// texel: C1's bound (m).
-    SliceD0,
-    /// texel: C2's bound (pixels).
-    SliceD1,
-    /// texel: the slice cap.
-    MaxSlices,
-    /// texel: slices3d or stacks.
-    TexelMode,
-    /// texel: forest-cover tiles on or off.
-    TexelTiles,
-    /// texel: the distance beyond which tiles draw (m).
-    TileDistance,
-    /// btf, hybrid and texel: the ground sees the sky through the trees (on or off).
-    GroundSky,
-    /// btf and hybrid: the far trees' billboards built on the GPU (on or off).
-    GpuFar,
-    /// btf and hybrid: the near trees' billboards expanded on the GPU (on or off).
-    GpuNear,
-}
-
-impl Knob {
-    pub const ALL: [Knob; 15] = [
-        Knob::LodScale,
-        Knob::WeightThreshold,
-        Knob::LodFade,
-        Knob::Planes,
-        Knob::Vcm,
-        Knob::LightGain,
-        Knob::SliceD0,
-        Knob::SliceD1,
-        Knob::MaxSlices,
-        Knob::TexelMode,
-        Knob::TexelTiles,
-        Knob::TileDistance,
-        Knob::GroundSky,
-        Knob::GpuFar,
-        Knob::GpuNear,
-    ];
-
-    /// The method this knob belongs to.
-    pub fn method(self) -> Method {
-        match self {
-            Knob::SliceD0
-            | Knob::SliceD1
-            | Knob::MaxSlices
-            | Knob::TexelMode
-            | Knob::TexelTiles
-            | Knob::TileDistance => Method::Texel,
-            _ => Method::Btf,
-        }
-    }
-
-    /// The knob changes `method` (the `btf` knobs also drive `hybrid`; the ground sky is
-    /// every image-based method's).
-    pub fn applies_to(self, method: Method) -> bool {
-        if self == Knob::GroundSky {
-            return method.is_btf() || method == Method::Texel;
-        }
-        let own = self.method();
-        own == method || (own == Method::Btf && method == Method::Hybrid)
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Knob::LodScale => "lod_scale",
-            Knob::WeightThreshold => "weight_threshold",
-            Knob::LodFade => "lod_fade",
-            Knob::Planes => "planes",
-            Knob::Vcm => "vcm",
-            Knob::LightGain => "light_gain",
-            Knob::SliceD0 => "slice_d0",
-            Knob::SliceD1 => "slice_d1",
-            Knob::MaxSlices => "max_slices",
-            Knob::TexelMode => "texel_mode",
-            Knob::TexelTiles => "texel_tiles",
-            Knob::TileDistance => "tile_distance",
-            Knob::GroundSky => "ground_sky",
-            Knob::GpuFar => "gpu_far",
-            Knob::GpuNear => "gpu_near",
-        }
-    }
-
-    /// Sets this knob to `value` (in `k`'s settings of the method it belongs to), or says
-    /// what values it takes.
-    pub fn apply(self, value: &str, k: &mut Knobs) -> Result<()> {
-        let (s, t) = (&mut k.btf, &mut k.texel);
-        let bad = |what: &str| Error::BadInput(format!("--sweep {}={value}: {what}", self.name()));
-        let number = |lo: f32, hi: f32| -> Result<f32> {
-            let v: f32 = value
-                .parse()
-                .map_err(|_| bad(&format!("not a number; give values in {lo}..={hi}")))?;
-            if !(lo..=hi).contains(&v) {
-                return Err(bad(&format!("out of range; give values in {lo}..={hi}")));
-            }
-            Ok(v)
-        };
-        match self {
-            Knob::LodScale => s.lod_scale = number(0.05, 64.0)?,
-            Knob::WeightThreshold => s.weight_threshold = number(0.0, 1.0)?,
-            Knob::LodFade => s.lod_fade = number(0.0, 1.0)?,
-            Knob::Planes => {
-                s.planes = PlaneMode::parse(value).ok_or_else(|| bad("give single or crossed"))?
-            }
-            Knob::Vcm => s.vcm = on_off(value).ok_or_else(|| bad("give on or off"))?,
-            Knob::LightGain => s.light_gain = number(0.0, 1.0)?,
-            Knob::GpuFar => s.gpu_far = on_off(value).ok_or_else(|| bad("give on or off"))?,
-            Knob::GpuNear => s.gpu_near = on_off(value).ok_or_else(|| bad("give on or off"))?,
-            Knob::TexelTiles => t.tiles = on_off(value).ok_or_else(|| bad("give on or off"))?,
-            Knob::TileDistance => t.tile_distance = number(1.0, 100_000.0)?,
-            Knob::SliceD0 => t.bounds.d0 = number(0.01, 100.0)?,
-            Knob::SliceD1 => t.bounds.d1 = number(0.05, 100.0)?,
-            Knob::MaxSlices => t.bounds.max_slices = number(1.0, 1024.0)?.round() as u32,
-            Knob::TexelMode => {
-                t.mode = TexelMode::parse(value)
-                    .ok_or_else(|| bad("give slices3d, stacks or polygons"))?
-            }
-            Knob::GroundSky => {
-                k.ground_sky = Some(on_off(value).ok_or_else(|| bad("give on or off"))?)
-            }
-        }
-        Ok(())
-    }
-}
-
-fn on_off(value: &str) -> Option<bool> {
-    match value {
-        "on" => Some(true),
-        "off" => Some(false),
-        _ => None,
-    }
-}
-
-/// One `--sweep KEY=V1,V2,...`.
+/// One `--sweep KEY=V1,V2,...`: the values of one knob name (every method's knob of that
+/// name, [`crate::render::method::knobs_named`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sweep {
-    pub knob: Knob,
-    pub values: Vec<String>,
+    pub knob: &'static Knob,
+    pub values: Vec<KnobValue>,
 }
 
 impl Sweep {
     /// Parses `KEY=V1,V2,...`, checking every value against the knob.
     pub fn parse(s: &str) -> Result<Sweep> {
-        let names: Vec<&str> = Knob::ALL.iter().map(|k| k.name()).collect();
+        let names = || {
+            all_knobs()
+                .iter()
+                .map(|k| k.name)
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
         let (key, values) = s.split_once('=').ok_or_else(|| {
             Error::BadInput(format!(
                 "--sweep {s}: write KEY=V1,V2,... with KEY one of {}",
-                names.join(", ")
+                names()
             ))
         })?;
-        let knob = Knob::ALL
+        let key = key.trim().replace('-', "_");
+        let knob = all_knobs()
             .into_iter()
-            .find(|k| k.name() == key.trim().replace('-', "_"))
+            .find(|k| k.name == key)
             .ok_or_else(|| {
                 Error::BadInput(format!(
                     "--sweep: unknown knob `{key}`; the knobs are {}",
-                    names.join(", ")
+                    names()
                 ))
             })?;
-        let values: Vec<String> = values
+        let values = values
             .split(',')
-            .map(|v| v.trim().to_string())
+            .map(str::trim)
             .filter(|v| !v.is_empty())
-            .collect();
+            .map(|v| {
+                knob.parse(v)
+                    .map_err(|e| Error::BadInput(format!("--sweep {}={v}: {e}", knob.name)))
+            })
+            .collect::<Result<Vec<_>>>()?;
         if values.is_empty() {
             return Err(Error::BadInput(format!("--sweep {s}: no values")));
         }
-        let mut probe = Knobs::default();
-        for v in &values {
-            knob.apply(v, &mut probe)?;
-        }
         Ok(Sweep { knob, values })
     }
-}
 
-/// The knobs a sweep sets.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Knobs {
-    pub btf: BtfSettings,
-    pub texel: TexelSettings,
-    /// `None`: the frame's own (on by default).
-    pub ground_sky: Option<bool>,
-}
-
-impl Knobs {
-    /// `btf`'s knobs; texel's at their defaults, the ground sky the frame's own.
-    pub fn btf(btf: BtfSettings) -> Self {
-        Self {
-            btf,
-            ..Self::default()
-        }
-    }
-
-    /// Sets these knobs on a frame.
-    pub fn apply_to(&self, d: &mut FrameDesc) {
-        d.btf = self.btf;
-        d.texel = self.texel;
-        if let Some(on) = self.ground_sky {
-            d.ground_sky = on;
-        }
+    /// The sweep changes `method` (reads a knob of its name).
+    pub fn applies_to(&self, method: Method) -> bool {
+        knobs_of(method).iter().any(|k| k.name == self.knob.name)
     }
 }
 
-/// One configuration: a method and, for `btf`, `hybrid` and `texel`, their knobs.
+/// One configuration: a method and the value of each of its knobs.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Config {
     /// e.g. `btf lod_scale=2 weight_threshold=0.1`, or the method's name.
     pub label: String,
     pub method: Method,
-    pub knobs: Knobs,
+    /// Every knob of the method ([`knobs_of`]), set on each frame it draws.
+    pub knobs: KnobValues,
+}
+
+impl Config {
+    /// `method`, labelled `label`, with its knobs as `frame` has them.
+    pub fn from_frame(label: impl Into<String>, method: Method, frame: &FrameDesc) -> Self {
+        Self {
+            label: label.into(),
+            method,
+            knobs: KnobValues::read(knobs_of(method), frame),
+        }
+    }
 }
 
 /// Most configurations one bench may run.
 pub const MAX_CONFIGS: usize = 256;
 
-/// Every method, `btf` and `texel` once per combination of the values swept of their own
-/// knobs (the others have no knobs and run once).
+/// Every method once per combination of the values swept of its own knobs (a method none
+/// of the sweeps applies to runs once), each knob not swept as `base` has it.
 pub fn configurations(
     methods: &[Method],
     sweeps: &[Sweep],
-    base: BtfSettings,
+    base: &FrameDesc,
 ) -> Result<Vec<Config>> {
     let mut out = Vec::new();
     for &method in methods {
-        let start = Knobs::btf(base);
-        let mut combos: Vec<(String, Knobs)> = vec![(String::new(), start)];
-        for sweep in sweeps.iter().filter(|s| s.knob.applies_to(method)) {
+        let start = KnobValues::read(knobs_of(method), base);
+        let mut combos: Vec<(String, KnobValues)> = vec![(String::new(), start)];
+        for sweep in sweeps.iter().filter(|s| s.applies_to(method)) {
+            let own = knobs_of(method)
+                .iter()
+                .find(|k| k.name == sweep.knob.name)
+                .copied()
+                .unwrap_or(sweep.knob);
             let mut next = Vec::new();
             for (label, k) in &combos {
                 for v in &sweep.values {
-                    let mut k = *k;
-                    sweep.knob.apply(v, &mut k)?;
-                    next.push((format!("{label} {}={v}", sweep.knob.name()), k));
+                    let mut k = k.clone();
+                    k.set(own, *v);
+                    next.push((format!("{label} {}={v}", own.name), k));
                 }
             }
             combos = next;
@@ -642,17 +502,21 @@ pub fn summarise(configs: &[Config], rows: &[FrameRow]) -> Result<Vec<ConfigSumm
 mod tests {
     use super::*;
 
+    fn base() -> FrameDesc {
+        FrameDesc::from_scene(&crate::scene::Scene::default_scene())
+    }
+
     #[test]
     fn sweeps_parse_and_refuse_unknown_knobs_and_bad_values() {
         let s = Sweep::parse("lod_scale=0.5,1, 2").unwrap();
-        assert_eq!((s.knob, s.values.len()), (Knob::LodScale, 3));
+        assert_eq!((s.knob.name, s.values.len()), ("lod_scale", 3));
         assert_eq!(
-            Sweep::parse("planes=single,crossed").unwrap().knob,
-            Knob::Planes
+            Sweep::parse("planes=single,crossed").unwrap().values,
+            [KnobValue::Choice("single"), KnobValue::Choice("crossed")]
         );
         assert_eq!(
-            Sweep::parse("weight-threshold=0.1").unwrap().knob,
-            Knob::WeightThreshold
+            Sweep::parse("weight-threshold=0.1").unwrap().knob.name,
+            "weight_threshold"
         );
         for bad in [
             "lod_scale",
@@ -662,6 +526,7 @@ mod tests {
             "lod_scale=-1",
             "vcm=maybe",
             "weight_threshold=2",
+            "max_slices=2.5",
         ] {
             let e = Sweep::parse(bad).unwrap_err().to_string();
             assert!(e.contains("--sweep"), "{bad}: {e}");
@@ -675,48 +540,65 @@ mod tests {
             Sweep::parse("weight_threshold=0,0.1,0.2").unwrap(),
         ];
         let methods = [Method::Geometry, Method::Btf, Method::Billboard];
-        let c = configurations(&methods, &sweeps, BtfSettings::default()).unwrap();
+        let c = configurations(&methods, &sweeps, &base()).unwrap();
         assert_eq!(c.len(), 1 + 12 + 1);
         assert_eq!(c[0].label, "geometry");
         assert_eq!(c[13].label, "billboard");
         assert_eq!(c[1].label, "btf lod_scale=0.5 weight_threshold=0");
         assert_eq!(
-            (c[12].knobs.btf.lod_scale, c[12].knobs.btf.weight_threshold),
-            (4.0, 0.2)
+            (
+                c[12].knobs.get("lod_scale"),
+                c[12].knobs.get("weight_threshold")
+            ),
+            (Some(KnobValue::Number(4.0)), Some(KnobValue::Number(0.2)))
         );
+        let mut d = base();
+        c[12].knobs.apply_to(&mut d);
+        assert_eq!((d.btf.lod_scale, d.btf.weight_threshold), (4.0, 0.2));
         let mut labels: Vec<&str> = c.iter().map(|c| c.label.as_str()).collect();
         labels.dedup();
         assert_eq!(labels.len(), 14, "labels are distinct");
-        // Without sweeps btf runs once with its defaults.
-        let plain = configurations(&[Method::Btf], &[], BtfSettings::default()).unwrap();
+        // Without sweeps btf runs once with the frame's knobs.
+        let plain = configurations(&[Method::Btf], &[], &base()).unwrap();
         assert_eq!((plain.len(), plain[0].label.as_str()), (1, "btf"));
-        assert!(configurations(&[], &[], BtfSettings::default()).is_err());
+        assert_eq!(
+            plain[0].knobs,
+            KnobValues::read(knobs_of(Method::Btf), &base())
+        );
+        assert!(configurations(&[], &[], &base()).is_err());
     }
 
     #[test]
-    fn the_ground_sky_is_swept_for_every_image_based_method_and_reaches_the_frame() {
-        let sweeps = [Sweep::parse("ground_sky=on,off").unwrap()];
+    fn a_knob_of_two_methods_is_swept_in_each_and_reaches_the_frame() {
+        let sweeps = [
+            Sweep::parse("ground_sky=on,off").unwrap(),
+            Sweep::parse("vcm=off").unwrap(),
+        ];
         assert!(Sweep::parse("ground_sky=maybe").is_err());
         let methods = [Method::Geometry, Method::Btf, Method::Hybrid, Method::Texel];
-        let c = configurations(&methods, &sweeps, BtfSettings::default()).unwrap();
+        let c = configurations(&methods, &sweeps, &base()).unwrap();
         let labels: Vec<&str> = c.iter().map(|c| c.label.as_str()).collect();
         assert_eq!(
             labels,
             [
                 "geometry",
-                "btf ground_sky=on",
-                "btf ground_sky=off",
-                "hybrid ground_sky=on",
-                "hybrid ground_sky=off",
-                "texel ground_sky=on",
-                "texel ground_sky=off"
+                "btf ground_sky=on vcm=off",
+                "btf ground_sky=off vcm=off",
+                "hybrid ground_sky=on vcm=off",
+                "hybrid ground_sky=off vcm=off",
+                "texel ground_sky=on vcm=off",
+                "texel ground_sky=off vcm=off"
             ]
         );
-        assert_eq!(c[0].knobs.ground_sky, None);
-        assert_eq!(
-            (c[1].knobs.ground_sky, c[2].knobs.ground_sky),
-            (Some(true), Some(false))
-        );
+        assert!(c[0].knobs.0.is_empty());
+        let on = |i: usize| {
+            let mut d = base();
+            c[i].knobs.apply_to(&mut d);
+            (d.ground_sky, d.btf.vcm, d.texel.vcm)
+        };
+        assert_eq!(on(1), (true, false, true));
+        assert_eq!(on(2), (false, false, true));
+        assert_eq!(on(6), (false, true, false), "texel's own vcm");
     }
 
     fn row(
@@ -740,12 +622,7 @@ mod tests {
 
     #[test]
     fn summaries_find_the_speedup_the_worst_frame_and_the_pop() {
-        let configs = configurations(
-            &[Method::Geometry, Method::Btf],
-            &[],
-            BtfSettings::default(),
-        )
-        .unwrap();
+        let configs = configurations(&[Method::Geometry, Method::Btf], &[], &base()).unwrap();
         let mut rows = Vec::new();
         for f in 0..5 {
             let change = (f > 0).then_some((0.02, 0.02));

@@ -3,9 +3,10 @@
 //! the cheapest one whose mean FLIP and flicker ratio meet the targets is chosen. One grid
 //! measured once: a looser target can only pick a configuration as cheap or cheaper.
 
-use super::run::{Config, ConfigSummary, Knobs};
-use crate::render::Method;
+use super::run::{Config, ConfigSummary};
+use crate::render::btf::knobs::{KNOBS, tuned_label};
 use crate::render::btf::{BtfSettings, PlaneMode};
+use crate::render::{FrameDesc, Method};
 use crate::{Error, Result};
 
 /// The most a configuration may cost in error and flicker.
@@ -19,12 +20,6 @@ pub struct TuneTarget {
 
 /// Default flicker bound of `canopy tune`.
 pub const DEFAULT_MAX_FLICKER: f64 = 1.2;
-
-/// The knob values tune tries.
-pub const LOD_SCALES: [f32; 5] = [0.5, 1.0, 2.0, 4.0, 8.0];
-pub const WEIGHT_THRESHOLDS: [f32; 4] = [0.0, 0.1, 0.2, 0.3];
-pub const LOD_FADES: [f32; 2] = [0.0, 0.2];
-pub const PLANES: [PlaneMode; 2] = [PlaneMode::Single, PlaneMode::Crossed];
 
 /// The bake settings `tune --bake` tries: views x lights x resolution. (66 views: 66 x 7 =
 /// 462 images per image set, nearly 4 times an 18-view bake's time, for every bake tried.)
@@ -62,22 +57,19 @@ pub fn bake_candidates() -> Vec<BakeChoice> {
 }
 
 /// The knob grid tried with each bake of `tune --bake`.
-pub fn bake_knob_candidates(base: BtfSettings) -> Vec<Config> {
+pub fn bake_knob_candidates(base: &FrameDesc) -> Vec<Config> {
     let mut out = Vec::new();
     for weight_threshold in BAKE_WEIGHT_THRESHOLDS {
         for lod_scale in BAKE_LOD_SCALES {
-            let btf = BtfSettings {
+            let mut d = *base;
+            d.btf = BtfSettings {
                 lod_scale,
                 weight_threshold,
                 lod_fade: 0.2,
                 planes: PlaneMode::Single,
-                ..base
+                ..base.btf
             };
-            out.push(Config {
-                label: label(&btf),
-                method: Method::Btf,
-                knobs: Knobs::btf(btf),
-            });
+            out.push(Config::from_frame(tuned_label(&d), Method::Btf, &d));
         }
     }
     out
@@ -161,41 +153,28 @@ impl TuneTarget {
     }
 }
 
-/// A label for `btf` with these knobs.
-pub fn label(s: &BtfSettings) -> String {
-    format!(
-        "btf lod_scale={} weight_threshold={} lod_fade={} planes={}",
-        s.lod_scale,
-        s.weight_threshold,
-        s.lod_fade,
-        s.planes.name()
-    )
-}
-
-/// Every configuration of the grid, from `base` (its other knobs kept).
-pub fn candidates(base: BtfSettings) -> Vec<Config> {
-    let mut out = Vec::new();
-    for planes in PLANES {
-        for lod_fade in LOD_FADES {
-            for weight_threshold in WEIGHT_THRESHOLDS {
-                for lod_scale in LOD_SCALES {
-                    let btf = BtfSettings {
-                        lod_scale,
-                        weight_threshold,
-                        lod_fade,
-                        planes,
-                        ..base
-                    };
-                    out.push(Config {
-                        label: label(&btf),
-                        method: Method::Btf,
-                        knobs: Knobs::btf(btf),
-                    });
-                }
-            }
-        }
+/// Every configuration of the grid: each combination of the values the `btf` knobs offer
+/// `tune` ([`crate::render::knob::Knob::tune`]; the first knob varies fastest), the other
+/// knobs as `base` has them.
+pub fn candidates(base: &FrameDesc) -> Vec<Config> {
+    let mut frames = vec![*base];
+    for k in KNOBS.iter().rev().filter(|k| !k.tune.is_empty()) {
+        frames = frames
+            .iter()
+            .flat_map(|d| {
+                k.tune.iter().filter_map(move |text| {
+                    let v = k.parse(text).ok()?;
+                    let mut d = *d;
+                    k.set(&mut d, v);
+                    Some(d)
+                })
+            })
+            .collect();
     }
-    out
+    frames
+        .iter()
+        .map(|d| Config::from_frame(tuned_label(d), Method::Btf, d))
+        .collect()
 }
 
 /// The cheapest measured configuration (by median frame time, then mean FLIP) that meets
@@ -322,8 +301,20 @@ mod tests {
 
     #[test]
     fn the_grid_covers_every_knob_value_once() {
-        let c = candidates(BtfSettings::default());
+        let base = FrameDesc::from_scene(&crate::scene::Scene::default_scene());
+        let c = candidates(&base);
         assert_eq!(c.len(), 5 * 4 * 2 * 2);
+        assert_eq!(
+            c[1].label,
+            "btf lod_scale=1 weight_threshold=0 lod_fade=0 planes=single"
+        );
+        let mut d = base;
+        c[c.len() - 1].knobs.apply_to(&mut d);
+        assert_eq!(
+            (d.btf.lod_scale, d.btf.weight_threshold, d.btf.lod_fade),
+            (8.0, 0.3, 0.2)
+        );
+        assert_eq!(d.btf.planes, PlaneMode::Crossed);
         let mut labels: Vec<&str> = c.iter().map(|c| c.label.as_str()).collect();
         labels.sort();
         labels.dedup();
@@ -351,7 +342,8 @@ mod tests {
         let t: toml::Table = toml::from_str(&appended).unwrap();
         assert_eq!(t["bake"]["lights"].as_integer(), Some(18));
         assert_eq!(bake_candidates().len(), 8);
-        assert_eq!(bake_knob_candidates(BtfSettings::default()).len(), 8);
+        let base = FrameDesc::from_scene(&crate::scene::Scene::default_scene());
+        assert_eq!(bake_knob_candidates(&base).len(), 8);
     }
 
     #[test]

@@ -1,13 +1,11 @@
-//! What the commands share: the value enums clap parses choices into, the parsers of the
-//! values clap has none for (sizes, points, ranges), the scene to load and the adapter.
+//! What the commands share: `--method`'s values, the parsers of the values clap has none
+//! for (sizes, points, ranges), the scene to load and the adapter.
 
 use std::path::Path;
 
 use clap::ValueEnum;
 use glam::Vec3;
 
-use crate::render::btf::PlaneMode;
-use crate::render::method::texel::TexelMode;
 use crate::render::scale::{MIN_SCALE, RenderScale};
 use crate::render::{AdapterPreference, Method};
 use crate::scene::Scene;
@@ -22,46 +20,6 @@ impl ValueEnum for Method {
     fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
         Some(clap::builder::PossibleValue::new(self.name()))
     }
-}
-
-/// `--texel-mode`: how texel volumes are sliced.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum TexelModeArg {
-    Slices3d,
-    Stacks,
-    Polygons,
-}
-
-impl From<TexelModeArg> for TexelMode {
-    fn from(m: TexelModeArg) -> TexelMode {
-        match m {
-            TexelModeArg::Slices3d => TexelMode::Slices3d,
-            TexelModeArg::Stacks => TexelMode::Stacks,
-            TexelModeArg::Polygons => TexelMode::Polygons,
-        }
-    }
-}
-
-/// `--planes`: one camera-facing plane per billboard, or three crossed planes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum PlanesArg {
-    Single,
-    Crossed,
-}
-
-impl From<PlanesArg> for PlaneMode {
-    fn from(p: PlanesArg) -> PlaneMode {
-        match p {
-            PlanesArg::Single => PlaneMode::Single,
-            PlanesArg::Crossed => PlaneMode::Crossed,
-        }
-    }
-}
-
-/// The parser of an `on`/`off` switch, as a bool.
-pub fn on_off() -> impl clap::builder::TypedValueParser<Value = bool> {
-    use clap::builder::TypedValueParser as _;
-    clap::builder::PossibleValuesParser::new(["on", "off"]).map(|s| s == "on")
 }
 
 /// `--render-scale`: a fraction of the window in `MIN_SCALE..=1`, or `auto`.
@@ -81,26 +39,6 @@ pub fn parse_render_scale(s: &str) -> Result<RenderScale, String> {
         _ => Err(format!(
             "{s:?} is not a render scale: give a fraction in {MIN_SCALE}..=1, or auto"
         )),
-    }
-}
-
-/// A number above 0 and at most 1000.
-pub fn parse_positive(s: &str) -> Result<f32, String> {
-    let v: f32 = s.parse().map_err(|_| format!("{s:?} is not a number"))?;
-    if v.is_finite() && v > 0.0 && v <= 1000.0 {
-        Ok(v)
-    } else {
-        Err(format!("{v} must be above 0 and at most 1000"))
-    }
-}
-
-/// A number in 0..=1.
-pub fn parse_unit(s: &str) -> Result<f32, String> {
-    let v: f32 = s.parse().map_err(|_| format!("{s:?} is not a number"))?;
-    if (0.0..=1.0).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("{v} must be between 0 and 1"))
     }
 }
 
@@ -200,18 +138,6 @@ mod tests {
     }
 
     #[test]
-    fn the_texel_modes_and_planes_parse_as_the_renderer_names_them() {
-        for m in TexelModeArg::value_variants() {
-            let name = m.to_possible_value().unwrap().get_name().to_owned();
-            assert_eq!(TexelMode::parse(&name), Some(TexelMode::from(*m)), "{name}");
-        }
-        for p in PlanesArg::value_variants() {
-            let name = p.to_possible_value().unwrap().get_name().to_owned();
-            assert_eq!(PlaneMode::parse(&name), Some(PlaneMode::from(*p)), "{name}");
-        }
-    }
-
-    #[test]
     fn values_parse_and_bad_ones_say_why() {
         assert_eq!(parse_size("640x360"), Ok((640, 360)));
         assert!(parse_size("0x10").unwrap_err().contains("between 1x1"));
@@ -222,10 +148,6 @@ mod tests {
         assert_eq!(parse_sun("135,35"), Ok((135.0, 35.0)));
         assert!(parse_sun("10").is_err());
         assert!(parse_sun("0,95").unwrap_err().contains("-90..90"));
-        assert_eq!(parse_unit("0.5"), Ok(0.5));
-        assert!(parse_unit("1.5").is_err());
-        assert_eq!(parse_positive("2"), Ok(2.0));
-        assert!(parse_positive("0").is_err());
         assert!(parse_render_scale("auto").unwrap().auto);
         assert_eq!(parse_render_scale("0.5").unwrap().scale, 0.5);
         assert!(parse_render_scale("2").is_err());

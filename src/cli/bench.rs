@@ -21,9 +21,9 @@ pub struct BenchArgs {
         default_value = "geometry,btf,billboard,texel,hybrid"
     )]
     methods: Vec<Method>,
-    /// Sweep a knob: KEY=V1,V2,... (btf and hybrid: lod_scale, weight_threshold, lod_fade, planes,
-    /// vcm, light_gain, gpu_far, gpu_near; texel: slice_d0, slice_d1, max_slices, texel_mode, texel_tiles, tile_distance;
-    /// all three: ground_sky); repeat for a grid.
+    /// Sweep a knob: KEY=V1,V2,... with KEY any knob of `render --help`'s "Method knobs"
+    /// (written with `_`: lod_scale, vcm, texel_mode, ...); each method that reads it runs
+    /// once per value; repeat for a grid.
     #[arg(long, value_parser = parse_sweep)]
     sweep: Vec<crate::bench::run::Sweep>,
     /// Image size, WIDTHxHEIGHT.

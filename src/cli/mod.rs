@@ -7,6 +7,7 @@ pub mod bake;
 pub mod bench;
 pub mod compare;
 pub mod info;
+pub mod knobs;
 pub mod render;
 pub mod tune;
 pub mod view;

@@ -6,15 +6,10 @@ use std::time::Instant;
 use anyhow::Context as _;
 use glam::Vec3;
 
-use super::args::{
-    PlanesArg, TexelModeArg, adapter, load_scene, on_off, parse_positive, parse_size, parse_sun,
-    parse_unit, parse_vec3,
-};
+use super::args::{adapter, load_scene, parse_size, parse_sun, parse_vec3};
 use crate::progress;
 use crate::render::measure::{self, FrameReport, MeasureOptions};
-use crate::render::method::texel::TexelSettings;
 use crate::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
-use crate::slices::SliceBounds;
 
 #[derive(clap::Args)]
 pub struct RenderArgs {
@@ -69,80 +64,8 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = crate::render::self_shadow::SELF_MAP_SIZE,
           value_parser = clap::value_parser!(u32).range(0..=8192), requires = "reference")]
     self_map: u32,
-    /// btf: a level is used while its largest texel projects below this many pixels
-    /// (default: the scene's [render] table, else 1).
-    #[arg(long, value_parser = parse_positive)]
-    lod_scale: Option<f32>,
-    /// btf: images whose blending weight is below this are skipped, 0..1 (default: the
-    /// scene's [render] table, else 0).
-    #[arg(long, value_parser = parse_unit)]
-    weight_threshold: Option<f32>,
-    /// btf: one camera-facing plane per billboard, or three crossed planes (default: the
-    /// scene's [render] table, else single).
-    #[arg(long, value_enum)]
-    planes: Option<PlanesArg>,
-    /// btf: colour billboards by level (twig red, main branch yellow, tree blue).
-    #[arg(long)]
-    show_lod: bool,
-    /// btf: tree shadows on the ground (alpha shadow map) and terrain self-shadows: on or off.
-    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
-    ground_shadows: bool,
-    /// btf, hybrid, texel: the ground sees the sky only where the trees leave it open (the
-    /// reference's sky visibility, computed once before the first frame): on or off.
-    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
-    ground_sky: bool,
-    /// btf: shade billboards by the visibility cube maps (trees shading each other): on or off.
-    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
-    vcm: bool,
-    /// btf: weight the sky light by the cube maps' mean visibility too: on or off (off: the
-    /// cube maps shade the sun light only).
-    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
-    vcm_sky: bool,
-    /// btf: how far to brighten the blend of the 3 nearest light samples towards the sun's
-    /// strength (their weighted directions fall short of it, to 1/sqrt(3) with 6 lights),
-    /// 0..1: 0 = the plain blend, 1 = the whole gain (default: 0.5)
-    #[arg(long, value_parser = parse_unit)]
-    light_gain: Option<f32>,
-    /// btf, hybrid: build the billboards of the trees far enough to be one tree-level
-    /// billboard each on the GPU (compute passes), the CPU preparing only the near trees:
-    /// on or off.
-    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
-    gpu_far: bool,
-    /// btf, hybrid, with --gpu-far on: expand the near trees' billboards on the GPU too (the
-    /// CPU choosing their levels and cross-fades only): on or off.
-    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
-    gpu_near: bool,
-    /// btf: draw the VCM sun factor alone, in grey (white = fully lit).
-    #[arg(long)]
-    show_shadow: bool,
-    /// btf: cross-fade band before each level's bound, as a fraction of it, 0 = pop
-    /// (default: the scene's [render] table, else 0.2).
-    #[arg(long, value_parser = parse_unit)]
-    lod_fade: Option<f32>,
-    /// texel: how volumes are sliced (slices3d: parallel to the screen through a 3D
-    /// texture; stacks: the seeds' three axis stacks of 2D slices with pre-composited
-    /// power-of-two levels; polygons: slices3d's slices drawn as polygons).
-    #[arg(long, value_enum, default_value_t = TexelModeArg::Slices3d)]
-    texel_mode: TexelModeArg,
-    /// texel: largest visible depth between slices, metres (criterion C1).
-    #[arg(long, default_value_t = SliceBounds::default().d0, value_parser = parse_positive)]
-    slice_d0: f32,
-    /// texel: largest projected spacing between slices, pixels (criterion C2).
-    #[arg(long, default_value_t = SliceBounds::default().d1, value_parser = parse_positive)]
-    slice_d1: f32,
-    /// texel: most slices per texel.
-    #[arg(long, default_value_t = SliceBounds::default().max_slices,
-          value_parser = clap::value_parser!(u32).range(1..=1024))]
-    max_slices: u32,
-    /// texel: colour each texel by its slice count (blue 1, green about 11, red 128 or more).
-    #[arg(long)]
-    show_slices: bool,
-    /// texel: draw the trees of far tiles as forest-cover tiles (on or off).
-    #[arg(long, default_value = "on", value_parser = on_off(), action = clap::ArgAction::Set)]
-    texel_tiles: bool,
-    /// texel: distance (m) beyond which a whole tile is drawn as one forest-cover volume.
-    #[arg(long, default_value_t = TexelSettings::default().tile_distance, value_parser = parse_positive)]
-    tile_distance: f32,
+    #[command(flatten)]
+    knobs: super::knobs::KnobArgs,
     /// Prefer the CPU (software) adapter.
     #[arg(long)]
     cpu: bool,
@@ -158,8 +81,15 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     let mut frame = FrameDesc::from_scene(&scene);
     frame.method = method;
     frame.shadows.map_size = args.shadow_map;
-    frame.ground_shadows = args.ground_shadows;
-    frame.ground_sky = args.ground_sky;
+    args.knobs.apply_to(&mut frame);
+    let ignored = args.knobs.ignored_by(method);
+    if !ignored.is_empty() {
+        eprintln!(
+            "warning: {} does not read {}",
+            method.name(),
+            ignored.join(", ")
+        );
+    }
     if args.pixel_classes {
         if method != Method::Geometry {
             return Err(crate::Error::BadInput(
@@ -197,32 +127,6 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
         frame.sun.azimuth_deg = az;
         frame.sun.elevation_deg = el;
     }
-    let start = frame.btf;
-    frame.btf = crate::render::btf::BtfSettings {
-        lod_scale: args.lod_scale.unwrap_or(start.lod_scale),
-        weight_threshold: args.weight_threshold.unwrap_or(start.weight_threshold),
-        planes: args.planes.map_or(start.planes, Into::into),
-        show_lod: args.show_lod,
-        lod_fade: args.lod_fade.unwrap_or(start.lod_fade),
-        vcm: args.vcm,
-        show_shadow: args.show_shadow,
-        vcm_sky: args.vcm_sky,
-        light_gain: args.light_gain.unwrap_or(start.light_gain),
-        gpu_far: args.gpu_far,
-        gpu_near: args.gpu_near,
-    };
-    frame.texel = TexelSettings {
-        mode: args.texel_mode.into(),
-        bounds: SliceBounds {
-            d0: args.slice_d0,
-            d1: args.slice_d1,
-            max_slices: args.max_slices,
-        },
-        vcm: args.vcm,
-        show_slices: args.show_slices,
-        tiles: args.texel_tiles,
-        tile_distance: args.tile_distance,
-    };
     let (w, h) = args.size;
     crate::render::target::check_size(
         w.saturating_mul(args.supersample),

@@ -7,6 +7,8 @@ use image::RgbaImage;
 use serde::{Serialize, Serializer};
 
 use super::btf::BtfStats;
+use super::knob::{KnobValue, KnobValues};
+use super::method::knobs_of;
 use super::{FrameDesc, FrameStats, GpuContext, Renderer};
 use crate::Result;
 
@@ -207,12 +209,15 @@ pub struct FrameReport {
     /// Where the image was written, if it was.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub out: Option<String>,
-    /// What the `btf` method did and with which settings (absent for other methods).
+    /// What the `btf` method did (absent for other methods).
     #[serde(flatten)]
     pub btf: Option<BtfReport>,
-    /// What the `texel` method did and with which settings (absent for other methods).
+    /// What the `texel` method did: `texels`, `tiles`, `slices_mean`, `slices_max`,
+    /// `texel_bytes`, `texel_mode` (absent for other methods).
     #[serde(flatten)]
-    pub texel: Option<TexelReport>,
+    pub texel: Option<crate::render::method::texel::TexelStats>,
+    /// Every knob of the method, by name ([`crate::render::method::knobs_of`]).
+    pub knobs: std::collections::BTreeMap<&'static str, KnobValue>,
     /// The frame was the reference (`geometry` with sky visibility and whole-scene sun
     /// shadows).
     pub reference: bool,
@@ -240,38 +245,15 @@ pub struct SkyReport {
     pub sky_volume_bytes: u64,
 }
 
-/// The `texel` part of a [`FrameReport`]: `texels`, `tiles`, `slices_mean`, `slices_max`,
-/// `texel_bytes`, `texel_mode`, and the knobs.
-#[derive(Clone, Debug, Serialize)]
-pub struct TexelReport {
-    #[serde(flatten)]
-    pub stats: crate::render::method::texel::TexelStats,
-    pub slice_d0: f32,
-    pub slice_d1: f32,
-    pub max_slices: u32,
-    pub texel_vcm: bool,
-    pub texel_tiles: bool,
-    pub tile_distance: f32,
-}
-
 /// The `btf` part of a [`FrameReport`].
 #[derive(Clone, Debug, Serialize)]
 pub struct BtfReport {
     /// Billboards and trees per level, fades, image fetches, VCM shading.
     #[serde(flatten, serialize_with = "btf_counts")]
     pub stats: BtfStats,
-    pub lod_scale: f32,
-    pub weight_threshold: f32,
-    pub planes: &'static str,
-    pub lod_fade: f32,
-    pub ground_shadows: bool,
     /// The sky light was weighted by the cube maps too (VCM shading on and `vcm_sky`).
     pub vcm_sky: bool,
-    /// How far the light blend was brightened by its gain (0..1).
-    pub light_gain: f32,
-    /// The far trees' billboards were built on the GPU.
-    pub gpu_far: bool,
-    /// The near trees' billboards were expanded on the GPU.
+    /// The near trees' billboards were expanded on the GPU (`gpu_near` with `gpu_far`).
     pub gpu_near: bool,
     pub btf_bytes: u64,
     /// GPU bytes of the far trees' buffers (0 without them).
@@ -294,14 +276,7 @@ impl FrameReport {
         let reference = frame.reference_drawn();
         let btf = m.stats.btf.map(|stats| BtfReport {
             stats,
-            lod_scale: frame.btf.lod_scale,
-            weight_threshold: frame.btf.weight_threshold,
-            planes: frame.btf.planes.name(),
-            lod_fade: frame.btf.lod_fade,
-            ground_shadows: frame.ground_shadows,
             vcm_sky: stats.vcm && frame.btf.vcm_sky,
-            light_gain: frame.btf.light_gain,
-            gpu_far: frame.btf.gpu_far,
             gpu_near: frame.btf.gpu_far && frame.btf.gpu_near,
             btf_bytes: renderer.btf_bytes(),
             far_bytes: renderer.far_bytes(),
@@ -322,15 +297,8 @@ impl FrameReport {
             adapter: ctx.adapter_name(),
             out: None,
             btf,
-            texel: m.stats.texel.map(|stats| TexelReport {
-                stats,
-                slice_d0: frame.texel.bounds.d0,
-                slice_d1: frame.texel.bounds.d1,
-                max_slices: frame.texel.bounds.max_slices,
-                texel_vcm: frame.texel.vcm,
-                texel_tiles: frame.texel.tiles,
-                tile_distance: frame.texel.tile_distance,
-            }),
+            texel: m.stats.texel,
+            knobs: KnobValues::read(knobs_of(frame.method), frame).to_map(),
             reference: reference.is_some(),
             sun_map_size: reference.map(|r| r.sun_map_size.max(frame.shadows.map_size)),
             self_map_size: reference.map(|r| r.self_map_size),

@@ -15,6 +15,7 @@ pub mod context;
 pub mod frame;
 mod frame_bindings;
 pub mod ground;
+pub mod knob;
 pub mod measure;
 mod meshes;
 pub mod method;

@@ -174,6 +174,13 @@ pub trait RenderMethod {
         false
     }
 
+    /// The method's own knobs (the panel's controls, the command line's flags, the bench's
+    /// sweeps and `tune`'s grid follow them); the ground's are added where
+    /// [`Self::shades_ground`].
+    fn knobs(&self) -> &'static [crate::render::knob::Knob] {
+        &[]
+    }
+
     /// The frame's CPU work: levels of detail, expansion, sorting, shading factors, and the
     /// uploads of what the method draws.
     fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan>;

@@ -6,11 +6,12 @@
 //! maps) stays in the core (`render/mod.rs`); constants more than one method reads are in
 //! `render/consts.rs`.
 //!
-//! Adding a method: its module here (its settings and stats in its own folder), its arm in
-//! [`Method`] (`kind.rs`), its entry in [`registry`], and, when it draws from the bake, its
-//! slot in [`Bake`]. The command line (`--method`), the viewer's method buttons and the
-//! bench's chart follow [`Method::ALL`]; a method's own knobs are still wired by hand into
-//! [`crate::render::FrameDesc`], the command line, the panel and the bench's sweeps.
+//! Adding a method: its module here (its settings, stats and knobs in its own folder), its
+//! arm in [`Method`] (`kind.rs`), its entry in [`registry`], its settings' field in
+//! [`crate::render::FrameDesc`] and, when it draws from the bake, its slot in [`Bake`]. The
+//! command line (`--method` and a flag per knob), the viewer's method buttons and knob
+//! controls, the bench's chart and sweeps and `tune`'s grid follow [`Method::ALL`] and
+//! [`RenderMethod::knobs`].
 
 pub mod billboard;
 pub mod btf;
@@ -23,6 +24,60 @@ pub mod view;
 pub use interface::{Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork};
 pub use kind::Method;
 pub use view::PrepareView;
+
+use std::sync::OnceLock;
+
+use crate::render::knob::{GROUND_KNOBS, Knob};
+
+/// The knobs `method` reads: its own ([`RenderMethod::knobs`]) and, where its trees shade
+/// the ground, the ground's.
+pub fn knobs_of(method: Method) -> &'static [&'static Knob] {
+    static TABLE: OnceLock<Vec<(Method, Vec<&'static Knob>)>> = OnceLock::new();
+    let table = TABLE.get_or_init(|| {
+        registry()
+            .iter()
+            .map(|m| {
+                let mut knobs: Vec<&'static Knob> = m.knobs().iter().collect();
+                if m.shades_ground() {
+                    knobs.extend(GROUND_KNOBS.iter());
+                }
+                (m.method(), knobs)
+            })
+            .collect()
+    });
+    table
+        .iter()
+        .find(|(m, _)| *m == method)
+        .map_or(&[], |(_, k)| k.as_slice())
+}
+
+/// Every knob name once (the first method's knob of each name), in the order of
+/// [`Method::ALL`]: the command line's flags and the sweeps' keys.
+pub fn all_knobs() -> Vec<&'static Knob> {
+    let mut out: Vec<&'static Knob> = Vec::new();
+    for m in Method::ALL {
+        for k in knobs_of(*m) {
+            if !out.iter().any(|o| o.name == k.name) {
+                out.push(k);
+            }
+        }
+    }
+    out
+}
+
+/// Every method's knob named `name` (one setting to the user, held by each method that
+/// reads it).
+pub fn knobs_named(name: &str) -> Vec<&'static Knob> {
+    let mut out: Vec<&'static Knob> = Vec::new();
+    for m in Method::ALL {
+        for k in knobs_of(*m) {
+            if k.name == name && !out.iter().any(|o| std::ptr::eq(*o, *k)) {
+                out.push(k);
+            }
+        }
+    }
+    out
+}
 
 /// One of each method, as the renderer holds them.
 pub fn registry() -> Vec<Box<dyn RenderMethod>> {
@@ -38,6 +93,7 @@ pub fn registry() -> Vec<Box<dyn RenderMethod>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::render::knob::KnobKind;
 
     #[test]
     fn the_registry_holds_every_method_once() {
@@ -51,5 +107,65 @@ mod tests {
             );
         }
         assert_eq!(methods.len(), Method::ALL.len());
+    }
+
+    #[test]
+    fn knobs_of_one_name_are_one_setting() {
+        for k in all_knobs() {
+            for other in knobs_named(k.name) {
+                assert_eq!(
+                    std::mem::discriminant(&k.kind),
+                    std::mem::discriminant(&other.kind),
+                    "two knobs named {} take different values",
+                    k.name
+                );
+                if let (KnobKind::Choice { names: a, .. }, KnobKind::Choice { names: b, .. }) =
+                    (k.kind, other.kind)
+                {
+                    assert_eq!(a, b, "{}", k.name);
+                }
+            }
+        }
+        let names: Vec<&str> = all_knobs().iter().map(|k| k.name).collect();
+        for want in ["lod_scale", "vcm", "texel_mode", "ground_sky"] {
+            assert!(names.contains(&want), "{want} missing from {names:?}");
+        }
+        assert_eq!(knobs_named("vcm").len(), 2, "btf's and texel's");
+        assert!(knobs_of(Method::Geometry).is_empty());
+        assert!(
+            knobs_of(Method::Hybrid)
+                .iter()
+                .any(|k| k.name == "lod_fade")
+        );
+    }
+
+    #[test]
+    fn every_knob_reads_back_what_it_writes() {
+        use crate::render::knob::KnobValue;
+        let scene = crate::scene::Scene::default_scene();
+        for k in all_knobs() {
+            for knob in knobs_named(k.name) {
+                let mut d = crate::render::FrameDesc::from_scene(&scene);
+                let v = match (knob.kind, knob.get(&d)) {
+                    (
+                        KnobKind::Number {
+                            min, max, integer, ..
+                        },
+                        _,
+                    ) => {
+                        let x = 0.7 * min + 0.3 * max;
+                        KnobValue::Number(if integer { x.round() } else { x })
+                    }
+                    (_, KnobValue::Toggle(on)) => KnobValue::Toggle(!on),
+                    (KnobKind::Choice { names, .. }, _) => {
+                        KnobValue::Choice(names[names.len() - 1])
+                    }
+                    _ => unreachable!("a toggle reads as on/off"),
+                };
+                knob.set(&mut d, v);
+                assert_eq!(knob.get(&d), v, "{}", knob.name);
+                assert_eq!(knob.parse(&knob.text(&d)), Ok(v), "{}", knob.name);
+            }
+        }
     }
 }

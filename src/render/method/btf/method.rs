@@ -195,6 +195,10 @@ impl RenderMethod for BtfMethod {
         true
     }
 
+    fn knobs(&self) -> &'static [crate::render::knob::Knob] {
+        super::knobs::KNOBS
+    }
+
     fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
         let method = self.method();
         bake.need_btf(method)?;

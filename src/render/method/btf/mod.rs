@@ -1,13 +1,13 @@
 //! The `btf` method: every tree as BTF billboards of its chosen level (Meyer, Neyret, Poulin
-//! 2001). Per frame, on the CPU ([`prepare`]): choose each visible tree's level by the texel
-//! criterion, expand it into billboards (the tree; its main branches; or its twigs, at their
-//! instance transforms), find each billboard's view and light directions in its object frame
-//! and the 3 nearest samples of each with their weights, cull small weights, sort back to
-//! front. On the GPU (this file): one instanced draw samples a single texture array holding
-//! every image set.
+//! 2001). Per frame, on the CPU ([`prepare`]): each visible tree's level by the texel
+//! criterion, expanded into billboards (the tree; its main branches; or its twigs, at their
+//! instance transforms), each billboard's 3 nearest view and light samples in its object
+//! frame with their weights, small weights culled, sorted back to front. On the GPU (this
+//! file): one instanced draw samples a single texture array holding every image set.
 
 mod billboard;
 pub mod far;
+pub mod knobs;
 pub mod method;
 pub mod prepare;
 pub mod settings;

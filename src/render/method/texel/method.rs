@@ -44,6 +44,10 @@ impl RenderMethod for TexelMethod {
         true
     }
 
+    fn knobs(&self) -> &'static [crate::render::knob::Knob] {
+        super::knobs::KNOBS
+    }
+
     fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
         let frame = cx.frame;
         let mut sun = SunWork::default();

@@ -12,6 +12,7 @@
 //! forest-cover tile are drawn as one volume that follows the ground ([`tiles`]).
 
 mod assets;
+pub mod knobs;
 pub mod method;
 pub mod polygons;
 mod prepare;
