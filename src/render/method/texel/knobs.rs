@@ -15,13 +15,13 @@ pub static KNOBS: &[Knob] = &[
     ),
     Knob::number(
         "slice_d0",
-        "slice depth d0 m",
-        "largest visible depth between slices, metres (criterion C1)",
-        (0.01, 100.0),
+        "slice depth d0 px",
+        "largest visible depth between slices, in pixels on screen (criterion C1)",
+        (0.05, 100.0),
         |d| d.texel.bounds.d0,
         |d, v| d.texel.bounds.d0 = v,
     )
-    .slider(0.05, 5.0, true),
+    .slider(0.25, 16.0, true),
     Knob::number(
         "slice_d1",
         "slice spacing d1 px",

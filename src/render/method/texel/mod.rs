@@ -2,7 +2,7 @@
 //! (`bake::texel`) in one 3D texture, drawn with slices parallel to the screen
 //! (Decaudin-Neyret 2009; `shaders/texel.wgsl`). Per frame, on the CPU ([`prepare`]): each
 //! visible tree's box, its slice count from the criteria of [`crate::slices`] (the box's
-//! depth along the view against d0 metres and d1 pixels), the mip level its voxels project
+//! depth along the view on screen against d0 and d1 pixels), the mip level its voxels project
 //! to, the 3 nearest baked lights of the sun in its frame with their weights, the tree-level
 //! VCM factors at its box corners; sorted back to front. On the GPU: one instanced draw of
 //! boxes (a second for the boxes the eye is inside, drawn from their far faces).
