@@ -1,8 +1,11 @@
 //! The last few hundred frames' CPU and GPU frame times, for the panel's plot. A ring buffer
 //! of fixed capacity: the viewer pushes a frame's times each frame, the plot reads them as
-//! points against "frames ago", so the axis stays still while the curve scrolls.
+//! points against "frames ago", so the axis stays still while the curve scrolls. Where the
+//! GPU timed each pass, the plot stacks them under the GPU line: where the frame goes.
 
 use std::collections::VecDeque;
+
+use crate::render::timing::PassTimes;
 
 /// How many frames the panel's plot shows.
 pub const HISTORY_FRAMES: usize = 300;
@@ -14,6 +17,8 @@ struct FrameTimes {
     /// None where the GPU time was not (yet) measured: no timestamp queries, or the first
     /// frames before a readback arrived.
     gpu_ms: Option<f64>,
+    /// The GPU time of each pass (empty where not measured).
+    passes: PassTimes,
 }
 
 /// The most recent frames' times, oldest first, at most `capacity` of them.
@@ -44,7 +49,51 @@ impl FrameTimeHistory {
         if self.frames.len() == self.capacity {
             self.frames.pop_front();
         }
-        self.frames.push_back(FrameTimes { cpu_ms, gpu_ms });
+        self.frames.push_back(FrameTimes {
+            cpu_ms,
+            gpu_ms,
+            passes: PassTimes::default(),
+        });
+    }
+
+    /// Records a frame with its GPU time per pass.
+    pub fn push_with_passes(&mut self, cpu_ms: f64, gpu_ms: Option<f64>, passes: PassTimes) {
+        self.push(cpu_ms, gpu_ms);
+        if let Some(f) = self.frames.back_mut() {
+            f.passes = passes;
+        }
+    }
+
+    /// The passes of the frames kept, in the order they first ran.
+    pub fn pass_names(&self) -> Vec<&'static str> {
+        let mut names = Vec::new();
+        for p in self.frames.iter().flat_map(|f| f.passes.iter()) {
+            if !names.contains(&p.name) {
+                names.push(p.name);
+            }
+        }
+        names
+    }
+
+    /// The passes stacked, in the order of [`Self::pass_names`]: per pass, the frames that
+    /// timed passes as (frames ago, bottom, top) of its band, ms.
+    pub fn pass_bands(&self) -> Vec<(&'static str, Vec<[f64; 3]>)> {
+        let names = self.pass_names();
+        let newest = self.frames.len() as f64 - 1.0;
+        let mut bands: Vec<(&'static str, Vec<[f64; 3]>)> =
+            names.iter().map(|&n| (n, Vec::new())).collect();
+        for (i, f) in self.frames.iter().enumerate() {
+            if f.passes.is_empty() {
+                continue;
+            }
+            let mut bottom = 0.0;
+            for (name, band) in &mut bands {
+                let top = bottom + f.passes.get(name).unwrap_or(0.0);
+                band.push([i as f64 - newest, bottom, top]);
+                bottom = top;
+            }
+        }
+        bands
     }
 
     pub fn len(&self) -> usize {
@@ -86,12 +135,14 @@ impl FrameTimeHistory {
 }
 
 /// Draws the history as a small plot: CPU and (when measured) GPU frame time, ms, against
-/// frames ago, with a legend. Fixed axes (no drag or zoom), so it reads the same every frame
-/// and the panel's scroll wheel keeps scrolling the panel.
+/// frames ago, with a legend, and under the GPU line each pass's time stacked (where the
+/// GPU timed passes). Fixed axes (no drag or zoom), so it reads the same every frame and
+/// the panel's scroll wheel keeps scrolling the panel.
 pub fn plot(ui: &mut egui::Ui, history: &FrameTimeHistory) {
-    use egui_plot::{Corner, Legend, Line, Plot};
+    use egui_plot::{Corner, FilledArea, Legend, Line, Plot};
+    let bands = history.pass_bands();
     Plot::new("frame time history")
-        .height(120.0)
+        .height(if bands.is_empty() { 120.0 } else { 160.0 })
         .legend(Legend::default().position(Corner::LeftTop))
         .include_x(-(history.capacity() as f64 - 1.0))
         .include_x(0.0)
@@ -103,6 +154,12 @@ pub fn plot(ui: &mut egui::Ui, history: &FrameTimeHistory) {
         .allow_boxed_zoom(false)
         .allow_double_click_reset(false)
         .show(ui, |plot| {
+            for (k, (name, band)) in bands.iter().enumerate() {
+                let xs: Vec<f64> = band.iter().map(|b| b[0]).collect();
+                let lo: Vec<f64> = band.iter().map(|b| b[1]).collect();
+                let hi: Vec<f64> = band.iter().map(|b| b[2]).collect();
+                plot.add(FilledArea::new(*name, &xs, &lo, &hi).fill_color(pass_color(k)));
+            }
             plot.line(
                 Line::new("CPU frame", history.cpu_points())
                     .color(egui::Color32::from_rgb(90, 160, 255)),
@@ -114,6 +171,22 @@ pub fn plot(ui: &mut egui::Ui, history: &FrameTimeHistory) {
                 );
             }
         });
+}
+
+/// The colour of the `k`-th pass's band: distinct hues, half transparent.
+fn pass_color(k: usize) -> egui::Color32 {
+    const HUES: [(u8, u8, u8); 8] = [
+        (120, 180, 90),
+        (200, 120, 200),
+        (90, 190, 190),
+        (220, 200, 90),
+        (230, 110, 100),
+        (140, 140, 230),
+        (170, 130, 90),
+        (160, 160, 160),
+    ];
+    let (r, g, b) = HUES[k % HUES.len()];
+    egui::Color32::from_rgba_unmultiplied(r, g, b, 150)
 }
 
 #[cfg(test)]
@@ -172,5 +245,26 @@ mod tests {
         h.push(1.0, None);
         h.push(2.0, None);
         assert_eq!(h.cpu_points(), vec![[0.0, 2.0]]);
+    }
+
+    #[test]
+    fn passes_stack_in_the_order_they_ran() {
+        let mut h = FrameTimeHistory::with_capacity(4);
+        let mut a = PassTimes::default();
+        a.add("sky", 1.0);
+        a.add("trees", 4.0);
+        let mut b = PassTimes::default();
+        b.add("far trees", 2.0);
+        b.add("sky", 1.5);
+        h.push_with_passes(10.0, Some(5.0), a);
+        h.push(11.0, None);
+        h.push_with_passes(12.0, Some(3.5), b);
+        assert_eq!(h.pass_names(), ["sky", "trees", "far trees"]);
+        let bands = h.pass_bands();
+        // Frames without passes have no band; each band starts where the one below ends.
+        assert_eq!(bands[0].1, vec![[-2.0, 0.0, 1.0], [0.0, 0.0, 1.5]]);
+        assert_eq!(bands[1].1, vec![[-2.0, 1.0, 5.0], [0.0, 1.5, 1.5]]);
+        assert_eq!(bands[2].1, vec![[-2.0, 5.0, 5.0], [0.0, 1.5, 3.5]]);
+        assert!(FrameTimeHistory::default().pass_bands().is_empty());
     }
 }

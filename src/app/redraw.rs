@@ -131,9 +131,10 @@ impl App {
         self.stats.sun_update_gpu_ms = r.renderer.last_sun_update_gpu_ms();
         self.stats.paused_for_bake = self.paused_for_bake;
         self.stats.cpu_frame_ms = 0.9 * self.stats.cpu_frame_ms + 0.1 * f64::from(frame_ms);
+        let passes = r.renderer.last_passes().unwrap_or_default();
         self.stats
             .history
-            .push(f64::from(frame_ms), self.stats.gpu_frame_ms);
+            .push_with_passes(f64::from(frame_ms), self.stats.gpu_frame_ms, passes);
         self.stats.camera_speed = self.fly.speed;
     }
 

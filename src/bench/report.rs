@@ -82,12 +82,19 @@ pub fn summary_json(run: &RunInfo, results: &BenchResults) -> String {
     .unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
 }
 
-/// The rows as CSV (the `csv` crate quotes and escapes each field as it needs).
+/// The rows as CSV (the `csv` crate quotes and escapes each field as it needs): the
+/// figures of each frame, then a column per pass any row timed (`pass_<name>_ms`, in the
+/// order the passes first ran; empty where a row's method has no such pass).
 pub fn results_csv(results: &BenchResults) -> String {
     let mut w = csv::Writer::from_writer(Vec::new());
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
-    // Writing into a Vec cannot fail.
-    let _ = w.write_record([
+    let mut pass_names: Vec<&'static str> = Vec::new();
+    for p in results.rows.iter().flat_map(|r| r.passes.iter()) {
+        if !pass_names.contains(&p.name) {
+            pass_names.push(p.name);
+        }
+    }
+    let mut header: Vec<String> = [
         "frame",
         "configuration",
         "method",
@@ -98,11 +105,16 @@ pub fn results_csv(results: &BenchResults) -> String {
         "change",
         "truth_change",
         "flicker_excess",
-    ]);
+    ]
+    .map(String::from)
+    .to_vec();
+    header.extend(pass_names.iter().map(|n| pass_column(n)));
+    // Writing into a Vec cannot fail.
+    let _ = w.write_record(&header);
     for r in &results.rows {
         let c = &results.configs[r.config];
         let excess = r.change.zip(r.truth_change).map(|(m, t)| m - t);
-        let _ = w.write_record([
+        let mut record = vec![
             r.frame.to_string(),
             c.label.clone(),
             c.method.name().to_owned(),
@@ -113,11 +125,22 @@ pub fn results_csv(results: &BenchResults) -> String {
             opt(r.change),
             opt(r.truth_change),
             opt(excess),
-        ]);
+        ];
+        record.extend(pass_names.iter().map(|n| {
+            r.passes
+                .get(n)
+                .map_or(String::new(), |ms| format!("{ms:.4}"))
+        }));
+        let _ = w.write_record(&record);
     }
     w.into_inner()
         .map(|bytes| String::from_utf8_lossy(&bytes).into_owned())
         .unwrap_or_default()
+}
+
+/// The CSV column of the pass `name`: `pass_far_trees_ms` for `far trees`.
+pub fn pass_column(name: &str) -> String {
+    format!("pass_{}_ms", name.replace(' ', "_"))
 }
 
 /// A plain table of the summaries, for the terminal.
@@ -285,5 +308,66 @@ mod tests {
         // A summary without its configurations is refused, and says what is missing.
         let e = Summary::parse("{\"scene\": \"x\"}").unwrap_err();
         assert!(e.contains("missing field"), "{e}");
+    }
+
+    /// Every pass any row timed is a column, in the order the passes ran; a row without
+    /// that pass leaves it empty.
+    #[test]
+    fn results_csv_has_a_column_per_pass() {
+        use crate::bench::run::FrameRow;
+        use crate::render::timing::PassTimes;
+        let config = |m: Method| Config {
+            label: m.name().into(),
+            method: m,
+            knobs: Knobs::default(),
+        };
+        let row = |config: usize, passes: &[(&'static str, f64)]| {
+            let mut p = PassTimes::default();
+            for &(n, ms) in passes {
+                p.add(n, ms);
+            }
+            FrameRow {
+                frame: 0,
+                config,
+                ms: 10.0,
+                prepare_ms: 1.0,
+                passes: p,
+                mean_flip: 0.1,
+                p95_flip: 0.2,
+                change: None,
+                truth_change: None,
+            }
+        };
+        let results = BenchResults {
+            configs: vec![config(Method::Geometry), config(Method::Btf)],
+            rows: vec![
+                row(0, &[("sky", 1.0), ("trees", 9.0)]),
+                row(1, &[("far trees", 2.0), ("sky", 1.5), ("billboards", 6.5)]),
+            ],
+            summaries: Vec::new(),
+            worst: Vec::new(),
+            frames: 1,
+            time_source: TimeSource::GpuTimestamps,
+            truth_rendered: 0,
+            truth_cached: 0,
+        };
+        let csv = results_csv(&results);
+        let mut r = csv::Reader::from_reader(csv.as_bytes());
+        let header: Vec<String> = r.headers().unwrap().iter().map(String::from).collect();
+        assert_eq!(
+            header[10..],
+            [
+                "pass_sky_ms",
+                "pass_trees_ms",
+                "pass_far_trees_ms",
+                "pass_billboards_ms"
+            ]
+        );
+        let rows: Vec<Vec<String>> = r
+            .records()
+            .map(|rec| rec.unwrap().iter().map(String::from).collect())
+            .collect();
+        assert_eq!(rows[0][10..], ["1.0000", "9.0000", "", ""]);
+        assert_eq!(rows[1][10..], ["1.5000", "", "2.0000", "6.5000"]);
     }
 }

@@ -172,6 +172,8 @@ pub struct FrameRow {
     pub ms: f64,
     /// CPU time of culling and the method's prepare step (ms, median).
     pub prepare_ms: f64,
+    /// Each pass's GPU time (ms, median of the repeats; empty without timestamps).
+    pub passes: crate::render::timing::PassTimes,
     pub mean_flip: f64,
     pub p95_flip: f64,
     /// FLIP between this frame and the one before, of the method and of the truth (absent
@@ -379,6 +381,7 @@ pub fn run(
             }
             let mut times = Vec::new();
             let mut prep = Vec::new();
+            let mut passes = Vec::new();
             let mut image = None;
             for _ in 0..opts.repeats.max(1) {
                 let t0 = std::time::Instant::now();
@@ -389,6 +392,7 @@ pub fn run(
                 }
                 times.push(stats.gpu_ms.unwrap_or(wall));
                 prep.push(stats.prepare_ms);
+                passes.push(stats.passes);
                 image = Some(img);
             }
             let Some(img) = image else { continue };
@@ -413,6 +417,7 @@ pub fn run(
                 config: c,
                 ms: median(&mut times),
                 prepare_ms: median(&mut prep),
+                passes: crate::render::timing::PassTimes::median(&passes),
                 mean_flip,
                 p95_flip: quantile(&mut res.errors, 0.95),
                 change,
@@ -613,6 +618,7 @@ mod tests {
             config,
             ms,
             prepare_ms: 0.1,
+            passes: Default::default(),
             mean_flip: flip,
             p95_flip: 2.0 * flip,
             change: change.map(|c| c.0),

@@ -205,6 +205,14 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
             m.stats.triangles,
             ctx.adapter_name()
         );
+        if !m.passes.is_empty() {
+            let passes: Vec<String> = m
+                .passes
+                .iter()
+                .map(|p| format!("{} {:.2}", p.name, p.ms))
+                .collect();
+            println!("passes (GPU ms): {}", passes.join(", "));
+        }
     }
     Ok(())
 }

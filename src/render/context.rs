@@ -26,6 +26,9 @@ pub struct GpuContext {
     pub queue: wgpu::Queue,
     /// GPU timestamp queries are available (frame times come from the GPU itself).
     pub timestamps: bool,
+    /// Timestamps can be written inside render and compute passes too, so that the draws
+    /// of one pass are timed apart ([`super::timing::PassSpans::mark`]).
+    pub timestamps_inside_passes: bool,
     /// Set when the device is lost (driver reset, GPU removed): the owner must recreate
     /// the context and everything made from it.
     pub lost: Arc<AtomicBool>,
@@ -65,9 +68,14 @@ impl GpuContext {
     fn from_adapter(instance: wgpu::Instance, adapter: wgpu::Adapter) -> Result<Self> {
         let info = adapter.get_info();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let inside = wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES;
+        let timestamps_inside_passes = timestamps && adapter.features().contains(inside);
         let mut required_features = wgpu::Features::empty();
         if timestamps {
             required_features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        if timestamps_inside_passes {
+            required_features |= inside;
         }
         // Ask for what the adapter offers, within the WebGPU defaults' spirit: large
         // textures for supersampled reference frames, storage buffers in vertex shaders.
@@ -106,11 +114,12 @@ impl GpuContext {
             }
         }));
         log::info!(
-            "GPU: {} ({:?}, {:?}), timestamps: {}",
+            "GPU: {} ({:?}, {:?}), timestamps: {} (inside passes: {})",
             info.name,
             info.backend,
             info.device_type,
-            timestamps
+            timestamps,
+            timestamps_inside_passes
         );
         Ok(Self {
             instance,
@@ -118,6 +127,7 @@ impl GpuContext {
             device,
             queue,
             timestamps,
+            timestamps_inside_passes,
             lost,
             last_error,
         })

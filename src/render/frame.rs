@@ -215,6 +215,9 @@ pub struct FrameStats {
     /// GPU time of the frame from timestamp queries, when the adapter has them and the
     /// caller asked for a blocking measurement.
     pub gpu_ms: Option<f64>,
+    /// The same frame's GPU time per pass, in the order they ran (empty where `gpu_ms` is
+    /// None); they add up to `gpu_ms` but for the gaps between passes.
+    pub passes: crate::render::timing::PassTimes,
     /// CPU time of culling and the method's prepare step (levels, expansion, sorting,
     /// shading factors, instance lists), in ms; sun-dependent work is not included.
     pub prepare_ms: f64,

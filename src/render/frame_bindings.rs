@@ -116,7 +116,7 @@ impl DepthTarget {
 impl DepthTarget {
     /// A pass drawing into `target` and this depth buffer: both cleared (the colour to
     /// `clear`, depth to the far plane) or, without `clear`, both loaded; the depth kept for
-    /// a later pass when `keep_depth`. `end_timestamp`: the frame's timing ends with it.
+    /// a later pass when `keep_depth`; timed by `timestamp_writes` when given.
     pub fn color_pass<'e>(
         &self,
         encoder: &'e mut wgpu::CommandEncoder,
@@ -124,7 +124,7 @@ impl DepthTarget {
         target: &wgpu::TextureView,
         clear: Option<wgpu::Color>,
         keep_depth: bool,
-        end_timestamp: Option<&wgpu::QuerySet>,
+        timestamp_writes: Option<wgpu::RenderPassTimestampWrites<'_>>,
     ) -> wgpu::RenderPass<'e> {
         encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some(label),
@@ -150,11 +150,7 @@ impl DepthTarget {
                 }),
                 stencil_ops: None,
             }),
-            timestamp_writes: end_timestamp.map(|q| wgpu::RenderPassTimestampWrites {
-                query_set: q,
-                beginning_of_pass_write_index: None,
-                end_of_pass_write_index: Some(1),
-            }),
+            timestamp_writes,
             occlusion_query_set: None,
             multiview_mask: None,
         })

@@ -10,7 +10,7 @@
 use super::method::kind::Method;
 use super::pipelines::{self, Layouts};
 use super::shadow::Cascades;
-use super::timing::GpuTimer;
+use super::timing::{GpuTimer, PassSpans};
 use super::uniforms::FrameUniforms;
 use super::world_gpu::WorldGpu;
 use super::{GpuContext, SHADOW_FORMAT};
@@ -249,7 +249,10 @@ impl GroundMaps {
         let light_uniforms = uniforms.for_light(self.light_view_proj);
         ctx.queue
             .write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&light_uniforms));
-        let queries = self.timer.as_mut().and_then(|t| t.begin()).cloned();
+        let spans = self
+            .timer
+            .as_mut()
+            .map_or_else(PassSpans::off, GpuTimer::begin);
         let mut encoder = ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -274,11 +277,7 @@ impl GroundMaps {
                 }),
                 stencil_ops: None,
             }),
-            timestamp_writes: queries.as_ref().map(|q| wgpu::RenderPassTimestampWrites {
-                query_set: q,
-                beginning_of_pass_write_index: Some(0),
-                end_of_pass_write_index: Some(1),
-            }),
+            timestamp_writes: spans.render_pass("ground maps"),
             occlusion_query_set: None,
             multiview_mask: None,
         });
@@ -295,8 +294,8 @@ impl GroundMaps {
             pass.draw(0..b.vertices, 0..b.count);
         }
         drop(pass);
-        if let Some(t) = &self.timer {
-            t.resolve(&mut encoder);
+        if let Some(t) = &mut self.timer {
+            t.resolve(spans, &mut encoder);
         }
         ctx.queue.submit([encoder.finish()]);
         if let Some(t) = &mut self.timer {

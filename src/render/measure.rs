@@ -9,6 +9,7 @@ use serde::{Serialize, Serializer};
 use super::btf::BtfStats;
 use super::knob::{KnobValue, KnobValues};
 use super::method::knobs_of;
+use super::timing::PassTimes;
 use super::{FrameDesc, FrameStats, GpuContext, Renderer};
 use crate::Result;
 
@@ -92,6 +93,8 @@ pub struct FrameMeasurement {
     /// Median CPU time of the timed frames' preparation (cull, LOD, billboard expansion,
     /// sort, shading factors, uploads), ms.
     pub prepare_ms: f64,
+    /// Each pass's median GPU time over the timed frames (empty without timestamps).
+    pub passes: PassTimes,
     /// The cost of a sun move, for the methods with sun-dependent state (`btf`).
     pub sun_update: Option<SunUpdate>,
 }
@@ -125,12 +128,14 @@ pub fn measure_frame_with(
     on_frame();
     let mut times = Vec::with_capacity(opts.frames as usize);
     let mut prepare = Vec::with_capacity(opts.frames as usize);
+    let mut passes = Vec::with_capacity(opts.frames as usize);
     for _ in 0..opts.frames.max(1) {
         let t0 = std::time::Instant::now();
         let (img, s) = renderer.render_image(ctx, frame, width, height, ss)?;
         let wall = t0.elapsed().as_secs_f64() * 1e3;
         times.push(s.gpu_ms.unwrap_or(wall));
         prepare.push(s.prepare_ms);
+        passes.push(s.passes);
         image = img;
         stats = s;
         on_frame();
@@ -147,6 +152,7 @@ pub fn measure_frame_with(
         image,
         frame_ms: times[times.len() / 2],
         prepare_ms: prepare[prepare.len() / 2],
+        passes: PassTimes::median(&passes),
         source: if stats.gpu_ms.is_some() {
             TimeSource::GpuTimestamps
         } else {
@@ -202,6 +208,10 @@ pub struct FrameReport {
     pub frames_timed: usize,
     /// Median CPU preparation time of the timed frames (ms).
     pub prepare_ms: f64,
+    /// Each pass's median GPU time (ms) in the order the passes ran: `[{name, ms}]`, empty
+    /// without timestamp queries. They add up to `frame_ms` but for the gaps between
+    /// passes (the ground maps, rebuilt only when the sun moves, are `sun_update_gpu_ms`).
+    pub passes: PassTimes,
     /// The frame's counts (trees, triangles, shadow casters and triangles, draw calls).
     #[serde(flatten, serialize_with = "frame_counts")]
     pub stats: FrameStats,
@@ -293,6 +303,7 @@ impl FrameReport {
             frame_ms_source: m.source,
             frames_timed: m.frames_timed,
             prepare_ms: m.prepare_ms,
+            passes: m.passes,
             stats: m.stats,
             adapter: ctx.adapter_name(),
             out: None,

@@ -5,6 +5,7 @@ use super::frame_bindings::FrameBindings;
 use super::pipelines::{self, ColorPipelines, Layouts};
 use super::self_shadow;
 use super::shadow::{CASCADES, Cascades};
+use super::timing::PassSpans;
 use super::uniforms::FrameUniforms;
 use super::world_gpu::{self, ALL_PARTS, TreeRun, WorldGpu};
 use super::{FrameStats, GpuContext};
@@ -100,19 +101,17 @@ impl MeshPasses {
         world.draw(pass, runs, Some(pipes), terrain, &ALL_PARTS);
     }
 
-    /// Draws the camera's trees (`runs`), whole, and the terrain when asked, in the main
-    /// pass.
+    /// Draws the camera's trees (`runs`), whole, in the main pass (after the core's
+    /// terrain).
     pub fn draw_main(
         pass: &mut wgpu::RenderPass<'_>,
         world: &WorldGpu,
         runs: &[TreeRun],
         pipes: &ColorPipelines,
-        terrain: bool,
         stats: &mut FrameStats,
     ) {
-        let (tris, trees, calls) =
-            world.draw(pass, runs, Some(pipes.meshes()), terrain, &ALL_PARTS);
-        stats.triangles = tris;
+        let (tris, trees, calls) = world.draw(pass, runs, Some(pipes.meshes()), false, &ALL_PARTS);
+        stats.triangles += tris;
         stats.trees_drawn = trees;
         stats.draw_calls += calls;
     }
@@ -137,8 +136,7 @@ pub(super) fn studio_cascades_key(
 
 /// The sun cascades' passes: each map cleared (even when off, so a stale map never shades a
 /// frame) and, when `casters` holds each cascade's tree runs, drawn; with `keep`, loaded
-/// as the last frame left them instead (nothing drawn). The first pass opens the frame's
-/// GPU timer when there is one.
+/// as the last frame left them instead (nothing drawn). Timed as one span, `cascades`.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn encode_cascades(
     encoder: &mut wgpu::CommandEncoder,
@@ -149,17 +147,12 @@ pub(super) fn encode_cascades(
     terrain: bool,
     keys: Option<&self_shadow::SelfShadow>,
     keep: bool,
-    queries: Option<&wgpu::QuerySet>,
+    spans: &PassSpans,
     stats: &mut FrameStats,
 ) {
+    let span = spans.open("cascades");
     for c in 0..CASCADES {
-        let ts = queries
-            .filter(|_| c == 0)
-            .map(|q| wgpu::RenderPassTimestampWrites {
-                query_set: q,
-                beginning_of_pass_write_index: Some(0),
-                end_of_pass_write_index: None,
-            });
+        let ts = spans.render_writes(span, c == 0, c + 1 == CASCADES);
         // The reference's cascades keep which tree is nearest the sun in each texel.
         let keyed = keys.and_then(|k| k.cascade_keys(c));
         let key_target = keyed.map(|(_, view)| wgpu::RenderPassColorAttachment {

@@ -50,7 +50,7 @@ use method::{Bake, DrawCx, Plan, PrepareCx, PrepareView, RenderMethod, SunWork};
 use pipelines::{ColorPipelines, Layouts};
 use shadow::{CascadeMaps, Cascades};
 use sky_visibility::SkyVisibility;
-use timing::GpuTimer;
+use timing::{GpuTimer, PassSpans};
 use uniforms::FrameUniforms;
 use world_gpu::WorldGpu;
 
@@ -227,6 +227,11 @@ impl Renderer {
     /// The newest GPU frame time measured without blocking (the viewer's readout).
     pub fn last_gpu_ms(&self) -> Option<f64> {
         self.timer.as_ref().and_then(|t| t.last_ms)
+    }
+
+    /// The newest frame's GPU time per pass, measured without blocking (the viewer's plot).
+    pub fn last_passes(&self) -> Option<timing::PassTimes> {
+        self.timer.as_ref().and_then(|t| t.last).map(|t| t.passes)
     }
 
     /// GPU time of the newest ground shadow maps' pass (the GPU side of a sun move), from
@@ -428,7 +433,10 @@ impl Renderer {
                 .and_then(|g| g.built_size()),
             ..Default::default()
         };
-        let queries = self.timer.as_mut().and_then(|t| t.begin()).cloned();
+        let spans = self
+            .timer
+            .as_mut()
+            .map_or_else(PassSpans::off, GpuTimer::begin);
         let self_shadow = self.self_shadow.as_ref().filter(|_| self_batches.is_some());
         let studio_key = plan
             .studio_casters
@@ -449,8 +457,10 @@ impl Renderer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
-        // The method's compute passes open the frame (and its timing) when it has any.
-        let compute_first = method.encode_compute(&self.bake, &mut encoder, queries.as_ref());
+        // Each pass is timed as a span of its own (see `timing`): the method's compute
+        // passes, the cascades, then the main pass split into the sky, the terrain and the
+        // method's draws where the adapter can time inside a pass.
+        method.encode_compute(&self.bake, &mut encoder, &spans);
         encode_cascades(
             &mut encoder,
             bindings,
@@ -460,13 +470,17 @@ impl Renderer {
             plan.terrain_casts,
             self_shadow,
             keep,
-            queries.as_ref().filter(|_| !compute_first),
+            &spans,
             &mut stats,
         );
-        // The reference's trees are drawn after the main pass, batch by batch, which then
-        // ends the frame's timing.
+        // The reference's trees are drawn after the main pass, batch by batch.
         let batches = self_batches.as_deref().unwrap_or(&[]);
         {
+            let main = spans.open(if studio || !spans.splits_passes() {
+                "main pass"
+            } else {
+                "sky"
+            });
             let mut pass = depth.color_pass(
                 &mut encoder,
                 "main",
@@ -477,7 +491,7 @@ impl Renderer {
                     wgpu::Color::BLACK
                 }),
                 !batches.is_empty(),
-                queries.as_ref().filter(|_| batches.is_empty()),
+                spans.render_writes(main, true, true),
             );
             pass.set_bind_group(0, &bindings.bind_group, &[]);
             if !studio {
@@ -486,12 +500,22 @@ impl Renderer {
                 stats.draw_calls += 1;
             }
             pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
+            if !studio {
+                // Instance 0 of every method's upload is the terrain's.
+                spans.mark(&mut pass, "terrain");
+                let (tris, _, calls) =
+                    self.world
+                        .draw(&mut pass, &[], Some(pipes.meshes()), true, &[]);
+                stats.triangles += tris;
+                stats.draw_calls += calls;
+            }
+            spans.mark(&mut pass, method.method().name());
             let cx = DrawCx {
                 world: &self.world,
                 pipes,
                 frame_group: &bindings.bind_group,
-                terrain: !studio,
                 trees_after: !batches.is_empty(),
+                spans: &spans,
             };
             method.draw(&self.bake, &mut pass, &cx, &mut stats);
         }
@@ -502,19 +526,22 @@ impl Renderer {
                 &bindings.bind_group,
                 (target, format, depth),
                 batches,
-                queries.as_ref(),
+                &spans,
                 &mut stats,
             )?;
         }
-        if let Some(t) = &self.timer {
-            t.resolve(&mut encoder);
+        if let Some(t) = &mut self.timer {
+            t.resolve(spans, &mut encoder);
         }
         ctx.queue.submit([encoder.finish()]);
         self.studio_cascades = studio_key;
 
         if let Some(t) = &mut self.timer {
             t.after_submit();
-            stats.gpu_ms = t.collect(ctx, measure_gpu).filter(|_| measure_gpu);
+            if let Some(timing) = t.collect(ctx, measure_gpu).filter(|_| measure_gpu) {
+                stats.gpu_ms = Some(timing.frame_ms);
+                stats.passes = timing.passes;
+            }
         }
         self.methods[index].finish(&self.bake, ctx, measure_gpu, &mut stats);
         if let Some(t) = self.ground.as_mut().and_then(|g| g.timer.as_mut()) {

@@ -27,6 +27,7 @@ use super::pipelines::{
     light_view_pipeline, mesh_pipeline,
 };
 use super::shadow::{CASCADES, Cascades, layered_target};
+use super::timing::PassSpans;
 use super::world_gpu::{TreeRun, WorldGpu};
 use super::{GpuContext, SHADOW_FORMAT, shaders};
 use crate::{Error, Result};
@@ -317,22 +318,29 @@ impl SelfShadow {
         batches(runs, self.layers)
     }
 
-    /// Draws the maps of `batch`'s trees, one layer each in order.
+    /// Draws the maps of `batch`'s trees, one layer each in order, timed as one span,
+    /// `tree sun maps`.
     pub fn encode_maps(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         world: &WorldGpu,
         batch: &[TreeRun],
+        spans: &PassSpans,
     ) -> u64 {
         let mut tris = 0;
-        let one_by_one = batch.iter().flat_map(|r| {
-            (0..r.count).map(move |i| TreeRun {
-                species: r.species,
-                first: r.first + i,
-                count: 1,
+        let one_by_one: Vec<TreeRun> = batch
+            .iter()
+            .flat_map(|r| {
+                (0..r.count).map(move |i| TreeRun {
+                    species: r.species,
+                    first: r.first + i,
+                    count: 1,
+                })
             })
-        });
-        for (run, view) in one_by_one.zip(&self.map_views) {
+            .collect();
+        let n = one_by_one.len().min(self.map_views.len());
+        let span = spans.open("tree sun maps");
+        for (i, (run, view)) in one_by_one.into_iter().zip(&self.map_views).enumerate() {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("per-tree sun map"),
                 color_attachments: &[],
@@ -344,7 +352,7 @@ impl SelfShadow {
                     }),
                     stencil_ops: None,
                 }),
-                timestamp_writes: None,
+                timestamp_writes: spans.render_writes(span, i == 0, i + 1 == n),
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
@@ -360,7 +368,7 @@ impl SelfShadow {
 
     /// Draws the reference's trees into `target` (of `format`, over `depth`, after the
     /// frame's main pass): each of `batches` (from [`Self::write_lights`]) its trees' maps,
-    /// then its trees; the last pass ends the frame's timing (`queries`).
+    /// then its trees, timed as `tree sun maps` and `reference trees` through `spans`.
     #[allow(clippy::too_many_arguments)]
     pub fn draw_trees(
         &self,
@@ -369,7 +377,7 @@ impl SelfShadow {
         frame_group: &wgpu::BindGroup,
         (target, format, depth): (&wgpu::TextureView, wgpu::TextureFormat, &DepthTarget),
         batches: &[Vec<TreeRun>],
-        queries: Option<&wgpu::QuerySet>,
+        spans: &PassSpans,
         stats: &mut FrameStats,
     ) -> Result<()> {
         let Some((trees, group)) = self.pipelines(format) else {
@@ -378,7 +386,7 @@ impl SelfShadow {
             ));
         };
         for (i, batch) in batches.iter().enumerate() {
-            stats.shadow_triangles += self.encode_maps(encoder, world, batch);
+            stats.shadow_triangles += self.encode_maps(encoder, world, batch, spans);
             let last = i + 1 == batches.len();
             let mut pass = depth.color_pass(
                 encoder,
@@ -386,7 +394,7 @@ impl SelfShadow {
                 target,
                 None,
                 !last,
-                queries.filter(|_| last),
+                spans.render_pass("reference trees"),
             );
             pass.set_bind_group(0, frame_group, &[]);
             pass.set_bind_group(1, &world.trees_bind_group, &[]);

@@ -330,7 +330,7 @@ impl super::Renderer {
             !studio,
             None,
             false,
-            None,
+            &super::timing::PassSpans::off(),
             &mut stats,
         );
         self.studio_cascades = None;

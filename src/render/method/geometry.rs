@@ -119,6 +119,7 @@ impl RenderMethod for Geometry {
             Some(r) if !cx.trees_after => &r[..],
             _ => &[],
         };
-        MeshPasses::draw_main(pass, cx.world, runs, cx.pipes, cx.terrain, stats);
+        cx.spans.rename("trees");
+        MeshPasses::draw_main(pass, cx.world, runs, cx.pipes, stats);
     }
 }

@@ -19,6 +19,7 @@ use crate::render::GpuContext;
 use crate::render::frame::{FrameDesc, FrameStats};
 use crate::render::pipelines::{ColorPipelines, Layouts};
 use crate::render::shadow::Cascades;
+use crate::render::timing::PassSpans;
 use crate::render::world_gpu::{TreeRun, WorldGpu};
 use crate::{Error, Result};
 
@@ -140,17 +141,19 @@ pub struct GroundCasters {
 }
 
 /// What the core lends a method to draw in the main pass (group 0 and the trees' group 1
-/// bound, the sky drawn).
+/// bound, the sky and the terrain drawn).
 pub struct DrawCx<'a> {
     pub world: &'a WorldGpu,
     pub pipes: &'a ColorPipelines,
     /// The frame's group 0, for a method that binds its own groups and must restore it.
     pub frame_group: &'a wgpu::BindGroup,
-    /// Draw the terrain (not in the studio).
-    pub terrain: bool,
     /// The reference draws its trees after the main pass, in batches: the main pass then
     /// draws the terrain only.
     pub trees_after: bool,
+    /// The frame's timed passes. The method's draws are timed under its name; to time its
+    /// parts apart, `spans.rename` names the first part and `spans.mark(pass, name)`
+    /// begins each next one.
+    pub spans: &'a PassSpans,
 }
 
 /// One way of drawing the forest. The renderer holds one of each ([`super::registry`]) and
@@ -210,15 +213,14 @@ pub trait RenderMethod {
         Ok(())
     }
 
-    /// Compute passes that open the frame, the first timed from `timestamp` when given;
-    /// false when there were none.
+    /// Compute passes that open the frame, each timed through `spans`
+    /// ([`PassSpans::compute_pass`] gives a named pass its timestamp writes).
     fn encode_compute(
         &self,
         _bake: &Bake,
         _encoder: &mut wgpu::CommandEncoder,
-        _timestamp: Option<&wgpu::QuerySet>,
-    ) -> bool {
-        false
+        _spans: &PassSpans,
+    ) {
     }
 
     /// The method's draws in the main pass, after the sky.

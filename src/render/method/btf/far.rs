@@ -39,7 +39,7 @@ use crate::Result;
 use crate::model::Level;
 use crate::model::mesh::Aabb;
 use crate::render::GpuContext;
-use crate::render::timing::MappedRead;
+use crate::render::timing::{MappedRead, PassSpans};
 use crate::render::world_gpu::TreeGpu;
 use crate::sphere::{DirectionRows, DirectionSet};
 
@@ -887,10 +887,10 @@ impl FarGpu {
         Ok(true)
     }
 
-    /// The frame's compute passes (timed from their start when `timestamp` is given):
-    /// build the far records, key the near ones, sort, gather, set the draw's count.
-    /// Nothing without a frame.
-    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, timestamp: Option<&wgpu::QuerySet>) {
+    /// The frame's compute pass (timed as `far trees` through `spans`): build the far
+    /// records, key the near ones, sort, gather, set the draw's count. Nothing without a
+    /// frame.
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, spans: &PassSpans) {
         let Some((keys, slots, expanded)) = self.frame else {
             return;
         };
@@ -898,11 +898,7 @@ impl FarGpu {
         encoder.clear_buffer(&self.keys, 0, Some(u64::from(keys) * 8));
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("btf far trees"),
-            timestamp_writes: timestamp.map(|q| wgpu::ComputePassTimestampWrites {
-                query_set: q,
-                beginning_of_pass_write_index: Some(0),
-                end_of_pass_write_index: None,
-            }),
+            timestamp_writes: spans.compute_pass("far trees"),
         });
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_bind_group(1, &self.step_bind_group, &[0]);

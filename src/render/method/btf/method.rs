@@ -16,6 +16,7 @@ use crate::render::method::interface::{
 use crate::render::method::kind::Method;
 use crate::render::pipelines::Layouts;
 use crate::render::shadow::Cascades;
+use crate::render::timing::PassSpans;
 use crate::render::world_gpu::{TreeRun, WorldGpu};
 
 /// `btf` (or `hybrid`): its frame, the geometry runs it draws and its pipeline.
@@ -168,9 +169,7 @@ pub(crate) fn draw_frame(
     stats: &mut FrameStats,
 ) {
     if let (Some(bf), Some(b)) = (frame, &bake.btf) {
-        b.draw_main(
-            pass, cx.world, runs, cx.pipes, pipeline, bf, cx.terrain, stats,
-        );
+        b.draw_main(pass, cx, runs, pipeline, bf, stats);
     }
 }
 
@@ -258,15 +257,11 @@ impl RenderMethod for BtfMethod {
         Ok(())
     }
 
-    fn encode_compute(
-        &self,
-        bake: &Bake,
-        encoder: &mut wgpu::CommandEncoder,
-        timestamp: Option<&wgpu::QuerySet>,
-    ) -> bool {
-        match (&self.frame, &bake.btf) {
-            (Some(bf), Some(b)) if bf.far => b.encode_far(encoder, timestamp),
-            _ => false,
+    fn encode_compute(&self, bake: &Bake, encoder: &mut wgpu::CommandEncoder, spans: &PassSpans) {
+        if let (Some(bf), Some(b)) = (&self.frame, &bake.btf)
+            && bf.far
+        {
+            b.encode_far(encoder, spans);
         }
     }
 

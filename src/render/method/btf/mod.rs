@@ -30,7 +30,8 @@ use crate::model::World;
 use crate::render::GpuContext;
 use crate::render::camera::Frustum;
 use crate::render::frame::FrameStats;
-use crate::render::pipelines::ColorPipelines;
+use crate::render::method::interface::DrawCx;
+use crate::render::timing::PassSpans;
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
 use crate::{Error, Result};
 
@@ -376,19 +377,10 @@ impl BtfAssets {
         stats.triangles += 2 * u64::from(n + near);
     }
 
-    /// The far trees' compute passes of the frame last prepared (timed from their start
-    /// when `timestamp` is given); false when there were none.
-    pub fn encode_far(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        timestamp: Option<&wgpu::QuerySet>,
-    ) -> bool {
-        match self.far.as_ref().and_then(Option::as_ref) {
-            Some(f) if f.has_frame() => {
-                f.encode(encoder, timestamp);
-                true
-            }
-            _ => false,
+    /// The far trees' compute passes of the frame last prepared, timed through `spans`.
+    pub fn encode_far(&self, encoder: &mut wgpu::CommandEncoder, spans: &PassSpans) {
+        if let Some(f) = self.far.as_ref().and_then(Option::as_ref) {
+            f.encode(encoder, spans);
         }
     }
 
@@ -440,19 +432,21 @@ impl BtfAssets {
     pub(crate) fn draw_main(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
-        world: &WorldGpu,
+        cx: &DrawCx<'_>,
         runs: &[Vec<TreeRun>],
-        pipes: &ColorPipelines,
         pipeline: Option<&wgpu::RenderPipeline>,
         bf: &BtfFrame,
-        terrain: bool,
         stats: &mut FrameStats,
     ) {
+        let (world, pipes) = (cx.world, cx.pipes);
+        // The trees drawn as meshes (trunks and limbs, `hybrid`'s whole trees), then the
+        // billboards, timed apart.
+        cx.spans.rename("near trees");
         let (t0, _, c0) = world.draw(
             pass,
             &runs[0],
             Some(pipes.meshes()),
-            terrain,
+            false,
             &[PartKind::Trunk],
         );
         let (t1, _, c1) = world.draw(
@@ -471,9 +465,10 @@ impl BtfAssets {
         let (t2a, _, c2a) = hybrid(2, &[PartKind::Trunk, PartKind::Limbs]);
         let (t2b, _, c2b) = hybrid(3, &[PartKind::Twigs]);
         let (t2, c2) = (t2a + t2b, c2a + c2b);
-        stats.triangles = t0 + t1 + t2 + 2 * u64::from(bf.billboards);
+        stats.triangles += t0 + t1 + t2 + 2 * u64::from(bf.billboards);
         stats.trees_drawn = bf.stats.trees_per_level.iter().sum::<u32>() + bf.stats.geometry_trees;
         stats.draw_calls += c0 + c1 + c2;
+        cx.spans.mark(pass, "billboards");
         // Sorted on the GPU with the far trees' billboards, or on the CPU.
         if let Some(pipeline) = pipeline
             && bf.far

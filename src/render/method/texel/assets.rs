@@ -13,6 +13,7 @@ use crate::render::GpuContext;
 use crate::render::frame::FrameStats;
 use crate::render::method::btf::BtfScene;
 use crate::render::method::view::PrepareView;
+use crate::render::timing::PassSpans;
 use crate::render::world_gpu::WorldGpu;
 use crate::slices::{self};
 use crate::{Error, Result};
@@ -523,9 +524,11 @@ impl TexelAssets {
         pass: &mut wgpu::RenderPass<'_>,
         pipelines: &TexelPipelines,
         frame: &TexelFrame,
+        spans: &PassSpans,
         stats: &mut FrameStats,
     ) {
         let n = frame.records.len() as u32;
+        spans.rename("texel tiles");
         if let (Some(t), Some(p), false) = (&self.tiles, &pipelines.tile, frame.tiles.is_empty()) {
             // The far tiles first: everything else is nearer.
             let count = frame.tiles.len() as u32;
@@ -533,6 +536,7 @@ impl TexelAssets {
             stats.draw_calls += 1;
             stats.triangles += u64::from(count) * 12;
         }
+        spans.mark(pass, "texels");
         if frame.stats.texel_mode == TexelMode::Polygons {
             if let (Some(p), Some(pipe)) = (&self.polygons, &pipelines.polygon) {
                 let vertices = frame.polygons.len() as u32;

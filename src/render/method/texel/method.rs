@@ -7,20 +7,18 @@ use std::time::Instant;
 use super::{TexelFrame, TexelPipelines};
 use crate::render::GpuContext;
 use crate::render::frame::FrameStats;
-use crate::render::meshes::MeshPasses;
 use crate::render::method::interface::{
     Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork,
 };
 use crate::render::method::kind::Method;
 use crate::render::pipelines::Layouts;
-use crate::render::world_gpu::{TreeRun, WorldGpu};
+use crate::render::world_gpu::WorldGpu;
 use crate::{Error, Result};
 
-/// `texel`: its frame, the terrain's run and its pipelines.
+/// `texel`: its frame and its pipelines.
 #[derive(Default)]
 pub struct TexelMethod {
     frame: Option<TexelFrame>,
-    runs: Vec<Vec<TreeRun>>,
     pipelines: Option<TexelPipelines>,
 }
 
@@ -67,8 +65,7 @@ impl RenderMethod for TexelMethod {
         };
         let tf = t.prepare_frame(cx.ctx, cx.world, &cx.visible, &cx.view, &frame.texel, vcm)?;
         // No tree parts as geometry; the list still holds the terrain's instance.
-        self.runs = cx
-            .world
+        cx.world
             .upload_lists(cx.ctx, &[vec![Vec::new(); cx.world.species.len()]]);
         self.frame = Some(tf);
         Ok(Plan::without_cascades(sun))
@@ -115,15 +112,12 @@ impl RenderMethod for TexelMethod {
         cx: &DrawCx<'_>,
         stats: &mut FrameStats,
     ) {
-        // The terrain, then the texels over it.
-        let terrain = self.runs.first().map_or(&[][..], |r| &r[..]);
-        MeshPasses::draw_main(pass, cx.world, terrain, cx.pipes, cx.terrain, stats);
         let Some(tf) = &self.frame else {
             return;
         };
         if let (Some(t), Some(p)) = (&bake.texel, &self.pipelines) {
             pass.set_bind_group(0, cx.frame_group, &[]);
-            t.draw(pass, p, tf, stats);
+            t.draw(pass, p, tf, cx.spans, stats);
         }
         stats.texel = Some(tf.stats);
     }

@@ -79,7 +79,7 @@ fn gpu_far_records(
     let mut encoder = ctx
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-    gpu.encode(&mut encoder, None);
+    gpu.encode(&mut encoder, &crate::render::timing::PassSpans::off());
     ctx.queue.submit([encoder.finish()]);
     gpu.read_sorted(&ctx).unwrap()
 }
