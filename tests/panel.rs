@@ -196,7 +196,12 @@ fn the_frame_time_plot_shows_cpu_and_gpu_lines_and_the_bench_button_opens_the_wi
     };
     let mut with_gpu = PanelStats::default();
     for i in 0..400 {
-        with_gpu.history.push(16.0 + f64::from(i % 7), Some(5.0));
+        let mut passes = canopy::render::timing::PassTimes::default();
+        passes.add("terrain", 1.0);
+        passes.add("billboards", 4.0);
+        with_gpu
+            .history
+            .push_with_passes(16.0 + f64::from(i % 7), Some(5.0), passes);
     }
     let mut harness = tall().build_ui_state(
         move |ui, s: &mut State| {
@@ -211,6 +216,7 @@ fn the_frame_time_plot_shows_cpu_and_gpu_lines_and_the_bench_button_opens_the_wi
     // The legend's entries name the plot's lines.
     harness.get_by_label("CPU frame");
     harness.get_by_label("GPU frame");
+    harness.get_by_label("most of the GPU frame: billboards (80 %)");
     assert!(!harness.state().actions.open_bench);
     harness.get_by_label("Bench results…").click();
     harness.run();
@@ -236,6 +242,11 @@ fn the_frame_time_plot_shows_cpu_and_gpu_lines_and_the_bench_button_opens_the_wi
     });
     harness.run();
     harness.get_by_label("CPU frame");
+    assert!(
+        harness
+            .query_by_label_contains("most of the GPU frame")
+            .is_none()
+    );
     assert!(
         harness.query_by_label("GPU frame").is_none(),
         "no GPU times, no GPU line"

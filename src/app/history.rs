@@ -75,6 +75,34 @@ impl FrameTimeHistory {
         names
     }
 
+    /// The pass that took the largest share of the GPU time over the frames kept that timed
+    /// their passes, with that share (0..1): what to lighten first.
+    pub fn dominant_pass(&self) -> Option<(&'static str, f64)> {
+        let names = self.pass_names();
+        let total: f64 = self
+            .frames
+            .iter()
+            .flat_map(|f| f.passes.iter())
+            .map(|p| p.ms)
+            .sum();
+        if !(total > 0.0) {
+            return None;
+        }
+        names
+            .into_iter()
+            .map(|name| {
+                let ms: f64 = self
+                    .frames
+                    .iter()
+                    .flat_map(|f| f.passes.iter())
+                    .filter(|p| p.name == name)
+                    .map(|p| p.ms)
+                    .sum();
+                (name, ms / total)
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+    }
+
     /// The passes stacked, in the order of [`Self::pass_names`]: per pass, the frames that
     /// timed passes as (frames ago, bottom, top) of its band, ms.
     pub fn pass_bands(&self) -> Vec<(&'static str, Vec<[f64; 3]>)> {
@@ -266,5 +294,10 @@ mod tests {
         assert_eq!(bands[1].1, vec![[-2.0, 1.0, 5.0], [0.0, 1.5, 1.5]]);
         assert_eq!(bands[2].1, vec![[-2.0, 5.0, 5.0], [0.0, 1.5, 3.5]]);
         assert!(FrameTimeHistory::default().pass_bands().is_empty());
+        // trees: 4 of 1 + 4 + 2 + 1.5 = 8.5 ms.
+        let (name, share) = h.dominant_pass().unwrap();
+        assert_eq!(name, "trees");
+        assert!((share - 4.0 / 8.5).abs() < 1e-9, "{share}");
+        assert_eq!(FrameTimeHistory::default().dominant_pass(), None);
     }
 }

@@ -97,6 +97,15 @@ pub fn controls(
         ui.end_row();
     });
     super::history::plot(ui, &stats.history);
+    if let Some((name, share)) = stats.history.dominant_pass() {
+        ui.label(format!(
+            "most of the GPU frame: {name} ({:.0} %)",
+            100.0 * share
+        ))
+        .on_hover_text(
+            "the pass that took the largest share of the GPU time over the plotted frames",
+        );
+    }
     ui.small(&stats.adapter);
     ui.separator();
 

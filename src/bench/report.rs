@@ -319,7 +319,7 @@ mod tests {
         let config = |m: Method| Config {
             label: m.name().into(),
             method: m,
-            knobs: Knobs::default(),
+            knobs: Default::default(),
         };
         let row = |config: usize, passes: &[(&'static str, f64)]| {
             let mut p = PassTimes::default();
