@@ -37,6 +37,7 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
     var color = vec3<f32>(0.0);
     var alpha = 0.0;
     var shadow = 0.0;
+    var reads = 0u;
     for (var k = 0; k < 3; k++) {
         let wv = b.view_weight[k];
         if wv <= 0.0 || pts[k].w == 0.0 {
@@ -49,6 +50,7 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
         // The light the ground sends up, as the geometry's ambient has it: never hidden, so
         // no cube map darkens it.
         let gnd = btf_sample(base + b.view_count * (lights + 1u) + v, t.uv, t.gx, t.gy);
+        reads += 2u;
         var c = amb.rgb * frame.sky_ambient * f.y + gnd.rgb * frame.ground_ambient;
         var direct = vec3<f32>(0.0);
         for (var j = 0; j < 3; j++) {
@@ -59,12 +61,14 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
             let layer = base + v * lights + b.light_index[j];
             let d = btf_sample(layer, t.uv, t.gx, t.gy);
             direct += wl * d.rgb;
+            reads += 1u;
         }
         c += direct * frame.sun_color * f.x;
         color += wv * c;
         alpha += wv * amb.a;
         shadow += wv * amb.a * f.x;
     }
+    count_fragment(in.clip, reads);
     if b.mode == MODE_SUN_FACTOR {
         color = vec3<f32>(shadow);
     } else if b.mode == MODE_TINT {

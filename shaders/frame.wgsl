@@ -58,9 +58,43 @@ struct Frame {
     ground_texel_world: f32,
     // Fraction of the ground textures' side in use (less while the sun is being dragged).
     ground_uv_scale: f32,
+    // The overdraw view (src/render/overdraw.rs): x = 0 off, 1 on; y, z = the target's width
+    // and height (the counters' row length and rows); w = what the heat map shows (0:
+    // fragments, 1: image reads).
+    overdraw: vec4<u32>,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;
+
+// Two counters per pixel of the target, row by row: fragments shaded there, and the images
+// they read. Written only while the overdraw view is on.
+@group(0) @binding(8) var<storage, read_write> overdraw_counts: array<atomic<u32>>;
+
+// Counts a colour pass's fragment at `pixel` (its @builtin(position)) with the `reads`
+// images it samples, while the overdraw view is on. Call it once per fragment, before any
+// `discard` (a fragment counts whether it is kept or not).
+fn count_fragment(pixel: vec4<f32>, reads: u32) {
+    let at = vec2<u32>(pixel.xy);
+    if frame.overdraw.x != 0u && at.x < frame.overdraw.y && at.y < frame.overdraw.z {
+        let i = 2u * (at.y * frame.overdraw.y + at.x);
+        atomicAdd(&overdraw_counts[i], 1u);
+        atomicAdd(&overdraw_counts[i + 1u], reads);
+    }
+}
+
+// Adds `reads` more image reads at `pixel` (a fragment counted already, whose reads are
+// known only at its end).
+fn count_reads(pixel: vec4<f32>, reads: u32) {
+    let at = vec2<u32>(pixel.xy);
+    if frame.overdraw.x != 0u && at.x < frame.overdraw.y && at.y < frame.overdraw.z {
+        atomicAdd(&overdraw_counts[2u * (at.y * frame.overdraw.y + at.x) + 1u], reads);
+    }
+}
+
+// The number of the 3 light weights `w` above zero (the light images a fragment reads).
+fn lights_read(w: vec3<f32>) -> u32 {
+    return u32(w.x > 0.0) + u32(w.y > 0.0) + u32(w.z > 0.0);
+}
 
 // Texture coordinates of a point at `ndc` (x right, y up) in a map seen by the same view.
 fn ndc_to_uv(ndc: vec2<f32>) -> vec2<f32> {

@@ -245,6 +245,7 @@ fn lit_by(in: VertexOut, n: vec3<f32>, vis: f32) -> vec3<f32> {
 
 @fragment
 fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    count_fragment(in.clip, 0u);
     if frame.pixel_classes != 0u {
         return pixel_class(in);
     }
@@ -272,6 +273,7 @@ fn lit_and_fogged(in: VertexOut, front: bool, own_cascades: bool) -> vec4<f32> {
 // only the pixels under their opacity while they fade in.
 @fragment
 fn fs_faded(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    count_fragment(in.clip, 0u);
     if dither_threshold(in.clip.xy) >= in.opacity {
         discard;
     }
@@ -332,6 +334,7 @@ fn fs_voxel(in: VertexOut, @builtin(front_facing) front: bool) {
 
 @fragment
 fn fs_reference(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    count_fragment(in.clip, 0u);
     if frame.pixel_classes != 0u {
         return pixel_class(in);
     }

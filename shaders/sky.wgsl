@@ -18,6 +18,7 @@ fn vs_sky(@builtin(vertex_index) i: u32) -> SkyOut {
 
 @fragment
 fn fs_sky(in: SkyOut) -> @location(0) vec4<f32> {
+    count_fragment(in.clip, 0u);
     if frame.pixel_classes != 0u {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }

@@ -111,6 +111,7 @@ fn sample_volume(t: Texel, uvw: vec3<f32>, volume: u32) -> vec4<f32> {
 @fragment
 fn fs_texel(in: TexelOut) -> @location(0) vec4<f32> {
     let t = texels[in.instance];
+    count_fragment(in.clip, 0u);
     let eye = (t.world_to_object * vec4<f32>(frame.camera_pos, 1.0)).xyz;
     let through = (t.world_to_object * vec4<f32>(in.world, 1.0)).xyz;
     let dir = normalize(through - eye);
@@ -138,13 +139,16 @@ fn fs_texel(in: TexelOut) -> @location(0) vec4<f32> {
     let half = 0.5 / (t.box_size / t.voxel);
     var color = vec3<f32>(0.0);
     var alpha = 0.0;
+    var reads = 0u;
     for (var k = 0.0; k < steps; k += 1.0) {
         let p = eye + dir * (first + k * dt);
         let uvw = clamp((p - t.box_min) * inv_size, half, vec3<f32>(1.0) - half);
         let sky = sample_volume(t, uvw, t.lights);
+        reads += 1u;
         if sky.a < 0.002 {
             continue;
         }
+        reads += lights_read(t.light_weight);
         var direct = vec3<f32>(0.0);
         for (var j = 0; j < 3; j++) {
             let w = t.light_weight[j];
@@ -163,6 +167,7 @@ fn fs_texel(in: TexelOut) -> @location(0) vec4<f32> {
             break;
         }
     }
+    count_reads(in.clip, reads);
     if alpha <= 0.0 {
         discard;
     }
@@ -299,6 +304,7 @@ fn fs_stack(in: StackOut) -> @location(0) vec4<f32> {
     let t = texels[in.texel];
     let s = stacks[in.texel];
     let sky = stack_sample(s, t.lights, in.slice, in.uv, t.lod);
+    count_fragment(in.clip, 1u + select(0u, lights_read(t.light_weight), sky.a >= 0.002));
     if sky.a < 0.002 {
         discard;
     }
@@ -376,6 +382,7 @@ fn sample_tile(t: Tile, uvw: vec3<f32>, volume: u32) -> vec4<f32> {
 @fragment
 fn fs_tile(in: TexelOut) -> @location(0) vec4<f32> {
     let t = tiles[in.instance];
+    count_fragment(in.clip, 0u);
     let eye = frame.camera_pos;
     let dir = normalize(in.world - eye);
     let inv = 1.0 / select(dir, vec3<f32>(1e-8), abs(dir) < vec3<f32>(1e-8));
@@ -397,6 +404,7 @@ fn fs_tile(in: TexelOut) -> @location(0) vec4<f32> {
     let half = 0.5 / cells;
     var color = vec3<f32>(0.0);
     var alpha = 0.0;
+    var reads = 0u;
     for (var k = 0.0; k < steps; k += 1.0) {
         let p = eye + dir * (first + k * dt);
         let u = (p.x - t.origin.x) / t.size;
@@ -409,9 +417,11 @@ fn fs_tile(in: TexelOut) -> @location(0) vec4<f32> {
         }
         let at = clamp(uvw, half, vec3<f32>(1.0) - half);
         let sky = sample_tile(t, at, t.lights);
+        reads += 1u;
         if sky.a < 0.002 {
             continue;
         }
+        reads += lights_read(t.light_weight);
         var direct = vec3<f32>(0.0);
         for (var j = 0; j < 3; j++) {
             let wj = t.light_weight[j];
@@ -427,6 +437,7 @@ fn fs_tile(in: TexelOut) -> @location(0) vec4<f32> {
             break;
         }
     }
+    count_reads(in.clip, reads);
     if alpha <= 0.0 {
         discard;
     }
@@ -462,6 +473,7 @@ fn fs_poly(in: TexelOut) -> @location(0) vec4<f32> {
     let half = 0.5 / (t.box_size / t.voxel);
     let uvw = clamp((p - t.box_min) / t.box_size, half, vec3<f32>(1.0) - half);
     let sky = sample_volume(t, uvw, t.lights);
+    count_fragment(in.clip, 1u + select(0u, lights_read(t.light_weight), sky.a >= 0.002));
     if sky.a < 0.002 {
         discard;
     }

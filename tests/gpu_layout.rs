@@ -93,6 +93,7 @@ fn frame_uniforms_match_frame_wgsl() {
         terrain_depth_on,
         ground_texel_world,
         ground_uv_scale,
+        overdraw,
     });
     // Every module sees the same block; one is enough to lay it out.
     check(

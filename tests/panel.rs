@@ -150,6 +150,14 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
     harness.get_by_label("show slice count").click();
     harness.run();
     assert!(harness.state().frame.texel.show_slices);
+    // The overdraw view is every method's.
+    assert_eq!(harness.state().frame.overdraw, None);
+    harness.get_by_label("reads").click();
+    harness.run();
+    assert_eq!(
+        harness.state().frame.overdraw,
+        Some(canopy::render::overdraw::OverdrawView::Reads)
+    );
 }
 
 #[test]

@@ -222,3 +222,108 @@ fn the_trees_cost_shows_in_their_own_span() {
         d("trees")
     );
 }
+
+/// The overdraw view's means of `frame` (after a warm-up frame), and its image.
+fn overdraw(
+    ctx: &GpuContext,
+    r: &mut Renderer,
+    frame: &FrameDesc,
+) -> (canopy::render::overdraw::OverdrawMeans, image::RgbaImage) {
+    r.render_image(ctx, frame, W, H, 1).unwrap();
+    let (img, stats) = r.render_image(ctx, frame, W, H, 1).unwrap();
+    let m = stats
+        .overdraw
+        .expect("a measured frame with the view on has its means");
+    println!("{m:?}");
+    (m, img)
+}
+
+#[test]
+fn the_overdraw_view_counts_a_known_stack_of_draws() {
+    use canopy::render::Camera;
+    use canopy::render::overdraw::OverdrawView;
+    use glam::Vec3;
+    let ctx = gpu();
+    let scene = scene();
+    let world = scene.build_world().unwrap();
+    let mut r = renderer(&ctx, &world);
+    let base = FrameDesc {
+        overdraw: Some(OverdrawView::Fragments),
+        ..FrameDesc::from_scene(&scene)
+    };
+    // Straight up: the sky's full-screen triangle alone, one fragment a pixel, no reads.
+    let up = FrameDesc {
+        camera: Camera::look_at(
+            Vec3::new(25.0, 5.0, 25.0),
+            Vec3::new(25.0, 100.0, 25.5),
+            60.0,
+        ),
+        ..base
+    };
+    let (m, img) = overdraw(&ctx, &mut r, &up);
+    assert_eq!((m.fragments_per_pixel, m.reads_per_pixel), (1.0, 0.0));
+    // Drawn as a heat map: one colour above the legend, which sits at the bottom.
+    let sky = *img.get_pixel(W - 1, 0);
+    assert!(
+        img.enumerate_pixels()
+            .filter(|(_, y, _)| *y < H / 2)
+            .all(|(_, _, p)| *p == sky)
+    );
+    assert!(sky[2] > 150 && sky[0] < 100, "the count 1 is blue: {sky:?}");
+    assert_ne!(*img.get_pixel(3, H - 3), sky, "the legend");
+    let (plain, _) = r
+        .render_image(
+            &ctx,
+            &FrameDesc {
+                overdraw: None,
+                ..up
+            },
+            W,
+            H,
+            1,
+        )
+        .unwrap();
+    assert_ne!(
+        *plain.get_pixel(W - 1, 0),
+        sky,
+        "the view replaces the picture"
+    );
+    // Straight down at the flat ground beside the tree, trees off: sky and terrain, two
+    // fragments on every pixel.
+    let down = FrameDesc {
+        camera: Camera::look_at(
+            Vec3::new(25.0, 10.0, 25.0),
+            Vec3::new(25.0, 0.0, 25.01),
+            60.0,
+        ),
+        trees: false,
+        ..base
+    };
+    let (m, _) = overdraw(&ctx, &mut r, &down);
+    assert_eq!((m.fragments_per_pixel, m.reads_per_pixel), (2.0, 0.0));
+    // The tree as btf billboards: what it adds to the trees-off frame are its billboards'
+    // fragments, each reading 3 views x (its lights + the sky- and ground-lit images).
+    let side = FrameDesc {
+        method: Method::Btf,
+        ..base
+    };
+    let (bare, _) = overdraw(
+        &ctx,
+        &mut r,
+        &FrameDesc {
+            trees: false,
+            ..side
+        },
+    );
+    let (with, _) = overdraw(&ctx, &mut r, &side);
+    let fragments = with.fragments_per_pixel - bare.fragments_per_pixel;
+    assert!(
+        fragments > 0.05,
+        "the tree covers some of the view: {fragments}"
+    );
+    let per = with.reads_per_pixel / fragments;
+    assert!(
+        (9.0..=15.0).contains(&per),
+        "{per} reads a billboard fragment"
+    );
+}

@@ -366,6 +366,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         reference: Some(Reference::default()),
         render_scale: Default::default(),
         pixel_classes: false,
+        overdraw: None,
     }
 }
 

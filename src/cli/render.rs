@@ -7,6 +7,12 @@ use anyhow::Context as _;
 use glam::Vec3;
 
 use super::args::{adapter, load_scene, parse_size, parse_sun, parse_vec3};
+
+/// `--show-overdraw`'s value.
+fn parse_overdraw(s: &str) -> Result<crate::render::overdraw::OverdrawView, String> {
+    crate::render::overdraw::OverdrawView::parse(s)
+        .ok_or_else(|| format!("`{s}`: give fragments or reads"))
+}
 use crate::progress;
 use crate::render::measure::{self, FrameReport, MeasureOptions};
 use crate::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
@@ -64,6 +70,11 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = crate::render::self_shadow::SELF_MAP_SIZE,
           value_parser = clap::value_parser!(u32).range(0..=8192), requires = "reference")]
     self_map: u32,
+    /// Draw the overdraw view instead of the picture: per pixel, the fragments shaded
+    /// (fragments) or the images they read (reads), as a heat map with its scale; the JSON
+    /// gets fragments_per_pixel and reads_per_pixel.
+    #[arg(long, value_parser = parse_overdraw)]
+    show_overdraw: Option<crate::render::overdraw::OverdrawView>,
     #[command(flatten)]
     knobs: super::knobs::KnobArgs,
     /// Prefer the CPU (software) adapter.
@@ -82,6 +93,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     frame.method = method;
     frame.shadows.map_size = args.shadow_map;
     args.knobs.apply_to(&mut frame);
+    frame.overdraw = args.show_overdraw;
     let ignored = args.knobs.ignored_by(method);
     if !ignored.is_empty() {
         eprintln!(

@@ -152,6 +152,9 @@ pub struct FrameDesc {
     /// red, trees nearer than [`NEAR_TREE_M`] green, farther ones blue), so that an error
     /// map can be split by what each pixel shows.
     pub pixel_classes: bool,
+    /// Draw the overdraw view over the frame instead of its picture: fragments shaded, or
+    /// images read, per pixel ([`super::overdraw`]); `None`: the picture.
+    pub overdraw: Option<super::overdraw::OverdrawView>,
 }
 
 /// Where the pixel classes' near trees end (m).
@@ -194,6 +197,7 @@ impl FrameDesc {
             reference: None,
             render_scale: Default::default(),
             pixel_classes: false,
+            overdraw: None,
         }
     }
 }
@@ -218,6 +222,9 @@ pub struct FrameStats {
     /// The same frame's GPU time per pass, in the order they ran (empty where `gpu_ms` is
     /// None); they add up to `gpu_ms` but for the gaps between passes.
     pub passes: crate::render::timing::PassTimes,
+    /// With the overdraw view on, in a measured frame: fragments shaded and images read
+    /// per pixel, averaged over the image.
+    pub overdraw: Option<super::overdraw::OverdrawMeans>,
     /// CPU time of culling and the method's prepare step (levels, expansion, sorting,
     /// shading factors, instance lists), in ms; sun-dependent work is not included.
     pub prepare_ms: f64,

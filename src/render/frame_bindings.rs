@@ -17,6 +17,8 @@ pub struct FrameBindings {
     pub ground_maps: bool,
     /// It binds the sky visibility (not its placeholder).
     pub sky_volume: bool,
+    /// The pixels of the overdraw counters it binds.
+    pub overdraw_pixels: u64,
 }
 
 /// The sky visibility group 0 binds: (3D texture, placement uniforms, not the placeholder).
@@ -34,6 +36,7 @@ impl FrameBindings {
         samplers: (&wgpu::Sampler, &wgpu::Sampler),
         ground: &GroundTextures,
         sky: SkyBinding<'_>,
+        overdraw: &super::overdraw::OverdrawCounts,
     ) -> Self {
         let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("frame"),
@@ -71,6 +74,10 @@ impl FrameBindings {
                     binding: 7,
                     resource: sky.1.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 8,
+                    resource: overdraw.buffer().as_entire_binding(),
+                },
             ],
         });
         Self {
@@ -78,6 +85,7 @@ impl FrameBindings {
             bind_group,
             ground_maps: !ground.is_placeholder(),
             sky_volume: sky.2,
+            overdraw_pixels: overdraw.pixels(),
         }
     }
 }

@@ -228,6 +228,9 @@ pub struct FrameReport {
     pub texel: Option<crate::render::method::texel::TexelStats>,
     /// Every knob of the method, by name ([`crate::render::method::knobs_of`]).
     pub knobs: std::collections::BTreeMap<&'static str, KnobValue>,
+    /// With the overdraw view on: `fragments_per_pixel` and `reads_per_pixel`.
+    #[serde(flatten)]
+    pub overdraw: Option<super::overdraw::OverdrawMeans>,
     /// The frame was the reference (`geometry` with sky visibility and whole-scene sun
     /// shadows).
     pub reference: bool,
@@ -310,6 +313,7 @@ impl FrameReport {
             btf,
             texel: m.stats.texel,
             knobs: KnobValues::read(knobs_of(frame.method), frame).to_map(),
+            overdraw: m.stats.overdraw,
             reference: reference.is_some(),
             sun_map_size: reference.map(|r| r.sun_map_size.max(frame.shadows.map_size)),
             self_map_size: reference.map(|r| r.self_map_size),

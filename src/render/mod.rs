@@ -19,6 +19,7 @@ pub mod knob;
 pub mod measure;
 mod meshes;
 pub mod method;
+pub mod overdraw;
 mod pipelines;
 mod reference;
 pub mod scale;
@@ -92,6 +93,8 @@ pub struct Renderer {
     /// The reference's sky visibility, once [`Self::prepare_reference`] computed it.
     sky_vis: Option<SkyVisibility>,
     sky_placeholder: SkyVisibility,
+    /// The overdraw view's counters (a one-pixel placeholder until the view is first on).
+    overdraw: overdraw::OverdrawCounts,
     /// The texel bake's voxelisation pipeline, once asked for.
     voxel_pipeline: Option<voxelize::VoxelPipeline>,
     /// The reference's per-tree sun maps, once a reference frame used them.
@@ -133,6 +136,7 @@ impl Renderer {
             ground_placeholder: GroundTextures::placeholder(ctx)?,
             sky_vis: None,
             sky_placeholder: SkyVisibility::placeholder(ctx)?,
+            overdraw: overdraw::OverdrawCounts::new(ctx, 1)?,
             ground_sampler: ground::ground_sampler(ctx),
             ground: None,
             layouts,
@@ -254,6 +258,7 @@ impl Renderer {
             b.cascades.size == size
                 && b.ground_maps == self.ground.is_some()
                 && b.sky_volume == self.sky_vis.is_some()
+                && b.overdraw_pixels == self.overdraw.pixels()
         }) {
             return Ok(());
         }
@@ -281,6 +286,7 @@ impl Renderer {
             (&self.shadow_sampler, &self.ground_sampler),
             ground,
             sky,
+            &self.overdraw,
         ));
         Ok(())
     }
@@ -358,6 +364,11 @@ impl Renderer {
             self.ground = Some(GroundMaps::new(ctx, &self.layouts)?);
         }
         self.ensure_depth(ctx, width, height)?;
+        let overdraw_view = frame.overdraw.filter(|_| !studio);
+        let pixels = u64::from(width) * u64::from(height);
+        if overdraw_view.is_some() && self.overdraw.pixels() < pixels {
+            self.overdraw = overdraw::OverdrawCounts::new(ctx, pixels)?;
+        }
         self.ensure_bindings(ctx, frame.shadows.map_size)?;
         if !self.color_pipelines.contains_key(&format) {
             let p = ctx.checked("building the render pipelines", || {
@@ -403,6 +414,9 @@ impl Renderer {
         let mut uniforms =
             self.frame_uniforms_for(frame, aspect, &plan.cascades, plan.shadows_on, sky_hidden);
         uniforms.hybrid_cascades = u32::from(plan.geometry_tree_cascades && plan.shadows_on);
+        if let Some(view) = overdraw_view {
+            uniforms.overdraw = [1, width, height, view.index()];
+        }
         let mut sun = plan.sun;
         if ground_on {
             self.update_ground(
@@ -460,6 +474,9 @@ impl Renderer {
         // Each pass is timed as a span of its own (see `timing`): the method's compute
         // passes, the cascades, then the main pass split into the sky, the terrain and the
         // method's draws where the adapter can time inside a pass.
+        if overdraw_view.is_some() {
+            self.overdraw.clear(&mut encoder, width, height);
+        }
         method.encode_compute(&self.bake, &mut encoder, &spans);
         encode_cascades(
             &mut encoder,
@@ -530,6 +547,28 @@ impl Renderer {
                 &mut stats,
             )?;
         }
+        if overdraw_view.is_some() {
+            let heat = spans.open("overdraw view");
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("overdraw view"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: target,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Load,
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: spans.render_writes(heat, true, true),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&pipes.overdraw);
+            pass.set_bind_group(0, &bindings.bind_group, &[]);
+            pass.draw(0..3, 0..1);
+        }
         if let Some(t) = &mut self.timer {
             t.resolve(spans, &mut encoder);
         }
@@ -544,6 +583,9 @@ impl Renderer {
             }
         }
         self.methods[index].finish(&self.bake, ctx, measure_gpu, &mut stats);
+        if overdraw_view.is_some() && measure_gpu {
+            stats.overdraw = Some(self.overdraw.means(ctx, width, height)?);
+        }
         if let Some(t) = self.ground.as_mut().and_then(|g| g.timer.as_mut()) {
             t.collect(ctx, measure_gpu);
         }

@@ -103,6 +103,12 @@ impl Layouts {
                     count: None,
                 },
                 uniform_entry(7, wgpu::ShaderStages::FRAGMENT),
+                // The overdraw view's counters (src/render/overdraw.rs).
+                buffer_entry(
+                    8,
+                    wgpu::ShaderStages::FRAGMENT,
+                    wgpu::BufferBindingType::Storage { read_only: false },
+                ),
             ],
         });
         let shadow_frame = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -291,6 +297,8 @@ pub struct ColorPipelines {
     pub faded_opaque: wgpu::RenderPipeline,
     pub faded_foliage: wgpu::RenderPipeline,
     pub sky: wgpu::RenderPipeline,
+    /// The overdraw view's heat map over the finished frame (no depth).
+    pub overdraw: wgpu::RenderPipeline,
 }
 
 impl ColorPipelines {
@@ -372,12 +380,38 @@ impl ColorPipelines {
             multiview_mask: None,
             cache: None,
         });
+        let overdraw_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("overdraw.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(shaders::overdraw().into()),
+        });
+        let overdraw = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("overdraw"),
+            layout: Some(&sky_layout),
+            vertex: wgpu::VertexState {
+                module: &overdraw_module,
+                entry_point: Some("vs_sky"),
+                compilation_options: Default::default(),
+                buffers: &[],
+            },
+            primitive: Default::default(),
+            depth_stencil: None,
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &overdraw_module,
+                entry_point: Some("fs_overdraw"),
+                compilation_options: Default::default(),
+                targets: &target,
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
         Self {
             opaque,
             faded_opaque,
             faded_foliage,
             foliage,
             sky,
+            overdraw,
         }
     }
 }

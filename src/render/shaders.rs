@@ -16,6 +16,7 @@ const BTF: &str = include_str!("../../shaders/btf.wgsl");
 const GROUND_MAP: &str = include_str!("../../shaders/ground_map.wgsl");
 const TEXEL: &str = include_str!("../../shaders/texel.wgsl");
 const BLIT: &str = include_str!("../../shaders/blit.wgsl");
+const OVERDRAW: &str = include_str!("../../shaders/overdraw.wgsl");
 
 /// A mesh pass's module: frame uniforms, instancing, then the pass's own file.
 fn with_instancing(pass: &str) -> String {
@@ -47,6 +48,7 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("ground_map", ground_map()),
         ("texel", texel()),
         ("blit", blit()),
+        ("overdraw", overdraw()),
     ]
 }
 
@@ -75,6 +77,11 @@ pub fn btf_far() -> String {
 /// The `texel` method's pass: frame uniforms, then its file.
 pub fn texel() -> String {
     with_frame(TEXEL)
+}
+
+/// The overdraw view's heat map: frame uniforms, the sky's full-screen triangle, its file.
+pub fn overdraw() -> String {
+    with_frame(&format!("{SKY}\n{OVERDRAW}"))
 }
 
 /// The render scale's upscaling pass (no frame uniforms).

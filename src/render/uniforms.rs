@@ -61,6 +61,9 @@ pub struct FrameUniforms {
     pub ground_texel_world: f32,
     /// Fraction of the ground textures' side in use.
     pub ground_uv_scale: f32,
+    /// The overdraw view: on (1) or off (0), the target's width and height, what the heat
+    /// map shows ([`super::overdraw::OverdrawView::index`]).
+    pub overdraw: [u32; 4],
 }
 
 impl FrameUniforms {
@@ -106,6 +109,7 @@ impl FrameUniforms {
             terrain_depth_on: 0,
             ground_texel_world: 0.0,
             ground_uv_scale: 0.0,
+            overdraw: [0; 4],
         }
     }
 
