@@ -4,8 +4,8 @@
 // bar of labelled steps in the bottom-left corner. The counters are `overdraw_counts`
 // (frame.wgsl), filled by `count_fragment` during the frame.
 
-// The scale's steps: 0, then `step` x 1, 2, 4, ... 64 (step 1 for fragments, 8 for reads).
-const STEPS: u32 = 8u;
+// The scale's steps: 0, then `step` x 1, 2, 4, ... 256 (step 1 for fragments, 8 for reads).
+const STEPS: u32 = 10u;
 
 // 3x5 pixel digits 0-9, row by row from the top, 3 bits a row, the left pixel highest.
 const DIGITS = array<u32, 10>(31599u, 11415u, 29671u, 29647u, 23497u, 31183u, 31215u, 29257u, 31727u, 31695u);
@@ -63,7 +63,7 @@ fn number_pixel(value: u32, p: vec2<u32>) -> bool {
 // The legend at pixel `at`: its colour, alpha 1 where it covers the pixel.
 fn legend(at: vec2<u32>) -> vec4<f32> {
     let s = select(1u, 2u, frame.overdraw.y >= 480u);
-    let cell = 14u * s;
+    let cell = 18u * s;
     let x0 = 4u * s;
     let bottom = frame.overdraw.z - min(4u * s, frame.overdraw.z);
     let bar_top = bottom - min(6u * s, bottom);

@@ -247,7 +247,7 @@ pub fn controls(
     ui.horizontal(|ui| {
         use crate::render::overdraw::OverdrawView;
         ui.label("overdraw view")
-            .on_hover_text("per pixel, the fragments shaded (scale 0, 1, 2 ... 64) or the images they read (0, 8, 16 ... 512), as a heat map");
+            .on_hover_text("per pixel, the fragments shaded (scale 0, 1, 2 ... 256) or the images they read (0, 8, 16 ... 2048), as a heat map");
         ui.selectable_value(&mut frame.overdraw, None, "off");
         for v in OverdrawView::ALL {
             ui.selectable_value(&mut frame.overdraw, Some(v), v.name());

@@ -16,10 +16,10 @@ use super::GpuContext;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum OverdrawView {
-    /// Fragments shaded per pixel (scale 0, 1, 2, 4 ... 64).
+    /// Fragments shaded per pixel (scale 0, 1, 2, 4 ... 256).
     #[default]
     Fragments,
-    /// Images read by those fragments per pixel (scale 0, 8, 16, 32 ... 512).
+    /// Images read by those fragments per pixel (scale 0, 8, 16, 32 ... 2048).
     Reads,
 }
 
