@@ -17,7 +17,7 @@ use glam::Vec3;
 use common::*;
 
 fn btf_scene() -> Scene {
-    Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses")
+    load_scene("btf.toml")
 }
 
 fn cache_file(name: &str) -> std::path::PathBuf {
@@ -29,20 +29,7 @@ fn cache_file(name: &str) -> std::path::PathBuf {
 /// The stand's bake, made once per test process.
 fn baked() -> &'static canopy::format::Baked {
     static BAKED: OnceLock<canopy::format::Baked> = OnceLock::new();
-    BAKED.get_or_init(|| {
-        let ctx = gpu();
-        let scene = btf_scene();
-        let world = scene.build_world().unwrap();
-        bake::load_or_bake_at(
-            &cache_file("shared.canopy"),
-            &ctx,
-            &scene,
-            &world,
-            &mut |_| {},
-        )
-        .unwrap()
-        .0
-    })
+    BAKED.get_or_init(|| load_or_bake(&btf_scene(), &cache_file("shared.canopy")))
 }
 
 /// Where the trees are in `trees` (an image of `frame` at `size`): the pixels that differ
@@ -484,7 +471,7 @@ fn billboard_draws_trees_where_geometry_has_them() {
 #[test]
 fn variants_are_baked_as_their_own_image_sets() {
     let ctx = gpu();
-    let mut scene = Scene::load(&data("lone_tree.toml")).expect("lone_tree.toml parses");
+    let mut scene = load_scene("lone_tree.toml");
     scene.species[0].variants = 2;
     scene.forest.count = Some(12);
     let world = scene.build_world().expect("world");

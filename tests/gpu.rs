@@ -29,7 +29,7 @@ fn small_scene_matches_the_reference_render() {
 
 /// One fir on flat ground, sun from the south-east at 45 degrees.
 fn lone_tree_scene() -> Scene {
-    Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses")
+    load_scene("lone_tree.toml")
 }
 
 #[test]

@@ -34,7 +34,7 @@ const VIEWS: [(&str, [f32; 3], [f32; 3]); 3] = [
 ];
 
 fn scene() -> Scene {
-    Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses")
+    load_scene("btf.toml")
 }
 
 #[test]

@@ -13,7 +13,7 @@ use glam::Vec3;
 use common::*;
 
 fn dense_stand() -> (Scene, World) {
-    let scene = Scene::load(&data("dense_stand.toml")).expect("tests/data/dense_stand.toml parses");
+    let scene = load_scene("dense_stand.toml");
     let world = scene.build_world().unwrap();
     (scene, world)
 }
@@ -230,7 +230,7 @@ fn lone_fir_against_the_reference(
 #[test]
 fn a_lone_tree_at_a_baked_view_and_light_is_nearly_the_reference() {
     // A light from above the horizon, a baked sample.
-    let scene = Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses");
+    let scene = load_scene("lone_tree.toml");
     let [(against_reference, _), (without_gain, _)] =
         lone_fir_against_the_reference("baked", &scene, |lights, view| {
             *lights

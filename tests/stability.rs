@@ -8,7 +8,6 @@ mod common;
 
 use std::sync::OnceLock;
 
-use canopy::bake;
 use canopy::bench::flight::{FlightFrame, Knobs};
 use canopy::bench::run::{self, BenchOptions, Config};
 use canopy::format::Baked;
@@ -21,19 +20,13 @@ use glam::Vec3;
 use common::*;
 
 fn stand() -> Scene {
-    Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses")
+    load_scene("btf.toml")
 }
 
 /// The stand's bake, made once per test process.
 fn baked() -> &'static Baked {
     static BAKED: OnceLock<Baked> = OnceLock::new();
-    BAKED.get_or_init(|| {
-        let ctx = gpu();
-        let scene = stand();
-        let world = scene.build_world().unwrap();
-        let settings = bake::cache::settings_of(&scene);
-        bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap()
-    })
+    BAKED.get_or_init(|| bake_btf(&stand()))
 }
 
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {

@@ -19,7 +19,7 @@ use glam::{Mat4, UVec3, Vec3};
 use common::*;
 
 fn lone_tree(species: &str) -> Scene {
-    let mut scene = Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses");
+    let mut scene = load_scene("lone_tree.toml");
     scene.bake.texel_resolution = 64;
     if scene.species[0].name != species {
         // The fixture's own tree is the fir as its bounds were measured; another species
