@@ -143,14 +143,53 @@ pub(crate) fn sampled_rgba8_texture(
     size: glam::UVec3,
     mips: u32,
 ) -> wgpu::Texture {
+    texture(
+        device,
+        label,
+        dimension,
+        size,
+        mips,
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    )
+}
+
+/// A 2D texture of `size` (width, height, layers) and one level, for drawing into.
+pub(crate) fn target_texture(
+    device: &wgpu::Device,
+    label: &str,
+    size: glam::UVec3,
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    texture(
+        device,
+        label,
+        wgpu::TextureDimension::D2,
+        size,
+        1,
+        format,
+        usage,
+    )
+}
+
+fn texture(
+    device: &wgpu::Device,
+    label: &str,
+    dimension: wgpu::TextureDimension,
+    size: glam::UVec3,
+    mips: u32,
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
     device.create_texture(&wgpu::TextureDescriptor {
         label: Some(label),
         size: extent(size),
         mip_level_count: mips,
         sample_count: 1,
         dimension,
-        format: wgpu::TextureFormat::Rgba8UnormSrgb,
-        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        format,
+        usage,
         view_formats: &[],
     })
 }

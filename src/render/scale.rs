@@ -4,7 +4,7 @@
 //! when there is room.
 
 use super::GpuContext;
-use super::pipelines::{FILTERABLE, sampler_entry, texture_entry, wgsl_module};
+use super::pipelines::{FILTERABLE, sampler_entry, target_texture, texture_entry, wgsl_module};
 use crate::Result;
 
 /// The smallest fraction of the window the 3D view is drawn at.
@@ -136,21 +136,13 @@ impl Upscaler {
             .is_none_or(|t| t.2 != size || t.3 != format);
         if stale {
             let texture = ctx.checked("allocating the scaled view", || {
-                ctx.device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some("render scale"),
-                    size: wgpu::Extent3d {
-                        width: size.0,
-                        height: size.1,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
+                target_texture(
+                    &ctx.device,
+                    "render scale",
+                    glam::UVec3::new(size.0, size.1, 1),
                     format,
-                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                        | wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                })
+                    wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+                )
             })?;
             let view = texture.create_view(&Default::default());
             self.texture = Some((texture, view, size, format));

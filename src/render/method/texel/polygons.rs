@@ -229,15 +229,19 @@ mod tests {
     fn a_box_seen_along_its_diagonal_gives_triangles_and_hexagons() {
         let eye = Vec3::splat(-10.0);
         let forward = Vec3::ONE.normalize();
-        let polys = slice_polygons(
-            &Mat4::IDENTITY,
-            Vec3::ZERO,
-            Vec3::ONE,
-            eye,
-            forward,
-            0.05,
-            1000,
-        );
+        // The unit box cut every 0.05 along the diagonal, at most `cap` slices.
+        let cut = |cap| {
+            slice_polygons(
+                &Mat4::IDENTITY,
+                Vec3::ZERO,
+                Vec3::ONE,
+                eye,
+                forward,
+                0.05,
+                cap,
+            )
+        };
+        let polys = cut(1000);
         let sizes: Vec<usize> = polys.iter().map(|p| p.len()).collect();
         assert!(sizes.contains(&3) && sizes.contains(&6), "{sizes:?}");
         for p in &polys {
@@ -248,15 +252,7 @@ mod tests {
             }
         }
         // The cap keeps the nearest slices.
-        let capped = slice_polygons(
-            &Mat4::IDENTITY,
-            Vec3::ZERO,
-            Vec3::ONE,
-            eye,
-            forward,
-            0.05,
-            5,
-        );
+        let capped = cut(5);
         assert_eq!(capped.len(), 5);
         assert_eq!(capped[4], polys[polys.len() - 1]);
     }
