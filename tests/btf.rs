@@ -16,10 +16,6 @@ use glam::Vec3;
 
 use common::*;
 
-fn btf_scene() -> Scene {
-    load_scene("btf.toml")
-}
-
 fn cache_file(name: &str) -> std::path::PathBuf {
     std::env::temp_dir()
         .join(format!("canopy-btf-test-{}", std::process::id()))
@@ -29,7 +25,7 @@ fn cache_file(name: &str) -> std::path::PathBuf {
 /// The stand's bake, made once per test process.
 fn baked() -> &'static canopy::format::Baked {
     static BAKED: OnceLock<canopy::format::Baked> = OnceLock::new();
-    BAKED.get_or_init(|| load_or_bake(&btf_scene(), &cache_file("shared.canopy")))
+    BAKED.get_or_init(|| load_or_bake(&btf_stand(), &cache_file("shared.canopy")))
 }
 
 /// Where the trees are in `trees` (an image of `frame` at `size`): the pixels that differ
@@ -74,8 +70,7 @@ fn masked_flip(a: &image::RgbaImage, b: &image::RgbaImage, mask: &[bool]) -> f32
 
 /// A renderer with the stand's bake attached.
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
-    let scene = btf_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(btf_stand());
     let mut renderer = Renderer::new(ctx, &world).unwrap();
     renderer.attach_btf(ctx, baked(), &world).unwrap();
     (scene, world, renderer)
@@ -307,8 +302,7 @@ fn renderer_texels(renderer: &Renderer, species: usize) -> canopy::lod::LevelTex
 #[test]
 fn the_cache_is_reused_and_a_corrupt_file_is_baked_again() {
     let ctx = gpu();
-    let scene = btf_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(btf_stand());
     let path = cache_file("own.canopy");
     let _ = std::fs::remove_file(&path);
     let first = baked().clone();

@@ -38,8 +38,7 @@ fn baked() -> &'static canopy::format::Baked {
 #[test]
 fn the_alpha_shadow_map_darkens_the_ground_under_a_tree_and_nowhere_else() {
     let ctx = gpu();
-    let scene = lone_tree();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(lone_tree());
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     renderer.attach_btf(&ctx, baked(), &world).unwrap();
 

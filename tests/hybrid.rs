@@ -39,8 +39,7 @@ const NEAR_MARGIN: f32 = 0.01;
 #[test]
 fn up_close_hybrid_draws_geometry_and_far_away_it_is_btf() {
     let ctx = gpu();
-    let scene = lone_broadleaf();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(lone_broadleaf());
     let baked = bake_of(&scene);
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     renderer.attach_btf(&ctx, &baked, &world).unwrap();

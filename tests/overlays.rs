@@ -15,7 +15,6 @@ use canopy::format::Baked;
 use canopy::model::{Level, PerLevel, World};
 use canopy::render::btf::LOD_COLORS;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
-use canopy::scene::Scene;
 use glam::Vec3;
 use image::RgbaImage;
 
@@ -91,15 +90,11 @@ fn lod_fractions(covered: &[(usize, Vec3, Vec3)]) -> (PerLevel<f32>, usize) {
 // ---------------------------------------------------------------------------------------
 // Show LOD, on the BTF test stand.
 
-fn btf_scene() -> Scene {
-    load_scene("btf.toml")
-}
-
 /// The stand's BTF image sets (no cube maps: the overlay draws no VCM shading, and the
 /// stand's tree-level cube maps are per instance), baked once per test process.
 fn stand_btf() -> &'static Baked {
     static BAKED: OnceLock<Baked> = OnceLock::new();
-    BAKED.get_or_init(|| bake_btf(&btf_scene()))
+    BAKED.get_or_init(|| bake_btf(&btf_stand()))
 }
 
 /// At each level, at least this fraction of a lone tree's visibly changed pixels must be
@@ -114,7 +109,7 @@ const LOD_MAX_OTHER_COLOUR: f32 = 0.02;
 #[test]
 fn show_lod_colours_a_lone_tree_by_the_level_it_is_drawn_at() {
     let ctx = gpu();
-    let scene = btf_scene();
+    let scene = btf_stand();
     let stand = scene.build_world().unwrap();
     let (w, h) = (96u32, 96u32);
     let fov = 40.0;

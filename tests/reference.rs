@@ -13,8 +13,7 @@ use glam::Vec3;
 use common::*;
 
 fn dense_stand() -> (Scene, World) {
-    let scene = load_scene("dense_stand.toml");
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(load_scene("dense_stand.toml"));
     (scene, world)
 }
 
@@ -326,8 +325,7 @@ fn far_fir_against_near(self_map_size: u32) -> (f32, f32) {
     let start = text.find("[species.params]").unwrap();
     let end = text.find("[forest]").unwrap();
     let text = format!("{}preset = \"fir\"\n\n{}", &text[..start], &text[end..]);
-    let scene = Scene::parse(&text, "lone_tree.toml with the fir preset").unwrap();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(Scene::parse(&text, "lone_tree.toml with the fir preset").unwrap());
     let tree = world.forest.instances[0];
     let bounds = world.species[0].tree_bounds.transformed(tree.transform());
     let (centre, radius) = (bounds.center(), 0.5 * bounds.extent().length());

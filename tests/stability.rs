@@ -19,19 +19,14 @@ use glam::Vec3;
 
 use common::*;
 
-fn stand() -> Scene {
-    load_scene("btf.toml")
-}
-
 /// The stand's bake, made once per test process.
 fn baked() -> &'static Baked {
     static BAKED: OnceLock<Baked> = OnceLock::new();
-    BAKED.get_or_init(|| bake_btf(&stand()))
+    BAKED.get_or_init(|| bake_btf(&btf_stand()))
 }
 
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
-    let scene = stand();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(btf_stand());
     let mut renderer = Renderer::new(ctx, &world).unwrap();
     renderer.attach_btf(ctx, baked(), &world).unwrap();
     (scene, world, renderer)

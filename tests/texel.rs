@@ -667,8 +667,7 @@ fn a_far_tile_stands_for_its_tree() {
 #[test]
 fn volumes_that_do_not_fit_the_scene_disable_only_the_texel_method() {
     let ctx = gpu();
-    let scene = lone_tree("fir");
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(lone_tree("fir"));
     let mut baked = bake_of(&scene);
     baked.texels[0].species = 5;
     let mut r = Renderer::new(&ctx, &world).unwrap();

@@ -21,22 +21,26 @@ fn display_or_skip() -> bool {
     false
 }
 
-/// `canopy view` of the small scene on the geometry method, writing a screenshot to `out`
-/// after `frames` frames, with `env` set.
+/// `canopy view` of the small scene on the geometry method, writing a screenshot to
+/// `canopy-{name}-{process id}.png` in the temporary directory (which it returns) after
+/// `frames` frames, with `env` set.
 fn view_screenshot(
-    out: &std::path::Path,
+    name: &str,
     frames: &str,
     env: &[(&str, &str)],
-) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_canopy"))
+) -> (std::path::PathBuf, std::process::Output) {
+    let out = std::env::temp_dir().join(format!("canopy-{name}-{}.png", std::process::id()));
+    let _ = std::fs::remove_file(&out);
+    let o = Command::new(env!("CARGO_BIN_EXE_canopy"))
         .envs(env.iter().copied())
         .arg("view")
         .arg(common::data("small.toml"))
         .arg("--screenshot")
-        .arg(out)
+        .arg(&out)
         .args(["--after-frames", frames, "--method", "geometry"])
         .output()
-        .unwrap()
+        .unwrap();
+    (out, o)
 }
 
 /// `canopy render` of the small scene's start frame (the viewer's first frame: the scene's
@@ -79,9 +83,7 @@ fn viewer_screenshot_matches_a_render_of_the_same_frame() {
     if !display_or_skip() {
         return;
     }
-    let out = std::env::temp_dir().join(format!("canopy-viewer-{}.png", std::process::id()));
-    let _ = std::fs::remove_file(&out);
-    let o = view_screenshot(&out, "3", &[]);
+    let (out, o) = view_screenshot("viewer", "3", &[]);
     assert!(
         o.status.success(),
         "viewer failed: {}",
@@ -116,10 +118,8 @@ fn the_viewer_recovers_from_a_lost_device() {
     if !display_or_skip() {
         return;
     }
-    let out = std::env::temp_dir().join(format!("canopy-viewer-lost-{}.png", std::process::id()));
-    let _ = std::fs::remove_file(&out);
-    let o = view_screenshot(
-        &out,
+    let (out, o) = view_screenshot(
+        "viewer-lost",
         "6",
         &[
             ("CANOPY_TEST_LOSE_DEVICE_AT_FRAME", "2"),

@@ -34,6 +34,12 @@ pub fn small_scene() -> Scene {
     load_scene("small.toml")
 }
 
+/// `scene` and the world it builds.
+pub fn built(scene: Scene) -> (Scene, World) {
+    let world = scene.build_world().unwrap();
+    (scene, world)
+}
+
 /// The BTF image sets of `scene`'s trees (no cube maps), baked on a fresh context.
 pub fn bake_btf(scene: &Scene) -> Baked {
     let ctx = gpu();
@@ -42,7 +48,13 @@ pub fn bake_btf(scene: &Scene) -> Baked {
     canopy::bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap()
 }
 
-/// One fir on flat ground (`tests/data/lone_tree.toml`).
+/// The BTF test stand (`tests/data/btf.toml`).
+pub fn btf_stand() -> Scene {
+    load_scene("btf.toml")
+}
+
+/// One fir on flat ground, sun from the south-east at 45 degrees
+/// (`tests/data/lone_tree.toml`).
 pub fn lone_fir() -> Scene {
     load_scene("lone_tree.toml")
 }
