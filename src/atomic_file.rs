@@ -117,6 +117,17 @@ pub(crate) fn write_atomic_with_hook(
     Ok(())
 }
 
+/// The names in `dir`, sorted: what tests of atomic writes check for leftover files.
+#[cfg(test)]
+pub(crate) fn dir_entries(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -130,15 +141,6 @@ mod tests {
         dir
     }
 
-    fn entries(dir: &Path) -> Vec<String> {
-        let mut names: Vec<String> = fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        names.sort();
-        names
-    }
-
     #[test]
     fn writes_and_replaces_leaving_no_temporary_file() {
         let dir = scratch("replace");
@@ -146,7 +148,7 @@ mod tests {
         write_atomic(&path, |w| w.write_all(b"one")).unwrap();
         write_atomic(&path, |w| w.write_all(b"two")).unwrap();
         assert_eq!(fs::read(&path).unwrap(), b"two");
-        assert_eq!(entries(&dir), ["out.txt"]);
+        assert_eq!(dir_entries(&dir), ["out.txt"]);
         #[cfg(unix)]
         {
             use std::os::unix::fs::PermissionsExt;
@@ -189,7 +191,7 @@ mod tests {
             "temporary file removed"
         );
         assert_eq!(fs::read(&path).unwrap(), b"old");
-        assert_eq!(entries(&dir), ["forest.canopy"]);
+        assert_eq!(dir_entries(&dir), ["forest.canopy"]);
         fs::remove_dir_all(&dir).unwrap();
     }
 
@@ -215,7 +217,7 @@ mod tests {
         fs::create_dir(&taken).unwrap();
         let err = write_atomic(&taken, |w| w.write_all(b"x")).unwrap_err();
         assert_eq!(err.step, Step::Replace);
-        assert_eq!(entries(&dir), ["plain.txt", "taken"]);
+        assert_eq!(dir_entries(&dir), ["plain.txt", "taken"]);
         assert_eq!(fs::read(&file).unwrap(), b"hello");
         fs::remove_dir_all(&dir).unwrap();
     }

@@ -16,10 +16,6 @@ use glam::Vec3;
 
 use common::*;
 
-fn btf_scene() -> Scene {
-    Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses")
-}
-
 fn cache_file(name: &str) -> std::path::PathBuf {
     std::env::temp_dir()
         .join(format!("canopy-btf-test-{}", std::process::id()))
@@ -29,20 +25,7 @@ fn cache_file(name: &str) -> std::path::PathBuf {
 /// The stand's bake, made once per test process.
 fn baked() -> &'static canopy::format::Baked {
     static BAKED: OnceLock<canopy::format::Baked> = OnceLock::new();
-    BAKED.get_or_init(|| {
-        let ctx = gpu();
-        let scene = btf_scene();
-        let world = scene.build_world().unwrap();
-        bake::load_or_bake_at(
-            &cache_file("shared.canopy"),
-            &ctx,
-            &scene,
-            &world,
-            &mut |_| {},
-        )
-        .unwrap()
-        .0
-    })
+    BAKED.get_or_init(|| load_or_bake(&btf_stand(), &cache_file("shared.canopy")))
 }
 
 /// Where the trees are in `trees` (an image of `frame` at `size`): the pixels that differ
@@ -87,8 +70,7 @@ fn masked_flip(a: &image::RgbaImage, b: &image::RgbaImage, mask: &[bool]) -> f32
 
 /// A renderer with the stand's bake attached.
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
-    let scene = btf_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(btf_stand());
     let mut renderer = Renderer::new(ctx, &world).unwrap();
     renderer.attach_btf(ctx, baked(), &world).unwrap();
     (scene, world, renderer)
@@ -320,8 +302,7 @@ fn renderer_texels(renderer: &Renderer, species: usize) -> canopy::lod::LevelTex
 #[test]
 fn the_cache_is_reused_and_a_corrupt_file_is_baked_again() {
     let ctx = gpu();
-    let scene = btf_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(btf_stand());
     let path = cache_file("own.canopy");
     let _ = std::fs::remove_file(&path);
     let first = baked().clone();
@@ -484,7 +465,7 @@ fn billboard_draws_trees_where_geometry_has_them() {
 #[test]
 fn variants_are_baked_as_their_own_image_sets() {
     let ctx = gpu();
-    let mut scene = Scene::load(&data("lone_tree.toml")).expect("lone_tree.toml parses");
+    let mut scene = load_scene("lone_tree.toml");
     scene.species[0].variants = 2;
     scene.forest.count = Some(12);
     let world = scene.build_world().expect("world");

@@ -5,7 +5,6 @@
 mod common;
 
 use canopy::render::{Camera, FrameDesc, Renderer};
-use canopy::scene::Scene;
 use glam::Vec3;
 
 use common::*;
@@ -19,24 +18,17 @@ const SNAPSHOT_MAX_MEAN_FLIP: f32 = 0.03;
 #[test]
 fn small_scene_matches_the_reference_render() {
     let ctx = gpu();
-    let scene = small_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(small_scene());
     let frame = FrameDesc::from_scene(&scene);
     let img = render(&ctx, &world, &frame, 256, 256);
     let mean = check_snapshot("small_geometry", &img, SNAPSHOT_MAX_MEAN_FLIP);
     eprintln!("small_geometry: mean FLIP {mean:.5}");
 }
 
-/// One fir on flat ground, sun from the south-east at 45 degrees.
-fn lone_tree_scene() -> Scene {
-    Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses")
-}
-
 #[test]
 fn a_tree_between_the_sun_and_the_ground_darkens_the_ground_under_it() {
     let ctx = gpu();
-    let scene = lone_tree_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(lone_fir());
     let (w, h) = (192u32, 192u32);
     let CrownShadow {
         mut frame,
@@ -74,8 +66,7 @@ fn a_tree_between_the_sun_and_the_ground_darkens_the_ground_under_it() {
 #[test]
 fn moving_the_sun_changes_the_image() {
     let ctx = gpu();
-    let scene = small_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(small_scene());
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     let mut frame = FrameDesc::from_scene(&scene);
     let (a, _) = renderer.render_image(&ctx, &frame, 128, 128, 1).unwrap();
@@ -105,8 +96,7 @@ fn moving_the_sun_changes_the_image() {
 #[test]
 fn frame_stats_count_what_was_drawn_and_culling_drops_trees_behind() {
     let ctx = gpu();
-    let scene = small_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(small_scene());
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     let mut frame = FrameDesc::from_scene(&scene);
     let (_, s) = renderer.render_image(&ctx, &frame, 64, 64, 1).unwrap();
@@ -126,8 +116,7 @@ fn frame_stats_count_what_was_drawn_and_culling_drops_trees_behind() {
 #[test]
 fn supersampling_keeps_the_output_size() {
     let ctx = gpu();
-    let scene = small_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(small_scene());
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     let frame = FrameDesc::from_scene(&scene);
     let (img, s) = renderer.render_image(&ctx, &frame, 48, 32, 3).unwrap();
@@ -138,8 +127,7 @@ fn supersampling_keeps_the_output_size() {
 #[test]
 fn zero_sized_frames_are_an_error_not_a_panic() {
     let ctx = gpu();
-    let scene = small_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(small_scene());
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     let frame = FrameDesc::from_scene(&scene);
     assert!(renderer.render_image(&ctx, &frame, 0, 32, 1).is_err());
@@ -149,8 +137,7 @@ fn zero_sized_frames_are_an_error_not_a_panic() {
 /// drawing after it says the device was lost and what to do; a new device draws again.
 #[test]
 fn a_lost_device_is_an_error_with_its_reason_and_a_new_one_draws_again() {
-    let scene = lone_tree_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(lone_fir());
     let frame = FrameDesc::from_scene(&scene);
     let ctx = gpu();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
@@ -177,8 +164,7 @@ fn the_view_drawn_at_half_size_is_stretched_over_the_target() {
     use canopy::render::scale::{Upscaler, scaled_size};
     use canopy::render::{FrameTarget, OFFSCREEN_FORMAT, OffscreenTarget};
     let ctx = gpu();
-    let scene = small_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(small_scene());
     let frame = FrameDesc::from_scene(&scene);
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     let (w, h) = (96, 64);
@@ -233,8 +219,7 @@ fn the_view_drawn_at_half_size_is_stretched_over_the_target() {
 fn pixel_classes_tell_sky_ground_and_near_and_far_trees_apart() {
     use canopy::metrics::PixelClass;
     let ctx = gpu();
-    let scene = small_scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(small_scene());
     let mut frame = FrameDesc::from_scene(&scene);
     frame.pixel_classes = true;
     let (w, h) = (160, 120);

@@ -5,7 +5,6 @@
 
 mod common;
 
-use canopy::bake;
 use canopy::model::World;
 use canopy::model::forest::Forest;
 use canopy::model::terrain::Terrain;
@@ -20,7 +19,7 @@ use common::*;
 /// One fir on flat ground, a coarse bake, but with 18 views rather than the file's 6 (at
 /// every level): they include east at 45° up, where the proportion test puts the sun.
 fn lone_tree() -> Scene {
-    let mut scene = Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses");
+    let mut scene = load_scene("lone_tree.toml");
     scene.bake.views = 18;
     scene.bake.tree_views = 18;
     scene
@@ -30,22 +29,16 @@ fn lone_tree() -> Scene {
 fn baked() -> &'static canopy::format::Baked {
     static BAKED: OnceLock<canopy::format::Baked> = OnceLock::new();
     BAKED.get_or_init(|| {
-        let ctx = gpu();
-        let scene = lone_tree();
-        let world = scene.build_world().unwrap();
         let cache =
             std::env::temp_dir().join(format!("canopy-ground-{}.canopy", std::process::id()));
-        bake::load_or_bake_at(&cache, &ctx, &scene, &world, &mut |_| {})
-            .unwrap()
-            .0
+        load_or_bake(&lone_tree(), &cache)
     })
 }
 
 #[test]
 fn the_alpha_shadow_map_darkens_the_ground_under_a_tree_and_nowhere_else() {
     let ctx = gpu();
-    let scene = lone_tree();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(lone_tree());
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     renderer.attach_btf(&ctx, baked(), &world).unwrap();
 

@@ -15,7 +15,7 @@ use common::*;
 
 /// The lone-tree scene with a broadleaf (its twig images magnify most up close).
 fn lone_broadleaf() -> Scene {
-    let mut scene = Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses");
+    let mut scene = load_scene("lone_tree.toml");
     scene.species[0].name = "broadleaf".into();
     scene.species[0].preset = Some("broadleaf".into());
     scene.species[0].params = None;
@@ -23,12 +23,8 @@ fn lone_broadleaf() -> Scene {
 }
 
 fn bake_of(scene: &Scene) -> Baked {
-    let ctx = gpu();
-    let world = scene.build_world().unwrap();
     let cache = std::env::temp_dir().join(format!("canopy-hybrid-{}.canopy", std::process::id()));
-    let b = canopy::bake::load_or_bake_at(&cache, &ctx, scene, &world, &mut |_| {})
-        .unwrap()
-        .0;
+    let b = load_or_bake(scene, &cache);
     let _ = std::fs::remove_file(&cache);
     b
 }
@@ -43,8 +39,7 @@ const NEAR_MARGIN: f32 = 0.01;
 #[test]
 fn up_close_hybrid_draws_geometry_and_far_away_it_is_btf() {
     let ctx = gpu();
-    let scene = lone_broadleaf();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(lone_broadleaf());
     let baked = bake_of(&scene);
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     renderer.attach_btf(&ctx, &baked, &world).unwrap();

@@ -9,7 +9,6 @@ mod common;
 
 use canopy::bake;
 use canopy::render::{Camera, FrameDesc, Method, Renderer};
-use canopy::scene::Scene;
 use glam::Vec3;
 
 use common::*;
@@ -33,15 +32,10 @@ const VIEWS: [(&str, [f32; 3], [f32; 3]); 3] = [
     ("far", [-120.0, 90.0, -260.0], [0.0, 6.0, 0.0]),
 ];
 
-fn scene() -> Scene {
-    Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses")
-}
-
 #[test]
 fn every_method_matches_its_references_at_three_distances() {
     let ctx = gpu();
-    let scene = scene();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(btf_stand());
     let cache = std::env::temp_dir()
         .join(format!("canopy-images-test-{}", std::process::id()))
         .join("stand.canopy");

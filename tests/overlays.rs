@@ -11,12 +11,10 @@ mod common;
 
 use std::sync::OnceLock;
 
-use canopy::bake;
 use canopy::format::Baked;
 use canopy::model::{Level, PerLevel, World};
 use canopy::render::btf::LOD_COLORS;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
-use canopy::scene::Scene;
 use glam::Vec3;
 use image::RgbaImage;
 
@@ -92,21 +90,11 @@ fn lod_fractions(covered: &[(usize, Vec3, Vec3)]) -> (PerLevel<f32>, usize) {
 // ---------------------------------------------------------------------------------------
 // Show LOD, on the BTF test stand.
 
-fn btf_scene() -> Scene {
-    Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses")
-}
-
 /// The stand's BTF image sets (no cube maps: the overlay draws no VCM shading, and the
 /// stand's tree-level cube maps are per instance), baked once per test process.
 fn stand_btf() -> &'static Baked {
     static BAKED: OnceLock<Baked> = OnceLock::new();
-    BAKED.get_or_init(|| {
-        let ctx = gpu();
-        let scene = btf_scene();
-        let world = scene.build_world().unwrap();
-        let settings = bake::cache::settings_of(&scene);
-        bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap()
-    })
+    BAKED.get_or_init(|| bake_btf(&btf_stand()))
 }
 
 /// At each level, at least this fraction of a lone tree's visibly changed pixels must be
@@ -121,7 +109,7 @@ const LOD_MAX_OTHER_COLOUR: f32 = 0.02;
 #[test]
 fn show_lod_colours_a_lone_tree_by_the_level_it_is_drawn_at() {
     let ctx = gpu();
-    let scene = btf_scene();
+    let scene = btf_stand();
     let stand = scene.build_world().unwrap();
     let (w, h) = (96u32, 96u32);
     let fov = 40.0;
@@ -221,42 +209,9 @@ fn show_lod_colours_a_lone_tree_by_the_level_it_is_drawn_at() {
 // ---------------------------------------------------------------------------------------
 // Show shadow, on firs of the lone-tree scene (as in tests/vcm.rs).
 
-/// One fir on flat ground.
-fn lone_tree() -> Scene {
-    Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses")
-}
-
-/// The lone fir's BTF image sets, baked once per test process.
-fn fir_btf() -> &'static Baked {
-    static BAKED: OnceLock<Baked> = OnceLock::new();
-    BAKED.get_or_init(|| {
-        let ctx = gpu();
-        let scene = lone_tree();
-        let world = scene.build_world().unwrap();
-        let settings = bake::cache::settings_of(&scene);
-        bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap()
-    })
-}
-
-/// A world of firs at `positions` (with their scales) on the lone tree's flat ground.
-fn firs_at(trees: &[(Vec3, f32)]) -> World {
-    let mut world = lone_tree().build_world().unwrap();
-    let tree = world.forest.instances[0];
-    world.forest.instances = trees
-        .iter()
-        .map(|&(position, scale)| canopy::model::TreeInstance {
-            position,
-            scale,
-            ..tree
-        })
-        .collect();
-    world
-}
-
 /// A renderer of `world` with the fir's BTF and `world`'s cube maps.
 fn fir_renderer(ctx: &GpuContext, world: &World) -> Renderer {
-    let mut baked = fir_btf().clone();
-    baked.vcm = bake::vcm::bake_vcm(world, &baked.btf, 32, &mut |_, _| {}).unwrap();
+    let baked = fir_bake_for(world);
     let mut renderer = Renderer::new(ctx, world).unwrap();
     renderer.attach_btf(ctx, &baked, world).unwrap();
     renderer
@@ -384,7 +339,7 @@ fn show_shadow_draws_the_sun_factor_in_grey_darker_behind_another_tree() {
     let texels = renderers[0].btf_texels(0).unwrap();
     let focal = Camera::look_at(Vec3::ZERO, Vec3::Z, fov).focal_px(h);
     let from = |texel: f32| canopy::lod::valid_beyond(texel * fir.scale, focal, LOD_SCALE);
-    let mut frame = FrameDesc::from_scene(&lone_tree());
+    let mut frame = FrameDesc::from_scene(&lone_fir());
     frame.method = Method::Btf;
     frame.fog_density = 0.0;
     frame.btf.lod_fade = 0.0;

@@ -13,8 +13,7 @@ use glam::Vec3;
 use common::*;
 
 fn dense_stand() -> (Scene, World) {
-    let scene = Scene::load(&data("dense_stand.toml")).expect("tests/data/dense_stand.toml parses");
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(load_scene("dense_stand.toml"));
     (scene, world)
 }
 
@@ -230,7 +229,7 @@ fn lone_fir_against_the_reference(
 #[test]
 fn a_lone_tree_at_a_baked_view_and_light_is_nearly_the_reference() {
     // A light from above the horizon, a baked sample.
-    let scene = Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses");
+    let scene = load_scene("lone_tree.toml");
     let [(against_reference, _), (without_gain, _)] =
         lone_fir_against_the_reference("baked", &scene, |lights, view| {
             *lights
@@ -326,8 +325,7 @@ fn far_fir_against_near(self_map_size: u32) -> (f32, f32) {
     let start = text.find("[species.params]").unwrap();
     let end = text.find("[forest]").unwrap();
     let text = format!("{}preset = \"fir\"\n\n{}", &text[..start], &text[end..]);
-    let scene = Scene::parse(&text, "lone_tree.toml with the fir preset").unwrap();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(Scene::parse(&text, "lone_tree.toml with the fir preset").unwrap());
     let tree = world.forest.instances[0];
     let bounds = world.species[0].tree_bounds.transformed(tree.transform());
     let (centre, radius) = (bounds.center(), 0.5 * bounds.extent().length());

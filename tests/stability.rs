@@ -8,7 +8,6 @@ mod common;
 
 use std::sync::OnceLock;
 
-use canopy::bake;
 use canopy::bench::flight::{FlightFrame, Knobs};
 use canopy::bench::run::{self, BenchOptions, Config};
 use canopy::format::Baked;
@@ -20,25 +19,14 @@ use glam::Vec3;
 
 use common::*;
 
-fn stand() -> Scene {
-    Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses")
-}
-
 /// The stand's bake, made once per test process.
 fn baked() -> &'static Baked {
     static BAKED: OnceLock<Baked> = OnceLock::new();
-    BAKED.get_or_init(|| {
-        let ctx = gpu();
-        let scene = stand();
-        let world = scene.build_world().unwrap();
-        let settings = bake::cache::settings_of(&scene);
-        bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap()
-    })
+    BAKED.get_or_init(|| bake_btf(&btf_stand()))
 }
 
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
-    let scene = stand();
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(btf_stand());
     let mut renderer = Renderer::new(ctx, &world).unwrap();
     renderer.attach_btf(ctx, baked(), &world).unwrap();
     (scene, world, renderer)

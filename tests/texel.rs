@@ -19,7 +19,7 @@ use glam::{Mat4, UVec3, Vec3};
 use common::*;
 
 fn lone_tree(species: &str) -> Scene {
-    let mut scene = Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses");
+    let mut scene = load_scene("lone_tree.toml");
     scene.bake.texel_resolution = 64;
     if scene.species[0].name != species {
         // The fixture's own tree is the fir as its bounds were measured; another species
@@ -667,8 +667,7 @@ fn a_far_tile_stands_for_its_tree() {
 #[test]
 fn volumes_that_do_not_fit_the_scene_disable_only_the_texel_method() {
     let ctx = gpu();
-    let scene = lone_tree("fir");
-    let world = scene.build_world().unwrap();
+    let (scene, world) = built(lone_tree("fir"));
     let mut baked = bake_of(&scene);
     baked.texels[0].species = 5;
     let mut r = Renderer::new(&ctx, &world).unwrap();

@@ -13,8 +13,7 @@ use canopy::scene::Scene;
 
 #[test]
 fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
-    let dir = std::env::temp_dir().join(format!("canopy-tune-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch_dir("tune-test");
     // This test binary holds one test: nothing else reads the environment meanwhile.
     unsafe { std::env::set_var("CANOPY_CACHE_DIR", dir.join("cache")) };
     let scene_path = dir.join("stand.toml");

@@ -17,45 +17,6 @@ use glam::Vec3;
 
 use common::*;
 
-/// One fir on flat ground (its BTF serves every world of firs below).
-fn lone_tree() -> Scene {
-    Scene::load(&data("lone_tree.toml")).expect("tests/data/lone_tree.toml parses")
-}
-
-/// The lone fir's BTF image sets, baked once per test process.
-fn fir_btf() -> &'static Baked {
-    static BAKED: OnceLock<Baked> = OnceLock::new();
-    BAKED.get_or_init(|| {
-        let ctx = gpu();
-        let scene = lone_tree();
-        let world = scene.build_world().unwrap();
-        let settings = bake::cache::settings_of(&scene);
-        bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap()
-    })
-}
-
-/// `world`'s bake: the fir's BTF and the cube maps of `world`.
-fn bake_for(world: &World) -> Baked {
-    let mut baked = fir_btf().clone();
-    baked.vcm = bake::vcm::bake_vcm(world, &baked.btf, 32, &mut |_, _| {}).unwrap();
-    baked
-}
-
-/// A world of firs at `positions` (with their scales) on the lone tree's flat ground.
-fn firs_at(trees: &[(Vec3, f32)]) -> World {
-    let mut world = lone_tree().build_world().unwrap();
-    let tree = world.forest.instances[0];
-    world.forest.instances = trees
-        .iter()
-        .map(|&(position, scale)| canopy::model::TreeInstance {
-            position,
-            scale,
-            ..tree
-        })
-        .collect();
-    world
-}
-
 fn to_px(frame: &FrameDesc, w: u32, h: u32, p: Vec3) -> (i64, i64) {
     let ndc = frame
         .camera
@@ -86,9 +47,11 @@ fn crown_view(
     let (w, h) = (CROWN_VIEW_PX, CROWN_VIEW_PX);
     let mut renderer = Renderer::new(ctx, world).unwrap();
     if method == Method::Btf {
-        renderer.attach_btf(ctx, &bake_for(world), world).unwrap();
+        renderer
+            .attach_btf(ctx, &fir_bake_for(world), world)
+            .unwrap();
     }
-    let mut frame = FrameDesc::from_scene(&lone_tree());
+    let mut frame = FrameDesc::from_scene(&lone_fir());
     frame.method = method;
     frame.fog_density = 0.0;
     frame.sun.azimuth_deg = azimuth;
@@ -283,8 +246,7 @@ fn btf_with_vcm_darkens_a_tree_behind_another_about_as_much_as_geometry() {
 fn dense_stand_as(layout: TreeVcm) -> (Scene, World, &'static Baked) {
     static CELLS: OnceLock<Baked> = OnceLock::new();
     static PER_TREE: OnceLock<Baked> = OnceLock::new();
-    let mut scene =
-        Scene::load(&data("dense_stand.toml")).expect("tests/data/dense_stand.toml parses");
+    let mut scene = load_scene("dense_stand.toml");
     scene.bake.tree_vcm = layout;
     let world = scene.build_world().unwrap();
     let once = match layout {
@@ -529,7 +491,7 @@ fn lone_tree_level_flips(scene: &Scene) -> Vec<(canopy::model::Level, f32, f32, 
 /// at both levels.
 #[test]
 fn the_cube_maps_of_branches_and_twigs_bring_a_lone_fir_closer_to_a_sharp_reference() {
-    let mut scene = lone_tree();
+    let mut scene = lone_fir();
     scene.species[0] = canopy::model::params::SpeciesEntry::from_preset("fir", "fir", 3);
     for (level, with, _, without) in lone_tree_level_flips(&scene) {
         assert!(
@@ -547,7 +509,7 @@ fn the_cube_maps_of_branches_and_twigs_bring_a_lone_fir_closer_to_a_sharp_refere
 #[ignore = "the fixture's sparse fir: branch- and twig-level cube maps darken it more than \
             the reference's self-shadowing does (branch 0.0607 on vs 0.0592 off)"]
 fn the_cube_maps_of_branches_and_twigs_bring_the_sparse_fixture_fir_closer_to_a_sharp_reference() {
-    for (level, with, _, without) in lone_tree_level_flips(&lone_tree()) {
+    for (level, with, _, without) in lone_tree_level_flips(&lone_fir()) {
         assert!(
             with < without,
             "{level:?} level: the cube maps should bring the fir closer to the reference: on {with} vs off {without}"

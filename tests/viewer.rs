@@ -7,6 +7,42 @@ mod common;
 
 use std::process::Command;
 
+/// Whether there is a display to open a window on; without one the test says it is
+/// skipped (and fails where CANOPY_REQUIRE_DISPLAY is set).
+fn display_or_skip() -> bool {
+    if std::env::var_os("DISPLAY").is_some() || std::env::var_os("WAYLAND_DISPLAY").is_some() {
+        return true;
+    }
+    assert!(
+        std::env::var_os("CANOPY_REQUIRE_DISPLAY").is_none(),
+        "CANOPY_REQUIRE_DISPLAY is set but there is no DISPLAY"
+    );
+    eprintln!("skipped: no display (run under Xvfb with DISPLAY set)");
+    false
+}
+
+/// `canopy view` of the small scene on the geometry method, writing a screenshot to
+/// `canopy-{name}-{process id}.png` in the temporary directory (which it returns) after
+/// `frames` frames, with `env` set.
+fn view_screenshot(
+    name: &str,
+    frames: &str,
+    env: &[(&str, &str)],
+) -> (std::path::PathBuf, std::process::Output) {
+    let out = std::env::temp_dir().join(format!("canopy-{name}-{}.png", std::process::id()));
+    let _ = std::fs::remove_file(&out);
+    let o = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .envs(env.iter().copied())
+        .arg("view")
+        .arg(common::data("small.toml"))
+        .arg("--screenshot")
+        .arg(&out)
+        .args(["--after-frames", frames, "--method", "geometry"])
+        .output()
+        .unwrap();
+    (out, o)
+}
+
 /// `canopy render` of the small scene's start frame (the viewer's first frame: the scene's
 /// camera, geometry) at `w` x `h` on the CPU adapter, with `extra` arguments.
 fn render_start_frame(name: &str, w: u32, h: u32, extra: &[&str]) -> image::RgbImage {
@@ -44,24 +80,10 @@ const OTHER_SUN_FLIP: f32 = 0.1;
 
 #[test]
 fn viewer_screenshot_matches_a_render_of_the_same_frame() {
-    if std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
-        assert!(
-            std::env::var_os("CANOPY_REQUIRE_DISPLAY").is_none(),
-            "CANOPY_REQUIRE_DISPLAY is set but there is no DISPLAY"
-        );
-        eprintln!("skipped: no display (run under Xvfb with DISPLAY set)");
+    if !display_or_skip() {
         return;
     }
-    let out = std::env::temp_dir().join(format!("canopy-viewer-{}.png", std::process::id()));
-    let _ = std::fs::remove_file(&out);
-    let o = Command::new(env!("CARGO_BIN_EXE_canopy"))
-        .arg("view")
-        .arg(common::data("small.toml"))
-        .arg("--screenshot")
-        .arg(&out)
-        .args(["--after-frames", "3", "--method", "geometry"])
-        .output()
-        .unwrap();
+    let (out, o) = view_screenshot("viewer", "3", &[]);
     assert!(
         o.status.success(),
         "viewer failed: {}",
@@ -93,26 +115,17 @@ fn viewer_screenshot_matches_a_render_of_the_same_frame() {
 /// goes on and writes its screenshot with the new device.
 #[test]
 fn the_viewer_recovers_from_a_lost_device() {
-    if std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
-        assert!(
-            std::env::var_os("CANOPY_REQUIRE_DISPLAY").is_none(),
-            "CANOPY_REQUIRE_DISPLAY is set but there is no DISPLAY"
-        );
-        eprintln!("skipped: no display (run under Xvfb with DISPLAY set)");
+    if !display_or_skip() {
         return;
     }
-    let out = std::env::temp_dir().join(format!("canopy-viewer-lost-{}.png", std::process::id()));
-    let _ = std::fs::remove_file(&out);
-    let o = Command::new(env!("CARGO_BIN_EXE_canopy"))
-        .env("CANOPY_TEST_LOSE_DEVICE_AT_FRAME", "2")
-        .env("RUST_LOG", "warn")
-        .arg("view")
-        .arg(common::data("small.toml"))
-        .arg("--screenshot")
-        .arg(&out)
-        .args(["--after-frames", "6", "--method", "geometry"])
-        .output()
-        .unwrap();
+    let (out, o) = view_screenshot(
+        "viewer-lost",
+        "6",
+        &[
+            ("CANOPY_TEST_LOSE_DEVICE_AT_FRAME", "2"),
+            ("RUST_LOG", "warn"),
+        ],
+    );
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "viewer failed: {err}");
     assert!(err.contains("device was lost"), "{err}");
@@ -130,16 +143,10 @@ fn the_viewer_recovers_from_a_lost_device() {
 /// machine, or one whose lavapipe settles late, runs on until it has those intervals.
 #[test]
 fn a_two_minute_soak_does_not_grow() {
-    if std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
-        assert!(
-            std::env::var_os("CANOPY_REQUIRE_DISPLAY").is_none(),
-            "CANOPY_REQUIRE_DISPLAY is set but there is no DISPLAY"
-        );
-        eprintln!("skipped: no display (run under Xvfb with DISPLAY set)");
+    if !display_or_skip() {
         return;
     }
-    let dir = std::env::temp_dir().join(format!("canopy-soak-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch_dir("soak");
     let report = dir.join("soak.csv");
     let script = dir.join("soak.toml");
     std::fs::write(
@@ -176,16 +183,10 @@ fn a_two_minute_soak_does_not_grow() {
 #[test]
 fn the_viewer_applies_scene_edits_live() {
     use std::io::BufRead;
-    if std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
-        assert!(
-            std::env::var_os("CANOPY_REQUIRE_DISPLAY").is_none(),
-            "CANOPY_REQUIRE_DISPLAY is set but there is no DISPLAY"
-        );
-        eprintln!("skipped: no display (run under Xvfb with DISPLAY set)");
+    if !display_or_skip() {
         return;
     }
-    let dir = std::env::temp_dir().join(format!("canopy-reload-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch_dir("reload");
     let scene = dir.join("scene.toml");
     let text = std::fs::read_to_string(common::data("lone_tree.toml")).unwrap();
     std::fs::write(&scene, &text).unwrap();

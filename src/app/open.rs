@@ -167,13 +167,8 @@ mod tests {
         let baked = crate::format::Baked {
             scene_hash: 42,
             settings: crate::format::BakeSettings {
-                views: 6,
-                tree_views: 6,
-                lights: 6,
-                resolution: 32,
-                supersample: 2,
-                vcm_resolution: 8,
                 texel_resolution: 0,
+                ..crate::format::test_support::settings()
             },
             btf: Vec::new(),
             vcm: Vec::new(),

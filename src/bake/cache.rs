@@ -52,17 +52,11 @@ pub fn scene_hash(scene: &Scene) -> u64 {
     })
     .unwrap_or_default();
     h = fnv1a(forest.as_bytes(), h);
-    let s = settings_of(scene);
-    for v in [
-        s.views,
-        s.lights,
-        s.resolution,
-        s.supersample,
-        s.vcm_resolution,
-        s.texel_resolution,
-        s.tree_views,
-        BAKE_REVISION,
-    ] {
+    for v in settings_of(scene)
+        .header_words()
+        .into_iter()
+        .chain([BAKE_REVISION])
+    {
         h = fnv1a(&v.to_le_bytes(), h);
     }
     // How the trees' own cube maps are laid out.

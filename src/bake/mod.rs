@@ -452,15 +452,7 @@ pub fn load_or_bake_at(
         }
         None => {}
     }
-    let settings = cache::settings_of(scene);
-    let (baked, _) = bake(
-        ctx,
-        world,
-        &settings,
-        &scene.texel,
-        cache::scene_hash(scene),
-        progress,
-    )?;
+    let (baked, _) = bake_scene(ctx, scene, world, progress)?;
     // A cache that cannot be written costs a re-bake next time, not this run.
     let not_cached = store(&path, &baked).err().map(|e| {
         log::warn!("could not cache the bake at {}: {e}", path.display());
@@ -485,17 +477,26 @@ pub fn bake_to(
     world: &World,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<(Baked, BakeTimes)> {
-    let settings = cache::settings_of(scene);
-    let (baked, times) = bake(
+    let (baked, times) = bake_scene(ctx, scene, world, progress)?;
+    store(path, &baked)?;
+    Ok((baked, times))
+}
+
+/// Bakes `scene` (its `world` built) with the scene's settings, stamped with its hash.
+fn bake_scene(
+    ctx: &GpuContext,
+    scene: &crate::scene::Scene,
+    world: &World,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<(Baked, BakeTimes)> {
+    bake(
         ctx,
         world,
-        &settings,
+        &cache::settings_of(scene),
         &scene.texel,
         cache::scene_hash(scene),
         progress,
-    )?;
-    store(path, &baked)?;
-    Ok((baked, times))
+    )
 }
 
 /// Writes `baked` to `path` atomically, creating its folder first.

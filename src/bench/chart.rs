@@ -548,29 +548,30 @@ mod tests {
         ]
     }
 
-    /// Decodes the PNG at `path` and returns its size and number of distinct colours.
-    fn inspect(path: &Path) -> ((u32, u32), usize) {
+    /// Checks the PNG at `path`: `size`, more than 20 distinct colours (not blank, not
+    /// text-less), and the first `series` colours of the palette among them; then removes
+    /// its folder.
+    fn check_chart(path: &Path, size: (u32, u32), series: usize) {
         let img = image::open(path).unwrap().to_rgb8();
         let colours: HashSet<[u8; 3]> = img.pixels().map(|p| p.0).collect();
-        (img.dimensions(), colours.len())
+        assert_eq!(img.dimensions(), size);
+        assert!(
+            colours.len() > 20,
+            "{} colours: blank or text-less",
+            colours.len()
+        );
+        for c in &PALETTE[..series] {
+            assert!(colours.contains(&[c.0, c.1, c.2]), "{c:?} missing");
+        }
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
     }
 
     #[test]
     fn the_speed_accuracy_chart_is_a_png_of_the_asked_size_with_color() {
         let path = out("speed.png");
         speed_accuracy_chart(&path, &sample_points(), (900, 600)).unwrap();
-        let (dims, colours) = inspect(&path);
-        assert_eq!(dims, (900, 600));
-        assert!(colours > 20, "{colours} colours: blank or text-less");
         // Each method's colour is there.
-        let img = image::open(&path).unwrap().to_rgb8();
-        for c in &PALETTE[..4] {
-            assert!(
-                img.pixels().any(|p| p.0 == [c.0, c.1, c.2]),
-                "{c:?} missing"
-            );
-        }
-        let _ = std::fs::remove_dir_all(path.parent().unwrap());
+        check_chart(&path, (900, 600), 4);
     }
 
     #[test]
@@ -588,17 +589,7 @@ mod tests {
             })
             .collect();
         flight_chart(&path, &series, (800, 700)).unwrap();
-        let (dims, colours) = inspect(&path);
-        assert_eq!(dims, (800, 700));
-        assert!(colours > 20, "{colours} colours");
-        let img = image::open(&path).unwrap().to_rgb8();
-        for c in &PALETTE[..3] {
-            assert!(
-                img.pixels().any(|p| p.0 == [c.0, c.1, c.2]),
-                "{c:?} missing"
-            );
-        }
-        let _ = std::fs::remove_dir_all(path.parent().unwrap());
+        check_chart(&path, (800, 700), 3);
     }
 
     #[test]

@@ -143,18 +143,27 @@ fn options(
     })
 }
 
-/// Runs `configs` along `frames` from the scene's frame, with a progress bar.
-#[allow(clippy::too_many_arguments)]
-fn measure(
-    ctx: &GpuContext,
-    renderer: &mut Renderer,
-    scene: &Scene,
-    frames: &[super::flight::FlightFrame],
-    configs: &[Config],
-    opts: &BenchOptions,
+/// What every measurement of a command shares: the GPU, the scene and the frames along
+/// its flight, the bench options, and the progress bar's switch and name.
+struct Measure<'a> {
+    ctx: &'a GpuContext,
+    scene: &'a Scene,
+    frames: &'a [super::flight::FlightFrame],
+    opts: &'a BenchOptions,
     progress: bool,
-    what: &str,
-) -> Result<BenchResults> {
+    what: &'a str,
+}
+
+/// Runs `configs` along `m`'s frames from the scene's frame, with a progress bar.
+fn measure(m: &Measure<'_>, renderer: &mut Renderer, configs: &[Config]) -> Result<BenchResults> {
+    let Measure {
+        ctx,
+        scene,
+        frames,
+        opts,
+        progress,
+        what,
+    } = *m;
     let n = frames.len();
     let base = FrameDesc::from_scene(scene);
     let total = (n * (configs.len() + 1)) as u64;
@@ -204,16 +213,15 @@ pub fn run_command(req: &BenchRequest) -> Result<BenchOutcome> {
     let bake = configs.iter().any(|c| c.method.needs_bake());
     let (ctx, mut renderer) = renderer(&scene, &world, req.adapter, bake, req.progress)?;
     let frames = flight.frames(n);
-    let results = measure(
-        &ctx,
-        &mut renderer,
-        &scene,
-        &frames,
-        &configs,
-        &opts,
-        req.progress,
-        "bench",
-    )?;
+    let m = Measure {
+        ctx: &ctx,
+        scene: &scene,
+        frames: &frames,
+        opts: &opts,
+        progress: req.progress,
+        what: "bench",
+    };
+    let results = measure(&m, &mut renderer, &configs)?;
     let run = RunInfo {
         scene: req
             .scene
@@ -298,6 +306,14 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
     let frames = flight.frames(req.frames);
     let (ctx, mut renderer) = renderer(&scene, &world, req.adapter, !req.bake, req.progress)?;
     let base = FrameDesc::from_scene(&scene);
+    let m = Measure {
+        ctx: &ctx,
+        scene: &scene,
+        frames: &frames,
+        opts: &opts,
+        progress: req.progress,
+        what: "tune",
+    };
     let (results, bakes) = if req.bake {
         let mut all: Option<BenchResults> = None;
         let mut bakes = Vec::new();
@@ -348,16 +364,7 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
                 })
                 .collect();
             bakes.extend(configs.iter().map(|_| Some((*b, bytes))));
-            let r = measure(
-                &ctx,
-                &mut renderer,
-                &scene,
-                &frames,
-                &configs,
-                &opts,
-                req.progress,
-                "tune",
-            )?;
+            let r = measure(&m, &mut renderer, &configs)?;
             match &mut all {
                 Some(a) => a.append(r),
                 None => all = Some(r),
@@ -367,16 +374,7 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
         (all, bakes)
     } else {
         let configs = candidates(&base);
-        let r = measure(
-            &ctx,
-            &mut renderer,
-            &scene,
-            &frames,
-            &configs,
-            &opts,
-            req.progress,
-            "tune",
-        )?;
+        let r = measure(&m, &mut renderer, &configs)?;
         let bakes = vec![None; r.configs.len()];
         (r, bakes)
     };

@@ -127,7 +127,7 @@ mod check;
 mod plan;
 mod read;
 #[cfg(test)]
-mod test_support;
+pub(crate) mod test_support;
 mod write;
 
 pub use plan::{btf_record_bytes, file_bytes_for, texel_record_bytes, vcm_record_bytes};
@@ -434,6 +434,33 @@ fn level_from_tag(tag: u8) -> Option<Level> {
 }
 
 impl BakeSettings {
+    /// The settings as the header stores them, in its order (what the scene hash folds in
+    /// too).
+    pub fn header_words(&self) -> [u32; 7] {
+        [
+            self.views,
+            self.lights,
+            self.resolution,
+            self.supersample,
+            self.vcm_resolution,
+            self.texel_resolution,
+            self.tree_views,
+        ]
+    }
+
+    /// The settings from the header's words (see [`Self::header_words`]).
+    pub fn from_header_words(w: [u32; 7]) -> Self {
+        Self {
+            views: w[0],
+            lights: w[1],
+            resolution: w[2],
+            supersample: w[3],
+            vcm_resolution: w[4],
+            texel_resolution: w[5],
+            tree_views: w[6],
+        }
+    }
+
     /// View directions of the image sets of `level`: the tree level has its own count.
     pub fn views_of(&self, level: Level) -> u32 {
         match level {

@@ -195,15 +195,8 @@ fn decode<R: Read>(
             expected,
         });
     }
-    let settings = BakeSettings {
-        views: u32_at(&rest, 20),
-        lights: u32_at(&rest, 24),
-        resolution: u32_at(&rest, 28),
-        supersample: u32_at(&rest, 32),
-        vcm_resolution: u32_at(&rest, 36),
-        texel_resolution: u32_at(&rest, 40),
-        tree_views: u32_at(&rest, 44),
-    };
+    let settings =
+        BakeSettings::from_header_words(std::array::from_fn(|i| u32_at(&rest, 20 + 4 * i)));
     settings.validate()?;
 
     let mut entries = Vec::with_capacity(section_count as usize);

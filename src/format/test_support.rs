@@ -2,7 +2,7 @@
 //! holds, sample bakes, and helpers that edit and reseal encoded bytes.
 
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::read::{u32_at, u64_at};
@@ -222,14 +222,7 @@ pub(crate) fn scratch_dir(name: &str) -> PathBuf {
     dir
 }
 
-pub(crate) fn dir_entries(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
-}
+pub(crate) use crate::atomic_file::dir_entries;
 
 #[test]
 pub(crate) fn the_allocation_tracker_sees_allocations() {

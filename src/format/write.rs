@@ -97,22 +97,13 @@ impl<'a> Encoding<'a> {
         let file_size = plans
             .iter()
             .fold(header_len as u64, |acc, p| acc.saturating_add(p.len));
-        let s = &baked.settings;
         let mut header = Vec::with_capacity(header_len);
         header.extend_from_slice(&MAGIC);
         header.extend_from_slice(&VERSION.to_le_bytes());
         header.extend_from_slice(&(plans.len() as u32).to_le_bytes());
         header.extend_from_slice(&file_size.to_le_bytes());
         header.extend_from_slice(&baked.scene_hash.to_le_bytes());
-        for v in [
-            s.views,
-            s.lights,
-            s.resolution,
-            s.supersample,
-            s.vcm_resolution,
-            s.texel_resolution,
-            s.tree_views,
-        ] {
+        for v in baked.settings.header_words() {
             header.extend_from_slice(&v.to_le_bytes());
         }
         for plan in &plans {

@@ -99,20 +99,13 @@ pub struct DepthTarget {
 impl DepthTarget {
     pub fn new(ctx: &GpuContext, width: u32, height: u32) -> Result<Self> {
         let texture = ctx.checked("allocating the depth buffer", || {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("depth"),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: DEPTH_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-                view_formats: &[],
-            })
+            super::pipelines::target_texture(
+                &ctx.device,
+                "depth",
+                glam::UVec3::new(width, height, 1),
+                DEPTH_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT,
+            )
         })?;
         Ok(Self {
             size: (width, height),

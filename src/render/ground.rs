@@ -55,24 +55,16 @@ pub struct GroundTextures {
 
 impl GroundTextures {
     fn new(ctx: &GpuContext, size: u32) -> Result<Self> {
-        let extent = wgpu::Extent3d {
-            width: size,
-            height: size,
-            depth_or_array_layers: 1,
-        };
         let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
         let (color, depth) = ctx.checked("allocating the ground shadow maps", || {
             let texture = |label, format| {
-                ctx.device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: extent,
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
+                pipelines::target_texture(
+                    &ctx.device,
+                    label,
+                    glam::UVec3::new(size, size, 1),
                     format,
                     usage,
-                    view_formats: &[],
-                })
+                )
             };
             (
                 texture("ground alpha shadow map", GROUND_FORMAT),

@@ -1,5 +1,7 @@
 //! Bind group layouts and render pipelines of the geometry method, built once per colour
-//! format (a window surface is often BGRA, offscreen targets RGBA).
+//! format (a window surface is often BGRA, offscreen targets RGBA), and the small builders
+//! every pass shares: layout entries, storage buffers, sampled RGBA8 textures, the
+//! `geometry.wgsl` mesh pipelines.
 
 use super::{DEPTH_FORMAT, SHADOW_FORMAT, shaders};
 use crate::model::mesh::Vertex;
@@ -34,12 +36,201 @@ fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGrou
     buffer_entry(binding, visibility, wgpu::BufferBindingType::Uniform)
 }
 
-fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+/// A layout entry for a read-only storage buffer seen by `visibility`.
+pub(crate) fn storage_entry(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+) -> wgpu::BindGroupLayoutEntry {
     buffer_entry(
         binding,
-        wgpu::ShaderStages::VERTEX,
+        visibility,
         wgpu::BufferBindingType::Storage { read_only: true },
     )
+}
+
+/// The sample type of a colour texture read through a filtering sampler.
+pub(crate) const FILTERABLE: wgpu::TextureSampleType =
+    wgpu::TextureSampleType::Float { filterable: true };
+
+/// A layout entry for a (single-sampled) texture the fragment stage reads.
+pub(crate) fn texture_entry(
+    binding: u32,
+    sample_type: wgpu::TextureSampleType,
+    view_dimension: wgpu::TextureViewDimension,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Texture {
+            sample_type,
+            view_dimension,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+/// A layout entry for a sampler the fragment stage uses.
+pub(crate) fn sampler_entry(
+    binding: u32,
+    ty: wgpu::SamplerBindingType,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Sampler(ty),
+        count: None,
+    }
+}
+
+/// A storage buffer of `size` bytes the queue writes into.
+pub(crate) fn storage_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// A storage buffer the queue writes into, room for `count` (at least one) `T`s.
+pub(crate) fn storage_buffer_of<T>(
+    device: &wgpu::Device,
+    label: &str,
+    count: usize,
+) -> wgpu::Buffer {
+    storage_buffer(
+        device,
+        label,
+        (count.max(1) * std::mem::size_of::<T>()) as u64,
+    )
+}
+
+/// Writes `items` at the start of `buffer`, first replacing it (labelled `label`) by a
+/// storage buffer with room for the next power of two of them when they do not fit; says
+/// whether it did (a bind group holding the old buffer must then be made again).
+pub(crate) fn write_growing<T: bytemuck::Pod>(
+    ctx: &super::GpuContext,
+    buffer: &mut wgpu::Buffer,
+    label: &str,
+    items: &[T],
+) -> bool {
+    let bytes: &[u8] = bytemuck::cast_slice(items);
+    let grown = bytes.len() as u64 > buffer.size();
+    if grown {
+        *buffer = storage_buffer_of::<T>(&ctx.device, label, items.len().next_power_of_two());
+    }
+    if !bytes.is_empty() {
+        ctx.queue.write_buffer(buffer, 0, bytes);
+    }
+    grown
+}
+
+/// A shader module from WGSL `source`.
+pub(crate) fn wgsl_module(device: &wgpu::Device, label: &str, source: &str) -> wgpu::ShaderModule {
+    device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    })
+}
+
+/// An sRGB RGBA8 texture of `size` (width, height, depth or layers) with `mips` levels,
+/// sampled by shaders and filled by the queue.
+pub(crate) fn sampled_rgba8_texture(
+    device: &wgpu::Device,
+    label: &str,
+    dimension: wgpu::TextureDimension,
+    size: glam::UVec3,
+    mips: u32,
+) -> wgpu::Texture {
+    texture(
+        device,
+        label,
+        dimension,
+        size,
+        mips,
+        wgpu::TextureFormat::Rgba8UnormSrgb,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+    )
+}
+
+/// A 2D texture of `size` (width, height, layers) and one level, for drawing into.
+pub(crate) fn target_texture(
+    device: &wgpu::Device,
+    label: &str,
+    size: glam::UVec3,
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    texture(
+        device,
+        label,
+        wgpu::TextureDimension::D2,
+        size,
+        1,
+        format,
+        usage,
+    )
+}
+
+fn texture(
+    device: &wgpu::Device,
+    label: &str,
+    dimension: wgpu::TextureDimension,
+    size: glam::UVec3,
+    mips: u32,
+    format: wgpu::TextureFormat,
+    usage: wgpu::TextureUsages,
+) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(label),
+        size: extent(size),
+        mip_level_count: mips,
+        sample_count: 1,
+        dimension,
+        format,
+        usage,
+        view_formats: &[],
+    })
+}
+
+/// Writes tightly packed RGBA8 `data` of `size` texels into mip `level` of `texture` at
+/// `origin`.
+pub(crate) fn write_rgba8(
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    level: u32,
+    origin: glam::UVec3,
+    data: &[u8],
+    size: glam::UVec3,
+) {
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: level,
+            origin: wgpu::Origin3d {
+                x: origin.x,
+                y: origin.y,
+                z: origin.z,
+            },
+            aspect: wgpu::TextureAspect::All,
+        },
+        data,
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(4 * size.x),
+            rows_per_image: Some(size.y),
+        },
+        extent(size),
+    );
+}
+
+fn extent(size: glam::UVec3) -> wgpu::Extent3d {
+    wgpu::Extent3d {
+        width: size.x,
+        height: size.y,
+        depth_or_array_layers: size.z,
+    }
 }
 
 impl Layouts {
@@ -49,59 +240,21 @@ impl Layouts {
             label: Some("frame"),
             entries: &[
                 uniform_entry(0, vf),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Depth,
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Comparison),
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 3,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 4,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 5,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Depth,
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                texture_entry(
+                    1,
+                    wgpu::TextureSampleType::Depth,
+                    wgpu::TextureViewDimension::D2Array,
+                ),
+                sampler_entry(2, wgpu::SamplerBindingType::Comparison),
+                texture_entry(3, FILTERABLE, wgpu::TextureViewDimension::D2),
+                sampler_entry(4, wgpu::SamplerBindingType::Filtering),
+                texture_entry(
+                    5,
+                    wgpu::TextureSampleType::Depth,
+                    wgpu::TextureViewDimension::D2Array,
+                ),
                 // The reference's sky visibility volume and its placement.
-                wgpu::BindGroupLayoutEntry {
-                    binding: 6,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D3,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                texture_entry(6, FILTERABLE, wgpu::TextureViewDimension::D3),
                 uniform_entry(7, wgpu::ShaderStages::FRAGMENT),
                 // The overdraw view's counters (src/render/overdraw.rs).
                 buffer_entry(
@@ -117,12 +270,12 @@ impl Layouts {
         });
         let trees = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("trees"),
-            entries: &[storage_entry(0)],
+            entries: &[storage_entry(0, wgpu::ShaderStages::VERTEX)],
         });
         let parts = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("parts"),
             entries: &[
-                storage_entry(0),
+                storage_entry(0, wgpu::ShaderStages::VERTEX),
                 uniform_entry(1, wgpu::ShaderStages::VERTEX),
             ],
         });
@@ -216,10 +369,7 @@ pub(crate) fn light_view_pipeline(
     device: &wgpu::Device,
     p: &LightView<'_>,
 ) -> wgpu::RenderPipeline {
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("shadow.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(shaders::shadow().into()),
-    });
+    let module = wgsl_module(device, "shadow.wgsl", &shaders::shadow());
     let groups = match p.groups.iter().rposition(Option::is_some) {
         Some(last) => &p.groups[..=last],
         None => &p.groups[..0],
@@ -230,12 +380,9 @@ pub(crate) fn light_view_pipeline(
         immediate_size: 0,
     });
     let fragment_module = p.fragment.as_ref().and_then(|f| {
-        f.source.as_ref().map(|source| {
-            device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(f.entry),
-                source: wgpu::ShaderSource::Wgsl(source.as_str().into()),
-            })
-        })
+        f.source
+            .as_ref()
+            .map(|source| wgsl_module(device, f.entry, source))
     });
     let targets = p.fragment.as_ref().map(|f| {
         [Some(wgpu::ColorTargetState {
@@ -317,23 +464,8 @@ impl ColorPipelines {
     }
 
     pub fn new(device: &wgpu::Device, layouts: &Layouts, format: wgpu::TextureFormat) -> Self {
-        let geometry = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("geometry.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::geometry().into()),
-        });
-        let sky = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("sky.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::sky().into()),
-        });
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("geometry"),
-            bind_group_layouts: &[
-                Some(&layouts.frame),
-                Some(&layouts.trees),
-                Some(&layouts.parts),
-            ],
-            immediate_size: 0,
-        });
+        let geometry = GeometryPass::new(device, layouts, "geometry", None);
+        let sky = wgsl_module(device, "sky.wgsl", &shaders::sky());
         let sky_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("sky"),
             bind_group_layouts: &[Some(&layouts.frame)],
@@ -345,8 +477,13 @@ impl ColorPipelines {
             write_mask: wgpu::ColorWrites::ALL,
         })];
         let mesh_pipeline = |label: &str, cull_mode: Option<wgpu::Face>, fragment: &str| {
-            mesh_pipeline(
-                device, &layout, &geometry, label, cull_mode, fragment, &target,
+            geometry.pipeline(
+                device,
+                label,
+                cull_mode,
+                fragment,
+                &target,
+                MeshDepth::TESTED,
             )
         };
         let opaque = mesh_pipeline("geometry opaque", Some(wgpu::Face::Back), "fs_main");
@@ -416,47 +553,93 @@ impl ColorPipelines {
     }
 }
 
-/// A pipeline drawing meshes of `geometry.wgsl` (`vs_main` and `fragment`) into one colour
-/// target, depth-tested and written (reversed Z: nearer is larger).
-pub(crate) fn mesh_pipeline(
-    device: &wgpu::Device,
-    layout: &wgpu::PipelineLayout,
-    module: &wgpu::ShaderModule,
-    label: &str,
-    cull_mode: Option<wgpu::Face>,
-    fragment: &str,
-    target: &[Option<wgpu::ColorTargetState>],
-) -> wgpu::RenderPipeline {
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
-        layout: Some(layout),
-        vertex: wgpu::VertexState {
-            module,
-            entry_point: Some("vs_main"),
-            compilation_options: Default::default(),
-            buffers: &[Some(vertex_layout())],
-        },
-        primitive: wgpu::PrimitiveState {
-            cull_mode,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Greater),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module,
-            entry_point: Some(fragment),
-            compilation_options: Default::default(),
-            targets: target,
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+/// `geometry.wgsl` and a pipeline layout over the frame, the trees, the parts and, for some
+/// passes, a fourth group: what every pass drawing the forest's meshes builds on.
+pub(crate) struct GeometryPass {
+    module: wgpu::ShaderModule,
+    layout: wgpu::PipelineLayout,
+}
+
+/// How a mesh pipeline uses the depth buffer.
+#[derive(Clone, Copy)]
+pub(crate) struct MeshDepth {
+    pub write: bool,
+    pub compare: wgpu::CompareFunction,
+}
+
+impl MeshDepth {
+    /// Tested and written, reversed Z: nearer is larger.
+    pub const TESTED: Self = Self {
+        write: true,
+        compare: wgpu::CompareFunction::Greater,
+    };
+}
+
+impl GeometryPass {
+    pub fn new(
+        device: &wgpu::Device,
+        layouts: &Layouts,
+        label: &str,
+        group3: Option<&wgpu::BindGroupLayout>,
+    ) -> Self {
+        let module = wgsl_module(device, "geometry.wgsl", &shaders::geometry());
+        let groups = [
+            Some(&layouts.frame),
+            Some(&layouts.trees),
+            Some(&layouts.parts),
+            group3,
+        ];
+        let count = if group3.is_some() { 4 } else { 3 };
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &groups[..count],
+            immediate_size: 0,
+        });
+        Self { module, layout }
+    }
+
+    /// A pipeline drawing meshes with `vs_main` and `fragment` into `targets`, faces
+    /// `cull_mode`d, using depth as `depth` says.
+    pub fn pipeline(
+        &self,
+        device: &wgpu::Device,
+        label: &str,
+        cull_mode: Option<wgpu::Face>,
+        fragment: &str,
+        targets: &[Option<wgpu::ColorTargetState>],
+        depth: MeshDepth,
+    ) -> wgpu::RenderPipeline {
+        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some(label),
+            layout: Some(&self.layout),
+            vertex: wgpu::VertexState {
+                module: &self.module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(vertex_layout())],
+            },
+            primitive: wgpu::PrimitiveState {
+                cull_mode,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(depth.write),
+                depth_compare: Some(depth.compare),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &self.module,
+                entry_point: Some(fragment),
+                compilation_options: Default::default(),
+                targets,
+            }),
+            multiview_mask: None,
+            cache: None,
+        })
+    }
 }
 
 /// A pipeline drawing procedural instances (no vertex buffers) over the frame, blended
@@ -476,10 +659,7 @@ pub struct Blended<'a> {
 }
 
 pub fn blended_pipeline(device: &wgpu::Device, p: Blended<'_>) -> wgpu::RenderPipeline {
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(p.label),
-        source: wgpu::ShaderSource::Wgsl(p.source.into()),
-    });
+    let module = wgsl_module(device, p.label, &p.source);
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(p.fragment),
         bind_group_layouts: &[Some(p.layouts[0]), Some(p.layouts[1])],

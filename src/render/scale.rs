@@ -4,6 +4,7 @@
 //! when there is room.
 
 use super::GpuContext;
+use super::pipelines::{FILTERABLE, sampler_entry, target_texture, texture_entry, wgsl_module};
 use crate::Result;
 
 /// The smallest fraction of the window the 3D view is drawn at.
@@ -108,22 +109,8 @@ impl Upscaler {
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("render scale"),
                 entries: &[
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 0,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                            view_dimension: wgpu::TextureViewDimension::D2,
-                            multisampled: false,
-                        },
-                        count: None,
-                    },
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 1,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                        count: None,
-                    },
+                    texture_entry(0, FILTERABLE, wgpu::TextureViewDimension::D2),
+                    sampler_entry(1, wgpu::SamplerBindingType::Filtering),
                 ],
             });
         Self {
@@ -149,21 +136,13 @@ impl Upscaler {
             .is_none_or(|t| t.2 != size || t.3 != format);
         if stale {
             let texture = ctx.checked("allocating the scaled view", || {
-                ctx.device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some("render scale"),
-                    size: wgpu::Extent3d {
-                        width: size.0,
-                        height: size.1,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
+                target_texture(
+                    &ctx.device,
+                    "render scale",
+                    glam::UVec3::new(size.0, size.1, 1),
                     format,
-                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                        | wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                })
+                    wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+                )
             })?;
             let view = texture.create_view(&Default::default());
             self.texture = Some((texture, view, size, format));
@@ -181,12 +160,7 @@ impl Upscaler {
         };
         let layout = &self.layout;
         let pipeline = self.pipelines.entry(format).or_insert_with(|| {
-            let module = ctx
-                .device
-                .create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some("blit.wgsl"),
-                    source: wgpu::ShaderSource::Wgsl(super::shaders::blit().into()),
-                });
+            let module = wgsl_module(&ctx.device, "blit.wgsl", &super::shaders::blit());
             let pl = ctx
                 .device
                 .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

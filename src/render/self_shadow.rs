@@ -23,13 +23,13 @@ use glam::{Mat4, Vec3};
 use super::frame::FrameStats;
 use super::frame_bindings::DepthTarget;
 use super::pipelines::{
-    Layouts, LightFragment, LightView, MeshPipelines, SHADOW_BIAS, buffer_entry,
-    light_view_pipeline, mesh_pipeline,
+    GeometryPass, Layouts, LightFragment, LightView, MeshDepth, MeshPipelines, SHADOW_BIAS,
+    light_view_pipeline, storage_buffer_of, storage_entry, texture_entry,
 };
 use super::shadow::{CASCADES, Cascades, layered_target};
 use super::timing::PassSpans;
 use super::world_gpu::{TreeRun, WorldGpu};
-use super::{GpuContext, SHADOW_FORMAT, shaders};
+use super::{GpuContext, SHADOW_FORMAT};
 use crate::{Error, Result};
 
 /// Texel format of the cascades' tree keys.
@@ -134,40 +134,22 @@ impl SelfShadow {
         let (map_array, map_views) =
             layered_target(ctx, "per-tree sun maps", size, layers, SHADOW_FORMAT)?;
         let lights = ctx.checked("allocating the per-tree sun matrices", || {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("per-tree sun matrices"),
-                size: (slots.max(1) * std::mem::size_of::<SelfLightGpu>()) as u64,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
+            storage_buffer_of::<SelfLightGpu>(device, "per-tree sun matrices", slots)
         })?;
-        let storage = |visibility| {
-            buffer_entry(
-                2,
-                visibility,
-                wgpu::BufferBindingType::Storage { read_only: true },
-            )
-        };
+        let storage = |visibility| storage_entry(2, visibility);
         let lights_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("per-tree sun matrices"),
             entries: &[storage(wgpu::ShaderStages::VERTEX)],
         });
-        let texture_entry = |binding, sample_type| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::FRAGMENT,
-            ty: wgpu::BindingType::Texture {
-                sample_type,
-                view_dimension: wgpu::TextureViewDimension::D2Array,
-                multisampled: false,
-            },
-            count: None,
+        let array_entry = |binding, sample_type| {
+            texture_entry(binding, sample_type, wgpu::TextureViewDimension::D2Array)
         };
         let reference_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("reference sun maps"),
             entries: &[
                 storage(wgpu::ShaderStages::FRAGMENT),
-                texture_entry(3, wgpu::TextureSampleType::Depth),
-                texture_entry(4, wgpu::TextureSampleType::Uint),
+                array_entry(3, wgpu::TextureSampleType::Depth),
+                array_entry(4, wgpu::TextureSampleType::Uint),
             ],
         });
         let lights_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -449,34 +431,20 @@ fn reference_pipelines(
     reference: &wgpu::BindGroupLayout,
     format: wgpu::TextureFormat,
 ) -> (wgpu::RenderPipeline, wgpu::RenderPipeline) {
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("geometry.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(shaders::geometry().into()),
-    });
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("reference trees"),
-        bind_group_layouts: &[
-            Some(&layouts.frame),
-            Some(&layouts.trees),
-            Some(&layouts.parts),
-            Some(reference),
-        ],
-        immediate_size: 0,
-    });
+    let pass = GeometryPass::new(device, layouts, "reference trees", Some(reference));
     let target = [Some(wgpu::ColorTargetState {
         format,
         blend: None,
         write_mask: wgpu::ColorWrites::ALL,
     })];
     let pipeline = |label: &str, cull_mode: Option<wgpu::Face>| {
-        mesh_pipeline(
+        pass.pipeline(
             device,
-            &layout,
-            &module,
             label,
             cull_mode,
             "fs_reference",
             &target,
+            MeshDepth::TESTED,
         )
     };
     (

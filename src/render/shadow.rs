@@ -174,20 +174,13 @@ pub(crate) fn layered_target(
     format: wgpu::TextureFormat,
 ) -> crate::Result<(wgpu::TextureView, Vec<wgpu::TextureView>)> {
     let texture = ctx.checked(&format!("allocating the {label}"), || {
-        ctx.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: wgpu::Extent3d {
-                width: size,
-                height: size,
-                depth_or_array_layers: layers,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
+        super::pipelines::target_texture(
+            &ctx.device,
+            label,
+            glam::UVec3::new(size, size, layers),
             format,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        })
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        )
     })?;
     let array = texture.create_view(&wgpu::TextureViewDescriptor {
         dimension: Some(wgpu::TextureViewDimension::D2Array),

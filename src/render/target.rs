@@ -50,20 +50,13 @@ impl OffscreenTarget {
     pub fn new(ctx: &GpuContext, width: u32, height: u32) -> Result<Self> {
         check_size(width, height, Some(ctx))?;
         let texture = ctx.checked("creating the offscreen target", || {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("offscreen colour"),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: OFFSCREEN_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-                view_formats: &[],
-            })
+            super::pipelines::target_texture(
+                &ctx.device,
+                "offscreen colour",
+                glam::UVec3::new(width, height, 1),
+                OFFSCREEN_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            )
         })?;
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
         Ok(Self {

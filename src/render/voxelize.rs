@@ -10,9 +10,8 @@ use glam::{UVec3, Vec3};
 
 use super::meshes::{MeshPasses, encode_cascades};
 use super::method::geometry::GeometryFrame;
-use super::pipelines::vertex_layout;
-use super::pipelines::{Layouts, buffer_entry};
-use super::{DEPTH_FORMAT, FrameDesc, FrameStats, GpuContext, Stage, shaders, target};
+use super::pipelines::{GeometryPass, Layouts, MeshDepth, buffer_entry};
+use super::{FrameDesc, FrameStats, GpuContext, Stage, target};
 use crate::{Error, Result};
 
 /// Fixed-point scale of the colour sums (1.0 = this many units).
@@ -59,53 +58,14 @@ impl VoxelPipeline {
                 ),
             ],
         });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("geometry.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(shaders::geometry().into()),
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("voxelise"),
-            bind_group_layouts: &[
-                Some(&layouts.frame),
-                Some(&layouts.trees),
-                Some(&layouts.parts),
-                Some(&layout),
-            ],
-            immediate_size: 0,
-        });
-        let pipeline = |cull_mode| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("voxelise"),
-                layout: Some(&pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(vertex_layout())],
-                },
-                // Every face, hidden or not: each is in some slab.
-                primitive: wgpu::PrimitiveState {
-                    cull_mode,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(false),
-                    depth_compare: Some(wgpu::CompareFunction::Always),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("fs_voxel"),
-                    compilation_options: Default::default(),
-                    targets: &[],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+        let pass = GeometryPass::new(device, layouts, "voxelise", Some(&layout));
+        // Every face, hidden or not: each is in some slab.
+        let depth = MeshDepth {
+            write: false,
+            compare: wgpu::CompareFunction::Always,
         };
+        let pipeline =
+            |cull_mode| pass.pipeline(device, "voxelise", cull_mode, "fs_voxel", &[], depth);
         Self {
             opaque: pipeline(Some(wgpu::Face::Back)),
             foliage: pipeline(None),

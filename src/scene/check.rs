@@ -383,18 +383,8 @@ mod tests {
         );
         // Neither preset nor params: reported at the entry's header.
         let (text, _) = edit("preset = \"broadleaf\"", "");
-        let header = BASE
-            .lines()
-            .enumerate()
-            .filter(|(_, l)| *l == "[[species]]")
-            .nth(1)
-            .map(|(i, _)| i + 1)
-            .unwrap_or(0);
-        let msg = error_of(&text);
-        assert!(
-            msg.starts_with(&format!("scene.toml:{header}: species[1]: give `preset`")),
-            "{msg}"
-        );
+        let header = nth_line(BASE, 1, |l| l == "[[species]]");
+        error_at(&text, header, "species[1]: give `preset`");
         // Both.
         let text = BASE.replace(
             "preset = \"broadleaf\"\nseed = 2\n",
@@ -403,18 +393,8 @@ mod tests {
                 crate::model::species::BROADLEAF_TOML
             ),
         );
-        let line = text
-            .lines()
-            .position(|l| l == "preset = \"broadleaf\"")
-            .map(|i| i + 1)
-            .unwrap_or(0);
-        let msg = error_of(&text);
-        assert!(
-            msg.starts_with(&format!(
-                "scene.toml:{line}: species[1].preset: give either"
-            )),
-            "{msg}"
-        );
+        let line = nth_line(&text, 0, |l| l == "preset = \"broadleaf\"");
+        error_at(&text, line, "species[1].preset: give either");
         // No species at all.
         let text = BASE
             .replace(
@@ -437,15 +417,8 @@ mod tests {
                 "[[species]]\nname = \"extra{i}\"\npreset = \"fir\"\nseed = 1\n"
             ));
         }
-        let msg = error_of(&text);
-        let line = BASE
-            .lines()
-            .position(|l| l == "[[species]]")
-            .map_or(0, |i| i + 1);
-        assert!(
-            msg.starts_with(&format!("scene.toml:{line}: species: at most 64 species")),
-            "{msg}"
-        );
+        let line = nth_line(BASE, 0, |l| l == "[[species]]");
+        error_at(&text, line, "species: at most 64 species");
     }
 
     #[test]

@@ -75,6 +75,26 @@ pub(crate) fn error_of(text: &str) -> String {
     }
 }
 
+/// The 1-based number of the `nth` (from 0) line of `text` that `is` picks; 0 when none.
+pub(crate) fn nth_line(text: &str, nth: usize, is: impl Fn(&str) -> bool) -> usize {
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| is(l))
+        .nth(nth)
+        .map_or(0, |(i, _)| i + 1)
+}
+
+/// Parses `text`, which must fail with a message that starts `scene.toml:{line}: {start}`;
+/// returns the message.
+pub(crate) fn error_at(text: &str, line: usize, start: &str) -> String {
+    let msg = error_of(text);
+    assert!(
+        msg.starts_with(&format!("scene.toml:{line}: {start}")),
+        "{msg}"
+    );
+    msg
+}
+
 /// `edit` + parse; asserts the message has the file, the line and the key.
 pub(crate) fn expect_error(from: &str, to: &str, key: &str, words: &[&str]) -> String {
     let (text, line) = edit(from, to);

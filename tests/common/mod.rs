@@ -4,7 +4,9 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
+use canopy::format::Baked;
 use canopy::model::World;
 use canopy::render::{AdapterPreference, Camera, FrameDesc, GpuContext, Renderer};
 use canopy::scene::Scene;
@@ -23,8 +25,82 @@ pub fn data(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// `tests/data/{name}`, parsed.
+pub fn load_scene(name: &str) -> Scene {
+    Scene::load(&data(name)).unwrap_or_else(|e| panic!("tests/data/{name} parses: {e:?}"))
+}
+
 pub fn small_scene() -> Scene {
-    Scene::load(&data("small.toml")).expect("tests/data/small.toml parses")
+    load_scene("small.toml")
+}
+
+/// `scene` and the world it builds.
+pub fn built(scene: Scene) -> (Scene, World) {
+    let world = scene.build_world().unwrap();
+    (scene, world)
+}
+
+/// The BTF image sets of `scene`'s trees (no cube maps), baked on a fresh context.
+pub fn bake_btf(scene: &Scene) -> Baked {
+    let ctx = gpu();
+    let world = scene.build_world().unwrap();
+    let settings = canopy::bake::cache::settings_of(scene);
+    canopy::bake::bake_btf(&ctx, &world, &settings, 0, &mut |_| {}).unwrap()
+}
+
+/// The BTF test stand (`tests/data/btf.toml`).
+pub fn btf_stand() -> Scene {
+    load_scene("btf.toml")
+}
+
+/// One fir on flat ground, sun from the south-east at 45 degrees
+/// (`tests/data/lone_tree.toml`).
+pub fn lone_fir() -> Scene {
+    load_scene("lone_tree.toml")
+}
+
+/// The lone fir's BTF image sets, baked once per test process.
+pub fn lone_fir_btf() -> &'static Baked {
+    static BAKED: OnceLock<Baked> = OnceLock::new();
+    BAKED.get_or_init(|| bake_btf(&lone_fir()))
+}
+
+/// `world`'s bake: the lone fir's BTF and the cube maps of `world` (a world of firs).
+pub fn fir_bake_for(world: &World) -> Baked {
+    let mut baked = lone_fir_btf().clone();
+    baked.vcm = canopy::bake::vcm::bake_vcm(world, &baked.btf, 32, &mut |_, _| {}).unwrap();
+    baked
+}
+
+/// A world of firs at `trees` (positions with their scales) on the lone fir's flat ground.
+pub fn firs_at(trees: &[(Vec3, f32)]) -> World {
+    let mut world = lone_fir().build_world().unwrap();
+    let tree = world.forest.instances[0];
+    world.forest.instances = trees
+        .iter()
+        .map(|&(position, scale)| canopy::model::TreeInstance {
+            position,
+            scale,
+            ..tree
+        })
+        .collect();
+    world
+}
+
+/// A fresh directory `canopy-{name}-{process id}` in the system's temporary directory.
+pub fn scratch_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("canopy-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// `scene`'s whole bake, read from `cache` or baked (on a fresh context) and written there.
+pub fn load_or_bake(scene: &Scene, cache: &Path) -> Baked {
+    let ctx = gpu();
+    let world = scene.build_world().unwrap();
+    canopy::bake::load_or_bake_at(cache, &ctx, scene, &world, &mut |_| {})
+        .unwrap()
+        .0
 }
 
 pub fn render(ctx: &GpuContext, world: &World, frame: &FrameDesc, w: u32, h: u32) -> RgbaImage {

@@ -74,34 +74,12 @@ fn unknown_table_at_top_level() {
 #[test]
 fn missing_key_is_named() {
     let (text, _) = edit("count = 30", "");
-    let msg = error_of(&text);
     // Reported at the [forest] header.
-    let header = BASE
-        .lines()
-        .position(|l| l == "[forest]")
-        .map(|i| i + 1)
-        .unwrap_or(0);
-    assert!(
-        msg.starts_with(&format!(
-            "scene.toml:{header}: forest.count: missing required key"
-        )),
-        "{msg}"
-    );
+    let header = nth_line(BASE, 0, |l| l == "[forest]");
+    error_at(&text, header, "forest.count: missing required key");
     let (text, _) = edit("seed = 2", "");
-    let msg = error_of(&text);
-    let header = BASE
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| *l == "[[species]]")
-        .nth(1)
-        .map(|(i, _)| i + 1)
-        .unwrap_or(0);
-    assert!(
-        msg.starts_with(&format!(
-            "scene.toml:{header}: species[1]: missing field `seed`"
-        )),
-        "{msg}"
-    );
+    let header = nth_line(BASE, 1, |l| l == "[[species]]");
+    error_at(&text, header, "species[1]: missing field `seed`");
 }
 
 #[test]
@@ -212,17 +190,11 @@ fn wrong_type_for_table() {
             "",
         )
         .replace("# test scene\n", "# test scene\nsky = 5\n");
-    let line = text
-        .lines()
-        .position(|l| l == "sky = 5")
-        .map(|i| i + 1)
-        .unwrap_or(0);
-    let msg = error_of(&text);
-    assert!(
-        msg.starts_with(&format!(
-            "scene.toml:{line}: sky: invalid type: integer `5`, expected a table"
-        )),
-        "{msg}"
+    let line = nth_line(&text, 0, |l| l == "sky = 5");
+    error_at(
+        &text,
+        line,
+        "sky: invalid type: integer `5`, expected a table",
     );
 }
 
@@ -255,16 +227,8 @@ fn unknown_enum_value_in_inline_params() {
             params.replace("\"leaves\"", "\"fronds\"")
         ),
     );
-    let line = text
-        .lines()
-        .position(|l| l.contains("\"fronds\""))
-        .map(|i| i + 1)
-        .unwrap_or(0);
-    let msg = error_of(&text);
-    assert!(
-        msg.starts_with(&format!("scene.toml:{line}: species[1].params.foliage")),
-        "{msg}"
-    );
+    let line = nth_line(&text, 0, |l| l.contains("\"fronds\""));
+    let msg = error_at(&text, line, "species[1].params.foliage");
     assert!(
         msg.contains("unknown variant `fronds`, expected `needles` or `leaves`"),
         "{msg}"
@@ -280,17 +244,11 @@ fn unknown_enum_value_in_inline_params() {
     let bad = text
         .replace("\"fronds\"", "\"leaves\"")
         .replace("crown_radius = 5.2", "crown_radius = -2");
-    let line = bad
-        .lines()
-        .position(|l| l.starts_with("crown_radius"))
-        .map(|i| i + 1)
-        .unwrap_or(0);
-    let msg = error_of(&bad);
-    assert!(
-        msg.starts_with(&format!(
-            "scene.toml:{line}: species[1].params.crown_radius: must be > 0, found -2"
-        )),
-        "{msg}"
+    let line = nth_line(&bad, 0, |l| l.starts_with("crown_radius"));
+    error_at(
+        &bad,
+        line,
+        "species[1].params.crown_radius: must be > 0, found -2",
     );
 }
 

@@ -409,12 +409,11 @@ impl FarGpu {
                 entries: &[uniform(0, true)],
             });
         let pipelines = ctx.checked("building the far trees' compute pipelines", || {
-            let module = ctx
-                .device
-                .create_shader_module(wgpu::ShaderModuleDescriptor {
-                    label: Some("btf_far.wgsl"),
-                    source: wgpu::ShaderSource::Wgsl(crate::render::shaders::btf_far().into()),
-                });
+            let module = crate::render::pipelines::wgsl_module(
+                &ctx.device,
+                "btf_far.wgsl",
+                &crate::render::shaders::btf_far(),
+            );
             let pl = ctx
                 .device
                 .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

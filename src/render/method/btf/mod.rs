@@ -15,7 +15,7 @@ pub mod shading;
 
 use std::collections::HashMap;
 
-use glam::Vec3;
+use glam::{UVec3, Vec3};
 
 pub use crate::render::consts::ATLAS_SIDE;
 pub use billboard::{BillboardGpu, BillboardMode};
@@ -31,6 +31,10 @@ use crate::render::GpuContext;
 use crate::render::camera::Frustum;
 use crate::render::frame::FrameStats;
 use crate::render::method::interface::DrawCx;
+use crate::render::pipelines::{
+    FILTERABLE, sampled_rgba8_texture, sampler_entry, storage_buffer_of, storage_entry,
+    texture_entry, write_rgba8,
+};
 use crate::render::timing::PassSpans;
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
 use crate::{Error, Result};
@@ -82,20 +86,13 @@ impl BtfAssets {
         // Each image has its own mip chain down to one texel, inside its square.
         let mips = res.max(1).ilog2() + 1;
         let texture = ctx.checked("allocating the BTF texture array", || {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("btf images"),
-                size: wgpu::Extent3d {
-                    width: side,
-                    height: side,
-                    depth_or_array_layers: layers.max(1) as u32,
-                },
-                mip_level_count: mips,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba8UnormSrgb,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            })
+            sampled_rgba8_texture(
+                &ctx.device,
+                "btf images",
+                wgpu::TextureDimension::D2,
+                UVec3::new(side, side, layers.max(1) as u32),
+                mips,
+            )
         })?;
         let image_bytes = (res * res * 4) as usize;
         let mut bytes = 0u64;
@@ -571,46 +568,14 @@ pub(super) fn btf_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
         entries: &[
             storage_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
             storage_entry(1, wgpu::ShaderStages::FRAGMENT),
-            wgpu::BindGroupLayoutEntry {
-                binding: 2,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                    view_dimension: wgpu::TextureViewDimension::D2Array,
-                    multisampled: false,
-                },
-                count: None,
-            },
-            wgpu::BindGroupLayoutEntry {
-                binding: 3,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                count: None,
-            },
+            texture_entry(2, FILTERABLE, wgpu::TextureViewDimension::D2Array),
+            sampler_entry(3, wgpu::SamplerBindingType::Filtering),
         ],
     })
 }
 
-fn storage_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only: true },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
 fn billboard_buffer(ctx: &GpuContext, capacity: usize) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("btf billboards"),
-        size: (capacity.max(1) * std::mem::size_of::<BillboardGpu>()) as u64,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
+    storage_buffer_of::<BillboardGpu>(&ctx.device, "btf billboards", capacity)
 }
 
 fn make_bind_group(
@@ -670,28 +635,13 @@ fn upload_image(
     let mut bytes = 0u64;
     for level in 0..mips {
         let (w, h) = img.dimensions();
-        ctx.queue.write_texture(
-            wgpu::TexelCopyTextureInfo {
-                texture,
-                mip_level: level,
-                origin: wgpu::Origin3d {
-                    x: cx * w,
-                    y: cy * h,
-                    z: layer,
-                },
-                aspect: wgpu::TextureAspect::All,
-            },
+        write_rgba8(
+            &ctx.queue,
+            texture,
+            level,
+            UVec3::new(cx * w, cy * h, layer),
             img.as_raw(),
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(4 * w),
-                rows_per_image: Some(h),
-            },
-            wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
-            },
+            UVec3::new(w, h, 1),
         );
         bytes += u64::from(4 * w * h);
         if w > 1 {

@@ -2,7 +2,7 @@
 
 use std::collections::HashMap;
 
-use glam::{Mat4, Vec3};
+use glam::{Mat4, UVec3, Vec3};
 
 use super::prepare::{TexelFrame, prepare};
 use super::scene::TexelScene;
@@ -13,6 +13,9 @@ use crate::render::GpuContext;
 use crate::render::frame::FrameStats;
 use crate::render::method::btf::BtfScene;
 use crate::render::method::view::PrepareView;
+use crate::render::pipelines::{
+    Blended, blended_pipeline, sampled_rgba8_texture, storage_buffer_of, write_rgba8,
+};
 use crate::render::timing::PassSpans;
 use crate::render::world_gpu::WorldGpu;
 use crate::slices::{self};
@@ -69,41 +72,16 @@ impl TexelAssets {
         let scene = TexelScene::new(baked, world, max_dim)?;
         let size = scene.atlas_size();
         let texture = ctx.checked("allocating the texel volumes", || {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("texel volumes"),
-                size: wgpu::Extent3d {
-                    width: size.x,
-                    height: size.y,
-                    depth_or_array_layers: size.z,
-                },
-                mip_level_count: scene.mips,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format: wgpu::TextureFormat::Rgba8UnormSrgb,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            })
+            sampled_rgba8_texture(
+                &ctx.device,
+                "texel volumes",
+                wgpu::TextureDimension::D3,
+                size,
+                scene.mips,
+            )
         })?;
         for (level, (d, data)) in scene.atlas_levels(baked).iter().enumerate() {
-            ctx.queue.write_texture(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &texture,
-                    mip_level: level as u32,
-                    origin: wgpu::Origin3d::ZERO,
-                    aspect: wgpu::TextureAspect::All,
-                },
-                data,
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(4 * d.x),
-                    rows_per_image: Some(d.y),
-                },
-                wgpu::Extent3d {
-                    width: d.x,
-                    height: d.y,
-                    depth_or_array_layers: d.z,
-                },
-            );
+            write_rgba8(&ctx.queue, &texture, level as u32, UVec3::ZERO, data, *d);
         }
         let view = texture.create_view(&Default::default());
         let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
@@ -120,29 +98,7 @@ impl TexelAssets {
             .device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("texel"),
-                entries: &[
-                    crate::render::pipelines::buffer_entry(
-                        0,
-                        wgpu::ShaderStages::VERTEX_FRAGMENT,
-                        wgpu::BufferBindingType::Storage { read_only: true },
-                    ),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 1,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                            view_dimension: wgpu::TextureViewDimension::D3,
-                            multisampled: false,
-                        },
-                        count: None,
-                    },
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 2,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                        count: None,
-                    },
-                ],
+                entries: &super::texel_layout_entries(),
             });
         let capacity = 64;
         let records = record_buffer(ctx, capacity);
@@ -444,14 +400,19 @@ impl TexelAssets {
                 dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
                 operation: wgpu::BlendOperation::Add,
             };
-            texel_pipeline(
+            blended_pipeline(
                 device,
-                [shadow_frame, layout],
-                "fs_texel_opacity",
-                crate::render::GROUND_FORMAT,
-                transmit,
-                None,
-                (crate::render::SHADOW_FORMAT, wgpu::CompareFunction::Less),
+                Blended {
+                    label: "texel.wgsl",
+                    layouts: [shadow_frame, layout],
+                    source: crate::render::shaders::texel(),
+                    vertex: "vs_texel",
+                    fragment: "fs_texel_opacity",
+                    format: crate::render::GROUND_FORMAT,
+                    blend: transmit,
+                    cull: None,
+                    depth: (crate::render::SHADOW_FORMAT, wgpu::CompareFunction::Less),
+                },
             )
         })
     }
@@ -471,15 +432,15 @@ impl TexelAssets {
         let stack = self
             .stacks
             .as_mut()
-            .map(|s| s.pipeline(device, frame_layout, format).clone());
+            .map(|s| s.pass.pipeline(device, frame_layout, format).clone());
         let tile = self
             .tiles
             .as_mut()
-            .map(|t| t.pipeline(device, frame_layout, format).clone());
+            .map(|t| t.pass.pipeline(device, frame_layout, format).clone());
         let polygon = self
             .polygons
             .as_mut()
-            .map(|p| p.pipeline(device, frame_layout, format).clone());
+            .map(|p| p.pass.pipeline(device, frame_layout, format).clone());
         TexelPipelines {
             boxes: self.box_pipelines(device, frame_layout, format).clone(),
             stack,
@@ -495,24 +456,15 @@ impl TexelAssets {
         format: wgpu::TextureFormat,
     ) -> &[wgpu::RenderPipeline; 2] {
         let layout = &self.layout;
-        // Premultiplied "over".
-        let over = wgpu::BlendComponent {
-            src_factor: wgpu::BlendFactor::One,
-            dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-            operation: wgpu::BlendOperation::Add,
-        };
-        // Reversed Z; tested against the terrain, never written.
-        let depth = (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater);
         self.pipelines.entry(format).or_insert_with(|| {
             [wgpu::Face::Back, wgpu::Face::Front].map(|cull| {
-                texel_pipeline(
+                super::over_pipeline(
                     device,
                     [frame_layout, layout],
-                    "fs_texel",
+                    "texel.wgsl",
+                    ("vs_texel", "fs_texel"),
                     format,
-                    over,
                     Some(cull),
-                    depth,
                 )
             })
         })
@@ -532,7 +484,7 @@ impl TexelAssets {
         if let (Some(t), Some(p), false) = (&self.tiles, &pipelines.tile, frame.tiles.is_empty()) {
             // The far tiles first: everything else is nearer.
             let count = frame.tiles.len() as u32;
-            t.draw(pass, p, count);
+            t.pass.draw(pass, p, count);
             stats.draw_calls += 1;
             stats.triangles += u64::from(count) * 12;
         }
@@ -540,7 +492,7 @@ impl TexelAssets {
         if frame.stats.texel_mode == TexelMode::Polygons {
             if let (Some(p), Some(pipe)) = (&self.polygons, &pipelines.polygon) {
                 let vertices = frame.polygons.len() as u32;
-                p.draw(pass, pipe, vertices);
+                p.pass.draw(pass, pipe, vertices);
                 stats.draw_calls += u32::from(vertices > 0);
                 stats.trees_drawn = n;
                 stats.triangles += u64::from(vertices / 3);
@@ -550,7 +502,7 @@ impl TexelAssets {
         if frame.stats.texel_mode == TexelMode::Stacks {
             if let (Some(s), Some(p)) = (&self.stacks, &pipelines.stack) {
                 let quads = frame.quads.len() as u32;
-                s.draw(pass, p, quads);
+                s.pass.draw(pass, p, quads);
                 stats.draw_calls += u32::from(quads > 0);
                 stats.trees_drawn = n;
                 stats.triangles += u64::from(quads) * 2;
@@ -576,12 +528,7 @@ impl TexelAssets {
 }
 
 fn record_buffer(ctx: &GpuContext, capacity: usize) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("texels"),
-        size: (capacity.max(1) * std::mem::size_of::<TexelGpu>()) as u64,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
+    storage_buffer_of::<TexelGpu>(&ctx.device, "texels", capacity)
 }
 
 fn make_bind_group(
@@ -594,46 +541,6 @@ fn make_bind_group(
     ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("texel"),
         layout,
-        entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: records.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: wgpu::BindingResource::TextureView(view),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: wgpu::BindingResource::Sampler(sampler),
-            },
-        ],
+        entries: &super::texel_entries(records, view, sampler),
     })
-}
-
-/// A pipeline drawing the texel boxes with `fragment` of texel.wgsl into one `format`
-/// target blended by `blend`, faces `cull`ed, depth-tested (never written) against `depth`.
-fn texel_pipeline(
-    device: &wgpu::Device,
-    layouts: [&wgpu::BindGroupLayout; 2],
-    fragment: &str,
-    format: wgpu::TextureFormat,
-    blend: wgpu::BlendComponent,
-    cull: Option<wgpu::Face>,
-    depth: (wgpu::TextureFormat, wgpu::CompareFunction),
-) -> wgpu::RenderPipeline {
-    crate::render::pipelines::blended_pipeline(
-        device,
-        crate::render::pipelines::Blended {
-            label: "texel.wgsl",
-            layouts,
-            source: crate::render::shaders::texel(),
-            vertex: "vs_texel",
-            fragment,
-            format,
-            blend,
-            cull,
-            depth,
-        },
-    )
 }

@@ -8,6 +8,8 @@
 
 use glam::{Mat4, Vec3};
 
+use crate::render::pipelines::{storage_buffer_of, storage_entry, write_growing};
+
 /// One polygon vertex as `texel.wgsl` reads it (`struct PolyVertex`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
@@ -115,54 +117,38 @@ pub fn triangles(polygons: &[Vec<Vec3>], texel: u32, out: &mut Vec<PolyVertex>) 
     }
 }
 
+/// Slices drawn as triangles, both faces.
+const POLYGONS: super::OverStyle = super::OverStyle {
+    label: "texel.wgsl polygons",
+    entry_points: ("vs_poly", "fs_poly"),
+    cull: None,
+    draw: super::OverDraw::Vertices,
+};
+
 /// The polygons' vertex buffer, its bind group (the texel records, volumes and sampler
 /// beside it) and pipelines.
 pub struct PolyAssets {
-    layout: wgpu::BindGroupLayout,
+    pub(super) pass: super::OverPass,
     vertices: wgpu::Buffer,
-    bind_group: Option<wgpu::BindGroup>,
-    pipelines: std::collections::HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
 }
 
 impl PolyAssets {
     pub fn new(ctx: &crate::render::GpuContext) -> Self {
-        let storage = |binding| {
-            crate::render::pipelines::buffer_entry(
-                binding,
-                wgpu::ShaderStages::VERTEX_FRAGMENT,
-                wgpu::BufferBindingType::Storage { read_only: true },
-            )
-        };
-        let layout = ctx
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("texel polygons"),
-                entries: &[
-                    storage(0),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 1,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                            view_dimension: wgpu::TextureViewDimension::D3,
-                            multisampled: false,
-                        },
-                        count: None,
-                    },
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 2,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                        count: None,
-                    },
-                    storage(8),
-                ],
-            });
+        let [records, volumes, sampler] = super::texel_layout_entries();
+        let pass = super::OverPass::new(
+            &ctx.device,
+            "texel polygons",
+            &[
+                records,
+                volumes,
+                sampler,
+                storage_entry(8, wgpu::ShaderStages::VERTEX_FRAGMENT),
+            ],
+            &POLYGONS,
+        );
         Self {
-            layout,
-            vertices: vertex_buffer(ctx, 1024),
-            bind_group: None,
-            pipelines: Default::default(),
+            pass,
+            vertices: storage_buffer_of::<PolyVertex>(&ctx.device, "texel polygons", 1024),
         }
     }
 
@@ -176,78 +162,22 @@ impl PolyAssets {
         view: &wgpu::TextureView,
         sampler: &wgpu::Sampler,
     ) {
-        let bytes: &[u8] = bytemuck::cast_slice(vertices);
-        if bytes.len() as u64 > self.vertices.size() {
-            self.vertices = vertex_buffer(ctx, vertices.len().next_power_of_two());
-        }
-        if !bytes.is_empty() {
-            ctx.queue.write_buffer(&self.vertices, 0, bytes);
-        }
-        self.bind_group = Some(ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("texel polygons"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: records.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(sampler),
-                },
+        write_growing(ctx, &mut self.vertices, "texel polygons", vertices);
+        let [records, volumes, sampler] = super::texel_entries(records, view, sampler);
+        self.pass.bind(
+            &ctx.device,
+            "texel polygons",
+            &[
+                records,
+                volumes,
+                sampler,
                 wgpu::BindGroupEntry {
                     binding: 8,
                     resource: self.vertices.as_entire_binding(),
                 },
             ],
-        }));
+        );
     }
-
-    pub fn pipeline(
-        &mut self,
-        device: &wgpu::Device,
-        frame_layout: &wgpu::BindGroupLayout,
-        format: wgpu::TextureFormat,
-    ) -> &wgpu::RenderPipeline {
-        let layout = &self.layout;
-        self.pipelines.entry(format).or_insert_with(|| {
-            super::over_pipeline(
-                device,
-                [frame_layout, layout],
-                "texel.wgsl polygons",
-                ("vs_poly", "fs_poly"),
-                format,
-                None,
-            )
-        })
-    }
-
-    /// Draws `vertices` polygon vertices (the pass has group 0 bound).
-    pub fn draw(
-        &self,
-        pass: &mut wgpu::RenderPass<'_>,
-        pipeline: &wgpu::RenderPipeline,
-        vertices: u32,
-    ) {
-        if let (Some(bg), true) = (&self.bind_group, vertices > 0) {
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(1, bg, &[]);
-            pass.draw(0..vertices, 0..1);
-        }
-    }
-}
-
-fn vertex_buffer(ctx: &crate::render::GpuContext, count: usize) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("texel polygons"),
-        size: (count.max(1) * std::mem::size_of::<PolyVertex>()) as u64,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
 }
 
 #[cfg(test)]
@@ -299,15 +229,19 @@ mod tests {
     fn a_box_seen_along_its_diagonal_gives_triangles_and_hexagons() {
         let eye = Vec3::splat(-10.0);
         let forward = Vec3::ONE.normalize();
-        let polys = slice_polygons(
-            &Mat4::IDENTITY,
-            Vec3::ZERO,
-            Vec3::ONE,
-            eye,
-            forward,
-            0.05,
-            1000,
-        );
+        // The unit box cut every 0.05 along the diagonal, at most `cap` slices.
+        let cut = |cap| {
+            slice_polygons(
+                &Mat4::IDENTITY,
+                Vec3::ZERO,
+                Vec3::ONE,
+                eye,
+                forward,
+                0.05,
+                cap,
+            )
+        };
+        let polys = cut(1000);
         let sizes: Vec<usize> = polys.iter().map(|p| p.len()).collect();
         assert!(sizes.contains(&3) && sizes.contains(&6), "{sizes:?}");
         for p in &polys {
@@ -318,15 +252,7 @@ mod tests {
             }
         }
         // The cap keeps the nearest slices.
-        let capped = slice_polygons(
-            &Mat4::IDENTITY,
-            Vec3::ZERO,
-            Vec3::ONE,
-            eye,
-            forward,
-            0.05,
-            5,
-        );
+        let capped = cut(5);
         assert_eq!(capped.len(), 5);
         assert_eq!(capped[4], polys[polys.len() - 1]);
     }

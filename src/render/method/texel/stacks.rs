@@ -21,6 +21,10 @@
 use glam::{UVec2, UVec3};
 
 use crate::format::TexelVolume;
+use crate::render::pipelines::{
+    FILTERABLE, sampled_rgba8_texture, sampler_entry, storage_buffer_of, storage_entry,
+    texture_entry, write_growing, write_rgba8,
+};
 use crate::render::target::{linear_to_srgb, srgb_lut};
 use crate::{Error, Result};
 
@@ -442,16 +446,22 @@ pub fn quads(stacks: &[StackGpu]) -> Vec<[u32; 2]> {
     out
 }
 
+/// Stack quads, both faces.
+const STACKS: super::OverStyle = super::OverStyle {
+    label: "texel.wgsl stacks",
+    entry_points: ("vs_stack", "fs_stack"),
+    cull: None,
+    draw: super::OverDraw::Instances(6),
+};
+
 /// The stack atlas on the GPU, with the frame's stack records and quads.
 pub struct StackAssets {
     pub atlas: StackAtlas,
     _texture: wgpu::Texture,
     view: wgpu::TextureView,
-    layout: wgpu::BindGroupLayout,
     records: wgpu::Buffer,
     quads: wgpu::Buffer,
-    bind_group: Option<wgpu::BindGroup>,
-    pipelines: std::collections::HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
+    pub(super) pass: super::OverPass,
     /// Bytes of the atlas with its mip levels.
     pub bytes: u64,
 }
@@ -466,90 +476,46 @@ impl StackAssets {
         let atlas = StackAtlas::new(volumes, species, max_dim)?;
         let levels = atlas.levels(volumes);
         let texture = ctx.checked("allocating the texel stacks", || {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("texel stacks"),
-                size: wgpu::Extent3d {
-                    width: atlas.size.x,
-                    height: atlas.size.y,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: STACK_MIPS,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba8UnormSrgb,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            })
+            sampled_rgba8_texture(
+                &ctx.device,
+                "texel stacks",
+                wgpu::TextureDimension::D2,
+                atlas.size.extend(1),
+                STACK_MIPS,
+            )
         })?;
         for (level, (d, data)) in levels.iter().enumerate() {
-            ctx.queue.write_texture(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &texture,
-                    mip_level: level as u32,
-                    origin: wgpu::Origin3d::ZERO,
-                    aspect: wgpu::TextureAspect::All,
-                },
+            write_rgba8(
+                &ctx.queue,
+                &texture,
+                level as u32,
+                UVec3::ZERO,
                 data,
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(4 * d.x),
-                    rows_per_image: Some(d.y),
-                },
-                wgpu::Extent3d {
-                    width: d.x,
-                    height: d.y,
-                    depth_or_array_layers: 1,
-                },
+                d.extend(1),
             );
         }
         let view = texture.create_view(&Default::default());
-        let storage = |binding| {
-            crate::render::pipelines::buffer_entry(
-                binding,
-                wgpu::ShaderStages::VERTEX_FRAGMENT,
-                wgpu::BufferBindingType::Storage { read_only: true },
-            )
-        };
-        let layout = ctx
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("texel stacks"),
-                entries: &[
-                    storage(0),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 2,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                        count: None,
-                    },
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 3,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                            view_dimension: wgpu::TextureViewDimension::D2,
-                            multisampled: false,
-                        },
-                        count: None,
-                    },
-                    storage(4),
-                    storage(5),
-                ],
-            });
+        let vf = wgpu::ShaderStages::VERTEX_FRAGMENT;
+        let pass = super::OverPass::new(
+            &ctx.device,
+            "texel stacks",
+            &[
+                storage_entry(0, vf),
+                sampler_entry(2, wgpu::SamplerBindingType::Filtering),
+                texture_entry(3, FILTERABLE, wgpu::TextureViewDimension::D2),
+                storage_entry(4, vf),
+                storage_entry(5, vf),
+            ],
+            &STACKS,
+        );
         Ok(Self {
             bytes: atlas.bytes(),
             atlas,
             _texture: texture,
             view,
-            layout,
-            records: stack_buffer(
-                ctx,
-                "texel stack records",
-                64 * std::mem::size_of::<StackGpu>(),
-            ),
-            quads: stack_buffer(ctx, "texel stack quads", 1024 * 8),
-            bind_group: None,
-            pipelines: Default::default(),
+            records: storage_buffer_of::<StackGpu>(&ctx.device, "texel stack records", 64),
+            quads: storage_buffer_of::<[u32; 2]>(&ctx.device, "texel stack quads", 1024),
+            pass,
         })
     }
 
@@ -563,32 +529,12 @@ impl StackAssets {
         texels: &wgpu::Buffer,
         sampler: &wgpu::Sampler,
     ) {
-        let records: &[u8] = bytemuck::cast_slice(stacks);
-        let quad_bytes: &[u8] = bytemuck::cast_slice(quads);
-        if records.len() as u64 > self.records.size() {
-            self.records = stack_buffer(
-                ctx,
-                "texel stack records",
-                records.len().next_power_of_two(),
-            );
-        }
-        if quad_bytes.len() as u64 > self.quads.size() {
-            self.quads = stack_buffer(
-                ctx,
-                "texel stack quads",
-                quad_bytes.len().next_power_of_two(),
-            );
-        }
-        if !records.is_empty() {
-            ctx.queue.write_buffer(&self.records, 0, records);
-        }
-        if !quad_bytes.is_empty() {
-            ctx.queue.write_buffer(&self.quads, 0, quad_bytes);
-        }
-        self.bind_group = Some(ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("texel stacks"),
-            layout: &self.layout,
-            entries: &[
+        write_growing(ctx, &mut self.records, "texel stack records", stacks);
+        write_growing(ctx, &mut self.quads, "texel stack quads", quads);
+        self.pass.bind(
+            &ctx.device,
+            "texel stacks",
+            &[
                 wgpu::BindGroupEntry {
                     binding: 0,
                     resource: texels.as_entire_binding(),
@@ -610,52 +556,8 @@ impl StackAssets {
                     resource: self.quads.as_entire_binding(),
                 },
             ],
-        }));
+        );
     }
-
-    /// The pipeline drawing stack quads into `format` (both faces, premultiplied over,
-    /// depth-tested against the terrain, never written).
-    pub fn pipeline(
-        &mut self,
-        device: &wgpu::Device,
-        frame_layout: &wgpu::BindGroupLayout,
-        format: wgpu::TextureFormat,
-    ) -> &wgpu::RenderPipeline {
-        let layout = &self.layout;
-        self.pipelines.entry(format).or_insert_with(|| {
-            super::over_pipeline(
-                device,
-                [frame_layout, layout],
-                "texel.wgsl stacks",
-                ("vs_stack", "fs_stack"),
-                format,
-                None,
-            )
-        })
-    }
-
-    /// Draws `quads` stack slices (the pass has group 0 bound).
-    pub fn draw(
-        &self,
-        pass: &mut wgpu::RenderPass<'_>,
-        pipeline: &wgpu::RenderPipeline,
-        quads: u32,
-    ) {
-        if let (Some(bg), true) = (&self.bind_group, quads > 0) {
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(1, bg, &[]);
-            pass.draw(0..6, 0..quads);
-        }
-    }
-}
-
-fn stack_buffer(ctx: &crate::render::GpuContext, label: &str, bytes: usize) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: bytes.max(16) as u64,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
 }
 
 #[cfg(test)]

@@ -19,6 +19,10 @@ use glam::{Mat4, UVec3, Vec2, Vec3, Vec4};
 use crate::format::TexelVolume;
 use crate::model::Terrain;
 use crate::model::mesh::Aabb;
+use crate::render::pipelines::{
+    FILTERABLE, sampled_rgba8_texture, sampler_entry, storage_buffer_of, storage_entry,
+    texture_entry, write_growing, write_rgba8,
+};
 use crate::render::target::{linear_to_srgb, srgb_lut};
 use crate::render::world_gpu::TreeGpu;
 
@@ -429,6 +433,14 @@ pub struct TileGpu {
     pub pad2: f32,
 }
 
+/// Tile boxes, front faces.
+const TILES: super::OverStyle = super::OverStyle {
+    label: "texel.wgsl tiles",
+    entry_points: ("vs_tile", "fs_tile"),
+    cull: Some(wgpu::Face::Back),
+    draw: super::OverDraw::Instances(36),
+};
+
 /// The tiles on the GPU: their volumes in one 3D texture (a tile's volumes one after the
 /// other along w, tiles along u then v), and the frame's records.
 pub struct TileAssets {
@@ -440,10 +452,8 @@ pub struct TileAssets {
     lights: u32,
     _texture: wgpu::Texture,
     view: wgpu::TextureView,
-    layout: wgpu::BindGroupLayout,
     records: wgpu::Buffer,
-    bind_group: Option<wgpu::BindGroup>,
-    pipelines: std::collections::HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
+    pub(super) pass: super::OverPass,
     /// Bytes of the tile volumes on the GPU.
     pub bytes: u64,
 }
@@ -491,20 +501,13 @@ impl TileAssets {
             )));
         }
         let texture = ctx.checked("allocating the forest-cover tiles", || {
-            ctx.device.create_texture(&wgpu::TextureDescriptor {
-                label: Some("forest-cover tiles"),
-                size: wgpu::Extent3d {
-                    width: atlas.x,
-                    height: atlas.y,
-                    depth_or_array_layers: atlas.z,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D3,
-                format: wgpu::TextureFormat::Rgba8UnormSrgb,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            })
+            sampled_rgba8_texture(
+                &ctx.device,
+                "forest-cover tiles",
+                wgpu::TextureDimension::D3,
+                atlas,
+                1,
+            )
         })?;
         let size = atlas.as_vec3();
         let mut origins = Vec::with_capacity(grid.tiles.len());
@@ -512,59 +515,26 @@ impl TileAssets {
             let t = t as u32;
             let at = UVec3::new((t % per_u) * d.x, (t / per_u) * d.y, 0);
             origins.push(at.as_vec3() / size);
-            ctx.queue.write_texture(
-                wgpu::TexelCopyTextureInfo {
-                    texture: &texture,
-                    mip_level: 0,
-                    origin: wgpu::Origin3d {
-                        x: at.x,
-                        y: at.y,
-                        z: 0,
-                    },
-                    aspect: wgpu::TextureAspect::All,
-                },
+            write_rgba8(
+                &ctx.queue,
+                &texture,
+                0,
+                at,
                 vols,
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(4 * d.x),
-                    rows_per_image: Some(d.y),
-                },
-                wgpu::Extent3d {
-                    width: d.x,
-                    height: d.y,
-                    depth_or_array_layers: d.z * (lights + 1),
-                },
+                d.with_z(d.z * (lights + 1)),
             );
         }
         let view = texture.create_view(&Default::default());
-        let layout = ctx
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("forest-cover tiles"),
-                entries: &[
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 2,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                        count: None,
-                    },
-                    crate::render::pipelines::buffer_entry(
-                        6,
-                        wgpu::ShaderStages::VERTEX_FRAGMENT,
-                        wgpu::BufferBindingType::Storage { read_only: true },
-                    ),
-                    wgpu::BindGroupLayoutEntry {
-                        binding: 7,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
-                        ty: wgpu::BindingType::Texture {
-                            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                            view_dimension: wgpu::TextureViewDimension::D3,
-                            multisampled: false,
-                        },
-                        count: None,
-                    },
-                ],
-            });
+        let pass = super::OverPass::new(
+            &ctx.device,
+            "forest-cover tiles",
+            &[
+                sampler_entry(2, wgpu::SamplerBindingType::Filtering),
+                storage_entry(6, wgpu::ShaderStages::VERTEX_FRAGMENT),
+                texture_entry(7, FILTERABLE, wgpu::TextureViewDimension::D3),
+            ],
+            &TILES,
+        );
         Ok(Self {
             bytes: u64::from(atlas.x) * u64::from(atlas.y) * u64::from(atlas.z) * 4,
             grid,
@@ -574,10 +544,8 @@ impl TileAssets {
             lights,
             _texture: texture,
             view,
-            layout,
-            records: tile_buffer(ctx, 64),
-            bind_group: None,
-            pipelines: Default::default(),
+            records: storage_buffer_of::<TileGpu>(&ctx.device, "forest-cover tiles", 64),
+            pass,
         })
     }
 
@@ -623,19 +591,12 @@ impl TileAssets {
         records: &[TileGpu],
         sampler: &wgpu::Sampler,
     ) {
-        let bytes: &[u8] = bytemuck::cast_slice(records);
-        let grown = bytes.len() as u64 > self.records.size();
-        if grown {
-            self.records = tile_buffer(ctx, records.len().next_power_of_two());
-        }
-        if !bytes.is_empty() {
-            ctx.queue.write_buffer(&self.records, 0, bytes);
-        }
-        if grown || self.bind_group.is_none() {
-            self.bind_group = Some(ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("forest-cover tiles"),
-                layout: &self.layout,
-                entries: &[
+        let grown = write_growing(ctx, &mut self.records, "forest-cover tiles", records);
+        if grown || !self.pass.is_bound() {
+            self.pass.bind(
+                &ctx.device,
+                "forest-cover tiles",
+                &[
                     wgpu::BindGroupEntry {
                         binding: 2,
                         resource: wgpu::BindingResource::Sampler(sampler),
@@ -649,53 +610,9 @@ impl TileAssets {
                         resource: wgpu::BindingResource::TextureView(&self.view),
                     },
                 ],
-            }));
+            );
         }
     }
-
-    /// The pipeline drawing tile boxes into `format` (front faces, premultiplied over,
-    /// depth-tested against the terrain, never written).
-    pub fn pipeline(
-        &mut self,
-        device: &wgpu::Device,
-        frame_layout: &wgpu::BindGroupLayout,
-        format: wgpu::TextureFormat,
-    ) -> &wgpu::RenderPipeline {
-        let layout = &self.layout;
-        self.pipelines.entry(format).or_insert_with(|| {
-            super::over_pipeline(
-                device,
-                [frame_layout, layout],
-                "texel.wgsl tiles",
-                ("vs_tile", "fs_tile"),
-                format,
-                Some(wgpu::Face::Back),
-            )
-        })
-    }
-
-    /// Draws `count` tiles (the pass has group 0 bound).
-    pub fn draw(
-        &self,
-        pass: &mut wgpu::RenderPass<'_>,
-        pipeline: &wgpu::RenderPipeline,
-        count: u32,
-    ) {
-        if let (Some(bg), true) = (&self.bind_group, count > 0) {
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(1, bg, &[]);
-            pass.draw(0..36, 0..count);
-        }
-    }
-}
-
-fn tile_buffer(ctx: &crate::render::GpuContext, count: usize) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("forest-cover tiles"),
-        size: (count.max(1) * std::mem::size_of::<TileGpu>()) as u64,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    })
 }
 
 #[cfg(test)]

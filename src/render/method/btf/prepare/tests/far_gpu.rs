@@ -253,26 +253,29 @@ fn gpu_against_cpu(
         assert!(close(g.plane_up, c.plane_up, 1e-4));
         assert!(close(g.obj_right, c.obj_right, 1e-4));
         assert!(close(g.obj_up, c.obj_up, 1e-4));
-        for i in 0..66u32 {
-            let (wg, wc) = (
-                weight_of(g.view_index, g.view_weight, i),
-                weight_of(c.view_index, c.view_weight, i),
-            );
-            assert!(
-                (wg - wc).abs() < 1e-3,
-                "record {k} view {i}: {wg} against {wc}"
-            );
-        }
-        for i in 0..6 {
-            let (wg, wc) = (
-                weight_of(g.light_index, g.light_weight, i),
-                weight_of(c.light_index, c.light_weight, i),
-            );
-            assert!(
-                (wg - wc).abs() < 1e-3,
-                "record {k} light {i}: {wg} against {wc}"
-            );
-        }
+        // The same weight on each of `n` directions, whatever the order of the three.
+        let same_weights =
+            |what: &str, n: u32, g: ([u32; 3], [f32; 3]), c: ([u32; 3], [f32; 3])| {
+                for i in 0..n {
+                    let (wg, wc) = (weight_of(g.0, g.1, i), weight_of(c.0, c.1, i));
+                    assert!(
+                        (wg - wc).abs() < 1e-3,
+                        "record {k} {what} {i}: {wg} against {wc}"
+                    );
+                }
+            };
+        same_weights(
+            "view",
+            66,
+            (g.view_index, g.view_weight),
+            (c.view_index, c.view_weight),
+        );
+        same_weights(
+            "light",
+            6,
+            (g.light_index, g.light_weight),
+            (c.light_index, c.light_weight),
+        );
         assert_eq!(
             (g.layer_base, g.view_count, g.light_count, g.planes, g.mode),
             (c.layer_base, c.view_count, c.light_count, c.planes, c.mode)
