@@ -13,6 +13,7 @@ use canopy::bench::run::{self, BenchOptions, Config};
 use canopy::format::Baked;
 use canopy::model::World;
 use canopy::render::btf::BtfSettings;
+use canopy::render::knob::{Knob, KnobValues};
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
@@ -60,9 +61,15 @@ fn btf(label: &str, f: impl FnOnce(&mut BtfSettings)) -> Config {
         ..BtfSettings::default()
     };
     f(&mut btf);
+    // The btf knobs alone: each test's frame keeps its own ground knobs.
     let mut d = FrameDesc::from_scene(&Scene::default_scene());
     d.btf = btf;
-    Config::from_frame(label, Method::Btf, &d)
+    let own: Vec<&'static Knob> = canopy::render::btf::knobs::KNOBS.iter().collect();
+    Config {
+        label: label.into(),
+        method: Method::Btf,
+        knobs: KnobValues::read(&own, &d),
+    }
 }
 
 /// The stand's frame for these flights: no fog, smaller shadow maps (the truth's cost).

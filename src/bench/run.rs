@@ -83,7 +83,8 @@ pub struct Config {
 }
 
 impl Config {
-    /// `method`, labelled `label`, with its knobs as `frame` has them.
+    /// `method`, labelled `label`, with every knob it reads as `frame` has them (the
+    /// ground's too, where it has them: they then override the frame a run starts from).
     pub fn from_frame(label: impl Into<String>, method: Method, frame: &FrameDesc) -> Self {
         Self {
             label: label.into(),
