@@ -347,9 +347,9 @@ mod tests {
         let to_sun = Vec3::new(0.4, 0.6, -0.5).normalize();
         for bins in [4, 8, 16] {
             for bin in 0..bins {
-                // A tree of yaw psi sees the sun turned by -psi about y: as
-                // `to_object * to_sun` in the prepare.
-                let yaw = -std::f32::consts::TAU * bin as f32 / bins as f32;
+                // A tree of yaw psi sees the sun turned by -psi about y (its azimuth,
+                // atan2(z, x), grown by psi): as `to_object * to_sun` in the prepare.
+                let yaw = std::f32::consts::TAU * bin as f32 / bins as f32;
                 let rot = glam::Mat3::from_rotation_y(yaw);
                 let l_obj = rot.transpose() * to_sun;
                 let b = yaw_bin(l_obj, to_sun, bins);
