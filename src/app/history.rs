@@ -85,7 +85,7 @@ impl FrameTimeHistory {
             .flat_map(|f| f.passes.iter())
             .map(|p| p.ms)
             .sum();
-        if !(total > 0.0) {
+        if total.is_nan() || total <= 0.0 {
             return None;
         }
         names

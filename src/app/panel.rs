@@ -134,61 +134,61 @@ pub fn controls(
         }
     }
     knob_controls(ui, frame);
-    if frame.method.is_btf() {
-        if let Some(s) = &stats.btf {
-            egui::Grid::new("btf stats").num_columns(2).show(ui, |ui| {
-                ui.label("billboards twig/branch/tree");
-                ui.label(format!(
-                    "{} / {} / {}",
-                    s.billboards.twig, s.billboards.branch, s.billboards.tree
-                ));
+    if frame.method.is_btf()
+        && let Some(s) = &stats.btf
+    {
+        egui::Grid::new("btf stats").num_columns(2).show(ui, |ui| {
+            ui.label("billboards twig/branch/tree");
+            ui.label(format!(
+                "{} / {} / {}",
+                s.billboards.twig, s.billboards.branch, s.billboards.tree
+            ));
+            ui.end_row();
+            ui.label("trees twig/branch/tree");
+            ui.label(format!(
+                "{} / {} / {}",
+                s.trees_per_level.twig, s.trees_per_level.branch, s.trees_per_level.tree
+            ));
+            ui.end_row();
+            ui.label("trees cross-fading");
+            ui.label(s.faded_trees.to_string());
+            ui.end_row();
+            if frame.method == Method::Hybrid {
+                ui.label("trees as geometry");
+                ui.label(s.geometry_trees.to_string());
                 ui.end_row();
-                ui.label("trees twig/branch/tree");
-                ui.label(format!(
-                    "{} / {} / {}",
-                    s.trees_per_level.twig, s.trees_per_level.branch, s.trees_per_level.tree
-                ));
+            }
+            if s.gpu_billboards > 0 {
+                ui.label("built on the GPU");
+                ui.label(format_count(u64::from(s.gpu_billboards)));
                 ui.end_row();
-                ui.label("trees cross-fading");
-                ui.label(s.faded_trees.to_string());
-                ui.end_row();
-                if frame.method == Method::Hybrid {
-                    ui.label("trees as geometry");
-                    ui.label(s.geometry_trees.to_string());
-                    ui.end_row();
-                }
-                if s.gpu_billboards > 0 {
-                    ui.label("built on the GPU");
-                    ui.label(format_count(u64::from(s.gpu_billboards)));
-                    ui.end_row();
-                }
-                ui.label("images per billboard");
-                ui.label(format!("{:.2}", s.images_per_billboard()));
-                ui.end_row();
-                ui.label("fetches saved");
-                ui.label(format_count(s.fetches_saved));
-                ui.end_row();
-                ui.label("BTF memory");
-                ui.label(format!("{:.1} MB", stats.btf_bytes as f64 / 1e6));
-                ui.end_row();
-                ui.label("VCM");
-                ui.label(match stats.vcm_resolution {
-                    Some(r) => format!(
-                        "{r}² x 6 faces x 8 corners, {:.1} MB",
-                        stats.vcm_bytes as f64 / 1e6
-                    ),
-                    None => "not baked".to_string(),
-                });
-                ui.end_row();
-                ui.label("sun update");
-                ui.label(match (stats.sun_update_ms, stats.sun_update_gpu_ms) {
-                    (Some(cpu), Some(gpu)) => format!("{cpu:.1} ms CPU + {gpu:.1} ms GPU"),
-                    (Some(cpu), None) => format!("{cpu:.1} ms CPU"),
-                    (None, _) => "n/a".to_string(),
-                });
-                ui.end_row();
+            }
+            ui.label("images per billboard");
+            ui.label(format!("{:.2}", s.images_per_billboard()));
+            ui.end_row();
+            ui.label("fetches saved");
+            ui.label(format_count(s.fetches_saved));
+            ui.end_row();
+            ui.label("BTF memory");
+            ui.label(format!("{:.1} MB", stats.btf_bytes as f64 / 1e6));
+            ui.end_row();
+            ui.label("VCM");
+            ui.label(match stats.vcm_resolution {
+                Some(r) => format!(
+                    "{r}² x 6 faces x 8 corners, {:.1} MB",
+                    stats.vcm_bytes as f64 / 1e6
+                ),
+                None => "not baked".to_string(),
             });
-        }
+            ui.end_row();
+            ui.label("sun update");
+            ui.label(match (stats.sun_update_ms, stats.sun_update_gpu_ms) {
+                (Some(cpu), Some(gpu)) => format!("{cpu:.1} ms CPU + {gpu:.1} ms GPU"),
+                (Some(cpu), None) => format!("{cpu:.1} ms CPU"),
+                (None, _) => "n/a".to_string(),
+            });
+            ui.end_row();
+        });
     }
     if frame.method == Method::Texel {
         texel_stats(ui, stats);

@@ -124,11 +124,9 @@ mod tests {
         );
         assert_eq!(d.texel.mode.name(), "stacks");
         assert_eq!(k.ignored_by(Method::Texel), vec!["lod_scale", "show_lod"]);
-        let e = parse(&["--lod-scale", "-1"]).err().expect("out of range");
+        let e = parse(&["--lod-scale", "-1"]).expect_err("out of range");
         assert!(e.to_string().contains("0.05..=64"), "{e}");
-        let e = parse(&["--planes", "triple"])
-            .err()
-            .expect("no such choice");
+        let e = parse(&["--planes", "triple"]).expect_err("no such choice");
         assert!(e.to_string().contains("single, crossed"), "{e}");
         assert!(parse(&[]).expect("none").given.is_empty());
     }
