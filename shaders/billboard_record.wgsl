@@ -37,7 +37,11 @@ struct Billboard {
     view_count: u32,
     // Light weights (0 = culled).
     light_weight: vec3<f32>,
-    _pad2: f32,
+    // The first of this billboard's light-blended images in the texture array
+    // (`light_blend.wgsl`; one per view sample, in view order), read instead of its lights'
+    // images; NO_LIGHT_BLEND for none. They are the blend normalised: the light weights'
+    // sum scales them back.
+    light_blend: u32,
     // Colour tint of the tree, or the overlay colour.
     tint: vec3<f32>,
     // What the fragment shows: MODE_IMAGES, MODE_TINT or MODE_SUN_FACTOR.
@@ -56,6 +60,9 @@ struct Billboard {
     vcm_direct: array<vec4<f32>, 2>,
     vcm_sky: array<vec4<f32>, 2>,
 }
+
+// `Billboard::light_blend`: the billboard blends its light images itself.
+const NO_LIGHT_BLEND: u32 = 0xffffffffu;
 
 // `Billboard::mode`: the weighted images (the method itself).
 const MODE_IMAGES: u32 = 0u;

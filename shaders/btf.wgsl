@@ -1,6 +1,8 @@
 // BTF billboard pass (Meyer 2001, ch. 5 and annex A, on one fragment pass): each billboard
 // blends its 3 nearest views x (3 nearest lights + the sky-lit and the ground-lit image),
-// weighted, from one texture array, and is composited back to front with premultiplied alpha,
+// weighted, from one texture array (a tree-level billboard with `light_blend` reads its
+// 3 lights' blend, made once per sun and yaw bin in the same array, instead of the 3
+// lights: 9 reads), and is composited back to front with premultiplied alpha,
 // T = M + (1 - M_alpha) T0, which is the thesis' equation A.2 without its extra passes.
 // With crossed planes the sum M = sum of w_k M_k runs over the three planes where the eye's
 // ray meets each at this pixel, so they too are blended as annex A says, never one plane
@@ -52,16 +54,27 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
         let gnd = btf_sample(base + b.view_count * (lights + 1u) + v, t.uv, t.gx, t.gy);
         reads += 2u;
         var c = amb.rgb * frame.sky_ambient * f.y + gnd.rgb * frame.ground_ambient;
+        // The lights' images, weighted: 3 of them, or with `light_blend` one, their blend
+        // made once for this sun and the billboard's yaw bin (normalised: their weights'
+        // sum scales it back). A loop of 1 or 3 turns (the same for every fragment of a
+        // billboard) rather than a branch: a CPU rasteriser runs both sides of a branch
+        // but only the turns some fragment takes.
+        let blended = b.light_blend != NO_LIGHT_BLEND;
+        let turns = select(3u, 1u, blended);
+        let wsum = b.light_weight.x + b.light_weight.y + b.light_weight.z;
         var direct = vec3<f32>(0.0);
-        for (var j = 0; j < 3; j++) {
-            let wl = b.light_weight[j];
-            if wl <= 0.0 {
-                continue;
+        var j = 0u;
+        loop {
+            let wl = select(b.light_weight[j], wsum, blended);
+            let layer = select(base + v * lights + b.light_index[j], b.light_blend + v, blended);
+            if wl > 0.0 {
+                direct += wl * btf_sample(layer, t.uv, t.gx, t.gy).rgb;
+                reads += 1u;
             }
-            let layer = base + v * lights + b.light_index[j];
-            let d = btf_sample(layer, t.uv, t.gx, t.gy);
-            direct += wl * d.rgb;
-            reads += 1u;
+            continuing {
+                j++;
+                break if j >= turns;
+            }
         }
         c += direct * frame.sun_color * f.x;
         color += wv * c;

@@ -82,6 +82,13 @@ struct FarParams {
     trees_at: u32,
     // Slots of `near_records`; the near slots past them are in `near_records_b`.
     near_room: u32,
+    // Yaw bins of the light blends (`light_blend.wgsl`) the tree level reads; 0: none, each
+    // tree-level billboard blends its light images itself.
+    light_bins: u32,
+    // The first light-blended image in the BTF atlas (prototype 0, bin 0, view 0).
+    light_blend_first: u32,
+    _blend_pad0: u32,
+    _blend_pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: FarParams;
@@ -105,7 +112,8 @@ struct FarParams {
 @group(0) @binding(6) var<storage, read_write> keys: array<vec2<u32>>;
 // The indirect draw: vertex count, instance count, first vertex, first instance; then the
 // far billboards made, and the near ones expanded here per level (twig, branch, tree);
-// then the image fetches of every billboard made here, and those image-weight culling saved.
+// then the image fetches of every billboard made here, and those image-weight culling saved;
+// then the billboards made here that read the light blends.
 @group(0) @binding(7) var<storage, read_write> draw_args: array<atomic<u32>, 12>;
 @group(0) @binding(8) var<storage, read_write> sorted: array<Billboard>;
 
@@ -333,10 +341,31 @@ fn transform(r: u32) -> mat4x4<f32> {
     return mat4x4<f32>(row(r), row(r + 1u), row(r + 2u), row(r + 3u));
 }
 
+const TAU: f32 = 6.283185307179586;
+
+// `yaw_bin` in src/render/method/btf/light_blend.rs: the yaw bin of the sun's direction
+// `l_obj` in an object's frame (its azimuth about the object's up axis, from the sun's
+// own, in `params.light_bins` steps).
+fn yaw_bin(l_obj: vec3<f32>) -> u32 {
+    let bins = i32(params.light_bins);
+    let a = atan2(l_obj.z, l_obj.x) - atan2(params.to_sun.z, params.to_sun.x);
+    let b = i32(round(a / TAU * f32(bins)));
+    return u32(((b % bins) + bins) % bins);
+}
+
+// `bin_direction`: the sun in the frame of an object of yaw bin `b` (its elevation kept).
+fn bin_direction(b: u32) -> vec3<f32> {
+    let s = params.to_sun;
+    let phi = atan2(s.z, s.x) + TAU * f32(b) / f32(params.light_bins);
+    let h = length(s.xz);
+    return vec3<f32>(h * cos(phi), s.y, h * sin(phi));
+}
+
 // The record of a billboard of the set at rows `set` placed by `m`, as `Pusher::push`
 // makes it (opacity 1, the tree's tint, no VCM factors); `planes` 0 when it is out of
-// view or `m` has no valid scale.
-fn make_record(m: mat4x4<f32>, set_at: u32, views: DirSet, tint: vec3<f32>) -> Billboard {
+// view or `m` has no valid scale. `blend_sp`: the species of a tree-level billboard, whose
+// light images are blended once per yaw bin when `params.light_bins` > 0 (else u32 max).
+fn make_record(m: mat4x4<f32>, set_at: u32, views: DirSet, tint: vec3<f32>, blend_sp: u32) -> Billboard {
     var r: Billboard;
     r.planes = 0u;
     let scale = length(m[0].xyz);
@@ -355,7 +384,13 @@ fn make_record(m: mat4x4<f32>, set_at: u32, views: DirSet, tint: vec3<f32>) -> B
     let rot = mat3x3<f32>(m[0].xyz, m[1].xyz, m[2].xyz) * (1.0 / scale);
     let to_object = transpose(rot);
     let v_obj = to_object * normalize_or(params.camera - center, vec3<f32>(0.0, 1.0, 0.0));
-    let l_obj = to_object * params.to_sun;
+    var l_obj = to_object * params.to_sun;
+    var light_blend = NO_LIGHT_BLEND;
+    if params.light_bins > 0u && blend_sp != 0xffffffffu {
+        let bin = yaw_bin(l_obj);
+        l_obj = bin_direction(bin);
+        light_blend = params.light_blend_first + (blend_sp * params.light_bins + bin) * views.count;
+    }
     let vb = cull(blend(views, v_obj), params.weight_threshold);
     var lb = cull(blend(params.lights, l_obj), params.weight_threshold);
     let strength = clamp(params.light_gain, 0.0, 1.0);
@@ -380,7 +415,7 @@ fn make_record(m: mat4x4<f32>, set_at: u32, views: DirSet, tint: vec3<f32>) -> B
     r.view_weight = vb.weight;
     r.view_count = views.count;
     r.light_weight = lb.weight;
-    r._pad2 = 0.0;
+    r.light_blend = light_blend;
     r.tint = tint;
     r.mode = params.mode;
     r.vcm_box_origin = row3(set_at + 1u);
@@ -391,9 +426,15 @@ fn make_record(m: mat4x4<f32>, set_at: u32, views: DirSet, tint: vec3<f32>) -> B
     r.vcm_sky = array<vec4<f32>, 2>(vec4<f32>(1.0), vec4<f32>(1.0));
     // The image fetches per pixel, as the CPU counts them.
     let views_used = dot(vec3<u32>(vb.weight > vec3<f32>(0.0)), vec3<u32>(1u));
-    let lights_used = dot(vec3<u32>(lb.weight > vec3<f32>(0.0)), vec3<u32>(1u));
+    var lights_used = dot(vec3<u32>(lb.weight > vec3<f32>(0.0)), vec3<u32>(1u));
+    if light_blend != NO_LIGHT_BLEND {
+        lights_used = 1u;
+    }
     let fetches = views_used * (lights_used + AMBIENT_IMAGES);
     atomicAdd(&draw_args[8], fetches);
+    if light_blend != NO_LIGHT_BLEND {
+        atomicAdd(&draw_args[10], 1u);
+    }
     atomicAdd(&draw_args[9], FETCHES_AT_MOST - min(fetches, FETCHES_AT_MOST));
     return r;
 }
@@ -439,7 +480,7 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
     if params.mode != MODE_IMAGES {
         tint = params.overlay;
     }
-    var r = make_record(tree.model, set_row(tree.species, LEVEL_TREE), params.views, tint);
+    var r = make_record(tree.model, set_row(tree.species, LEVEL_TREE), params.views, tint, tree.species);
     if r.planes == 0u {
         return;
     }
@@ -652,7 +693,8 @@ fn near_build(@builtin(global_invocation_id) gid: vec3<u32>) {
         views = params.views_branch;
     }
     let set_at = set_row(sp, level);
-    var r = make_record(tree.model * part, set_at, views, tint);
+    let blend_sp = select(0xffffffffu, sp, level == LEVEL_TREE);
+    var r = make_record(tree.model * part, set_at, views, tint, blend_sp);
     if r.planes == 0u {
         return;
     }

@@ -123,7 +123,7 @@ fn billboard_record_matches_billboard_wgsl() {
         view_weight,
         view_count,
         light_weight,
-        _pad2,
+        light_blend,
         tint,
         mode,
         vcm_box_origin,
@@ -327,7 +327,11 @@ fn far_tree_structs_match_btf_far_wgsl() {
         draws_at,
         bits_at,
         trees_at,
-        near_room
+        near_room,
+        light_bins,
+        light_blend_first,
+        _blend_pad0,
+        _blend_pad1
     });
     check(
         "FarParams",

@@ -78,6 +78,7 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
             geometry_trees: 0,
             images_sampled: 540,
             fetches_saved: 180,
+            light_blended: 0,
             dropped: 0,
             gpu_billboards: 0,
             vcm: true,

@@ -76,6 +76,10 @@ pub struct SunUpdate {
     pub ground_map_size: Option<u32>,
     /// The same while the sun is held.
     pub ground_map_drag_size: Option<u32>,
+    /// GPU time of the `btf` tree level's light blends made again for the moved sun
+    /// (the `light blend` pass; absent where they are off or not timed).
+    #[serde(rename = "sun_update_light_blend_ms")]
+    pub light_blend_ms: Option<f64>,
 }
 
 /// One measured frame.
@@ -193,6 +197,7 @@ fn measure_sun_update(
         drag_gpu_ms,
         ground_map_size: sizes.map(|s| s.0),
         ground_map_drag_size: sizes.map(|s| s.1),
+        light_blend_ms: full.passes.get("light blend"),
     })
 }
 
@@ -271,6 +276,8 @@ pub struct BtfReport {
     pub btf_bytes: u64,
     /// GPU bytes of the far trees' buffers (0 without them).
     pub far_bytes: u64,
+    /// GPU bytes of the tree level's light blends (0 without them).
+    pub light_blend_bytes: u64,
     pub vcm_bytes: u64,
     pub vcm_resolution: Option<u32>,
     #[serde(flatten)]
@@ -293,6 +300,7 @@ impl FrameReport {
             gpu_near: frame.btf.gpu_far && frame.btf.gpu_near,
             btf_bytes: renderer.btf_bytes(),
             far_bytes: renderer.far_bytes(),
+            light_blend_bytes: renderer.light_blend_bytes(),
             vcm_bytes: renderer.vcm_bytes(),
             vcm_resolution: renderer.vcm_resolution(),
             sun_update: m.sun_update.unwrap_or_default(),
@@ -360,6 +368,7 @@ fn btf_counts<S: Serializer>(b: &BtfStats, ser: S) -> Result<S::Ok, S::Error> {
         geometry_trees: u32,
         images_per_billboard: f64,
         fetches_saved: u64,
+        light_blended: u32,
         gpu_billboards: u32,
         vcm: bool,
     }
@@ -370,6 +379,7 @@ fn btf_counts<S: Serializer>(b: &BtfStats, ser: S) -> Result<S::Ok, S::Error> {
         geometry_trees: b.geometry_trees,
         images_per_billboard: b.images_per_billboard(),
         fetches_saved: b.fetches_saved,
+        light_blended: b.light_blended,
         gpu_billboards: b.gpu_billboards,
         vcm: b.vcm,
     }

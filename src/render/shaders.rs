@@ -15,6 +15,7 @@ const SKY: &str = include_str!("../../shaders/sky.wgsl");
 const BTF: &str = include_str!("../../shaders/btf.wgsl");
 const GROUND_MAP: &str = include_str!("../../shaders/ground_map.wgsl");
 const TEXEL: &str = include_str!("../../shaders/texel.wgsl");
+const LIGHT_BLEND: &str = include_str!("../../shaders/light_blend.wgsl");
 const BLIT: &str = include_str!("../../shaders/blit.wgsl");
 const OVERDRAW: &str = include_str!("../../shaders/overdraw.wgsl");
 
@@ -31,10 +32,21 @@ fn with_frame(pass: &str) -> String {
 /// A pass that draws billboards: frame uniforms, the BTF atlas's layout, the billboard
 /// record, the pass's file.
 fn with_billboards(pass: &str) -> String {
-    let atlas = super::consts::ATLAS_SIDE;
     format!(
-        "{FRAME}\nconst BTF_ATLAS_SIDE: u32 = {atlas}u;\n{BILLBOARD_RECORD}\n{BILLBOARD}\n{pass}"
+        "{FRAME}\n{}\n{BILLBOARD_RECORD}\n{BILLBOARD}\n{pass}",
+        atlas_side()
     )
+}
+
+/// The BTF atlas's images per layer side, as a WGSL constant.
+fn atlas_side() -> String {
+    let atlas = super::consts::ATLAS_SIDE;
+    format!("const BTF_ATLAS_SIDE: u32 = {atlas}u;")
+}
+
+/// The `btf` method's light-blend pass: the atlas side, then its file.
+pub fn light_blend() -> String {
+    format!("{}\n{LIGHT_BLEND}", atlas_side())
 }
 
 /// Every shader module the render core builds, by name, for validation and for pipelines.
@@ -45,6 +57,7 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("sky", sky()),
         ("btf", btf()),
         ("btf_far", btf_far()),
+        ("light_blend", light_blend()),
         ("ground_map", ground_map()),
         ("texel", texel()),
         ("blit", blit()),

@@ -55,7 +55,10 @@ pub struct BillboardGpu {
     pub view_count: u32,
     /// Light weights (0 = culled).
     pub light_weight: [f32; 3],
-    pub _pad2: f32,
+    /// The first of the billboard's light-blended images, one per view sample
+    /// ([`super::light_blend`]), read instead of its lights' images (scaled by the light
+    /// weights' sum); [`NO_LIGHT_BLEND`] for none.
+    pub light_blend: u32,
     /// Colour tint of the tree, or the overlay colour.
     pub tint: [f32; 3],
     /// A [`BillboardMode`].
@@ -73,6 +76,10 @@ pub struct BillboardGpu {
     /// Sky visibility at the 8 corners.
     pub vcm_sky: [[f32; 4]; 2],
 }
+
+/// [`BillboardGpu::light_blend`] of a billboard that blends its light images itself
+/// (`NO_LIGHT_BLEND` in `billboard_record.wgsl`).
+pub const NO_LIGHT_BLEND: u32 = u32::MAX;
 
 /// A billboard with every field zero and no VCM shading (all factors 1).
 const NO_SHADE: BillboardGpu = BillboardGpu {
@@ -93,7 +100,7 @@ const NO_SHADE: BillboardGpu = BillboardGpu {
     view_weight: [0.0; 3],
     view_count: 0,
     light_weight: [0.0; 3],
-    _pad2: 0.0,
+    light_blend: NO_LIGHT_BLEND,
     tint: [0.0; 3],
     mode: BillboardMode::Images as u32,
     vcm_box_origin: [0.5, 0.5, 0.5],
@@ -129,6 +136,8 @@ impl BillboardGpu {
 #[derive(Clone, Copy, Debug)]
 pub(super) struct SetInfo {
     pub layer_base: u32,
+    /// The prototype (species entry) whose set it is.
+    pub prototype: u32,
     pub center: Vec3,
     pub radius: f32,
     /// The object's bounds in its own frame (its VCM box).

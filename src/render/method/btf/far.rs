@@ -111,6 +111,12 @@ pub struct FarParamsGpu {
     pub bits_at: u32,
     pub trees_at: u32,
     pub near_room: u32,
+    /// Yaw bins of the light blends the tree level reads (0: none).
+    pub light_bins: u32,
+    /// The first light-blended image in the BTF atlas.
+    pub light_blend_first: u32,
+    pub _blend_pad0: u32,
+    pub _blend_pad1: u32,
 }
 
 /// One step of the bitonic sort (`SortStep`).
@@ -128,7 +134,8 @@ const WORKGROUP: u32 = 64;
 const SHADE_WORDS: usize = std::mem::size_of::<FarShadeGpu>() / 4;
 
 /// Words of the draw-arguments buffer: the indirect draw's 4, the far billboards made, the
-/// near ones per level, the image fetches and the fetches saved, and 2 unused.
+/// near ones per level, the image fetches and the fetches saved, the billboards that read
+/// the light blends, and 1 unused.
 const DRAW_WORDS: u64 = 12;
 
 /// The far trees' buffers and compute pipelines.
@@ -328,6 +335,10 @@ impl FarGpu {
             bits_at: (SHADE_WORDS * n) as u32,
             trees_at,
             near_room: limit.min(u64::from(u32::MAX)) as u32,
+            light_bins: 0,
+            light_blend_first: scene.light_blend_first(0, 0),
+            _blend_pad0: 0,
+            _blend_pad1: 0,
         };
         let init = |label: &str, contents: &[u8]| {
             wgpu::util::DeviceExt::create_buffer_init(
@@ -777,6 +788,11 @@ impl FarGpu {
                 Some(_) if settings.vcm_sky => 1,
                 Some(_) => 2,
             },
+            light_bins: if settings.light_blend {
+                scene.light_bins()
+            } else {
+                0
+            },
             ..self.base
         });
         self.bits = bits;
@@ -931,7 +947,7 @@ impl FarGpu {
     /// read back (this one's when `wait`, blocking): the far trees', then the near trees'
     /// expanded here per level (twig, main branch, tree), then their image fetches per
     /// pixel summed and the fetches image-weight culling saved; None before any.
-    pub fn drawn(&self, ctx: &GpuContext, wait: bool) -> Option<[u32; 6]> {
+    pub fn drawn(&self, ctx: &GpuContext, wait: bool) -> Option<[u32; 8]> {
         self.count.collect(ctx, wait)
     }
 
@@ -1187,13 +1203,13 @@ struct CountReadback {
     /// This frame copied into `read`.
     copied: AtomicBool,
     /// The latest counts read (None before any).
-    last: Mutex<Option<[u32; 6]>>,
+    last: Mutex<Option<[u32; 8]>>,
 }
 
 impl CountReadback {
     fn new(ctx: &GpuContext) -> Self {
         Self {
-            read: MappedRead::new(ctx, "far count read", 24),
+            read: MappedRead::new(ctx, "far count read", 32),
             copied: AtomicBool::new(false),
             last: Mutex::new(None),
         }
@@ -1202,13 +1218,13 @@ impl CountReadback {
     /// Copies the far count of `args` when the last copy has been read.
     fn copy(&self, encoder: &mut wgpu::CommandEncoder, args: &wgpu::Buffer) {
         if self.read.is_free() && !self.copied.swap(true, Ordering::SeqCst) {
-            encoder.copy_buffer_to_buffer(args, 16, self.read.buffer(), 0, 24);
+            encoder.copy_buffer_to_buffer(args, 16, self.read.buffer(), 0, 32);
         }
     }
 
     /// Maps a copy just submitted; reads a mapped one; with `wait`, blocks until the
     /// copy is read. The latest count read.
-    fn collect(&self, ctx: &GpuContext, wait: bool) -> Option<[u32; 6]> {
+    fn collect(&self, ctx: &GpuContext, wait: bool) -> Option<[u32; 8]> {
         if self.copied.swap(false, Ordering::SeqCst) {
             self.read.map();
         }

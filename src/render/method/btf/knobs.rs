@@ -97,6 +97,13 @@ pub static KNOBS: &[Knob] = &[
         |d, v| d.btf.gpu_near = v,
     )
     .when(|d| d.btf.gpu_far),
+    Knob::toggle(
+        "light_blend",
+        "tree level's light blend once per sun",
+        "tree-level billboards read their 3 lights' images blended once per sun and yaw bin: 9 image reads a pixel instead of 15",
+        |d| d.btf.light_blend,
+        |d, v| d.btf.light_blend = v,
+    ),
 ];
 
 /// `frame`'s `btf` knobs as a label, `btf lod_scale=2 ...`, those `tune` varies.

@@ -213,6 +213,15 @@ impl RenderMethod for BtfMethod {
                 sun.ms += t0.elapsed().as_secs_f64() * 1e3;
             }
         }
+        // The tree level's light blends follow the sun: weights here, drawn before the
+        // frame's other passes (`encode_compute`).
+        if frame.btf.light_blend && frame.trees {
+            let t0 = Instant::now();
+            if b.update_light_blend(cx.ctx, cx.view.to_sun, &frame.btf) {
+                sun.moved = true;
+                sun.ms += t0.elapsed().as_secs_f64() * 1e3;
+            }
+        }
         let culls = b.takes_far(&frame.btf);
         let (bf, shade_ms) = b.prepare(
             cx.ctx,
@@ -258,6 +267,9 @@ impl RenderMethod for BtfMethod {
     }
 
     fn encode_compute(&self, bake: &Bake, encoder: &mut wgpu::CommandEncoder, spans: &PassSpans) {
+        if let Some(b) = &bake.btf {
+            b.encode_light_blend(encoder, spans);
+        }
         if let (Some(bf), Some(b)) = (&self.frame, &bake.btf)
             && bf.far
         {

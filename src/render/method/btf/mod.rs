@@ -8,6 +8,7 @@
 mod billboard;
 pub mod far;
 pub mod knobs;
+pub mod light_blend;
 pub mod method;
 pub mod prepare;
 pub mod settings;
@@ -18,7 +19,7 @@ use std::collections::HashMap;
 use glam::{UVec3, Vec3};
 
 pub use crate::render::consts::ATLAS_SIDE;
-pub use billboard::{BillboardGpu, BillboardMode};
+pub use billboard::{BillboardGpu, BillboardMode, NO_LIGHT_BLEND};
 pub use prepare::{
     BtfFrame, BtfScene, LevelChoice, NearDrawGpu, PrepareView, SortedBillboards, choose_level,
 };
@@ -32,8 +33,7 @@ use crate::render::camera::Frustum;
 use crate::render::frame::FrameStats;
 use crate::render::method::interface::DrawCx;
 use crate::render::pipelines::{
-    FILTERABLE, sampled_rgba8_texture, sampler_entry, storage_buffer_of, storage_entry,
-    texture_entry, write_rgba8,
+    FILTERABLE, sampler_entry, storage_buffer_of, storage_entry, texture_entry, write_rgba8,
 };
 use crate::render::timing::PassSpans;
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
@@ -59,13 +59,16 @@ pub struct BtfAssets {
     /// The far trees' GPU work, made on the first frame that wants it (None after that
     /// when the GPU cannot hold it).
     far: Option<Option<far::FarGpu>>,
+    /// The tree level's light blends, in the texture array's last layers (None where the
+    /// GPU cannot hold them).
+    light_blend: Option<light_blend::LightBlend>,
     /// Bytes of the texture array, mipmaps included.
     pub bytes: u64,
 }
 
 impl BtfAssets {
     pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
-        let scene = BtfScene::new(baked, world)?;
+        let mut scene = BtfScene::new(baked, world)?;
         let res = scene.resolution();
         let images = scene.layer_count();
         let layers = atlas_layers(images);
@@ -85,15 +88,46 @@ impl BtfAssets {
         }
         // Each image has its own mip chain down to one texel, inside its square.
         let mips = res.max(1).ilog2() + 1;
-        let texture = ctx.checked("allocating the BTF texture array", || {
-            sampled_rgba8_texture(
-                &ctx.device,
-                "btf images",
-                wgpu::TextureDimension::D2,
-                UVec3::new(side, side, layers.max(1) as u32),
-                mips,
-            )
-        })?;
+        // The tree level's light blends take layers after the baked images, where the GPU
+        // allows them.
+        let blends = scene.light_blend_count(light_blend::LIGHT_BINS);
+        let blend_layers = atlas_layers(blends);
+        let allocate = |blend_layers: u64| {
+            let mut usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+            if blend_layers > 0 {
+                usage |= wgpu::TextureUsages::RENDER_ATTACHMENT;
+            }
+            ctx.checked("allocating the BTF texture array", || {
+                ctx.device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("btf images"),
+                    size: wgpu::Extent3d {
+                        width: side,
+                        height: side,
+                        depth_or_array_layers: (layers + blend_layers).max(1) as u32,
+                    },
+                    mip_level_count: mips,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                    usage,
+                    view_formats: &[],
+                })
+            })
+        };
+        let fits = blend_layers > 0 && layers + blend_layers <= max_layers && layers > 0;
+        let (texture, blends) = match fits.then(|| allocate(blend_layers)) {
+            Some(Ok(t)) => (t, blends),
+            other => {
+                if let Some(Err(e)) = other {
+                    log::warn!("tree-level billboards blend their lights themselves: {e}");
+                } else if blend_layers > 0 {
+                    log::warn!(
+                        "tree-level billboards blend their lights themselves: the light blends' {blend_layers} layers pass this GPU's {max_layers}"
+                    );
+                }
+                (allocate(0)?, 0)
+            }
+        };
         let image_bytes = (res * res * 4) as usize;
         let mut bytes = 0u64;
         for (base, set) in scene.image_sets(baked) {
@@ -108,6 +142,11 @@ impl BtfAssets {
         let texture_view = texture.create_view(&wgpu::TextureViewDescriptor {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
+        });
+        let blend = (blends > 0).then(|| {
+            let first = (layers * u64::from(ATLAS_SIDE * ATLAS_SIDE)) as u32;
+            scene.set_light_blend(light_blend::LIGHT_BINS, first);
+            light_blend::LightBlend::new(ctx, &texture, layers as u32, blends as u32)
         });
         let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("btf"),
@@ -171,6 +210,7 @@ impl BtfAssets {
             sun_capacity,
             sun_bind_group,
             far: None,
+            light_blend: blend,
             bytes,
         })
     }
@@ -178,6 +218,33 @@ impl BtfAssets {
     /// Reads every tree's cube maps in the sun's direction if it moved; true if it did.
     pub fn update_sun(&mut self, to_sun: Vec3) -> bool {
         self.scene.update_sun(to_sun)
+    }
+
+    /// Sets the tree level's light blends for the sun `to_sun` if it (or a knob that
+    /// changes their weights) moved since they were made; true if so. Their draw is
+    /// encoded by [`Self::encode_light_blend`].
+    pub fn update_light_blend(
+        &mut self,
+        ctx: &GpuContext,
+        to_sun: Vec3,
+        settings: &BtfSettings,
+    ) -> bool {
+        match self.light_blend.as_mut() {
+            Some(b) => b.update(ctx, &self.scene, to_sun, settings),
+            None => false,
+        }
+    }
+
+    /// The light blends' passes, when their weights changed, timed through `spans`.
+    pub fn encode_light_blend(&self, encoder: &mut wgpu::CommandEncoder, spans: &PassSpans) {
+        if let Some(b) = &self.light_blend {
+            b.encode(encoder, spans);
+        }
+    }
+
+    /// GPU bytes of the tree level's light blends (0 where there are none).
+    pub fn light_blend_bytes(&self) -> u64 {
+        self.light_blend.as_ref().map_or(0, |b| b.bytes)
     }
 
     /// Bytes of visibility cube maps held in main memory.
@@ -356,7 +423,8 @@ impl BtfAssets {
         if !f.has_frame() {
             return;
         }
-        let Some([n, twigs, branches, trees, images, saved]) = f.drawn(ctx, wait) else {
+        let Some([n, twigs, branches, trees, images, saved, blended, _]) = f.drawn(ctx, wait)
+        else {
             return;
         };
         use crate::model::Level;
@@ -369,6 +437,7 @@ impl BtfAssets {
             b.gpu_billboards += n + near;
             b.images_sampled += u64::from(images);
             b.fetches_saved += u64::from(saved);
+            b.light_blended += blended;
         }
         stats.trees_drawn += n;
         stats.triangles += 2 * u64::from(n + near);

@@ -2,6 +2,8 @@
 //! sorted back to front.
 
 use super::*;
+use crate::render::method::btf::billboard::NO_LIGHT_BLEND;
+use crate::render::method::btf::light_blend::{bin_direction, light_weights, yaw_bin};
 
 /// One frame's billboard records in the chunks that made them, and their order back to
 /// front.
@@ -207,20 +209,27 @@ impl Pusher<'_, '_> {
         let rot = Mat3::from_mat4(m) * (1.0 / scale);
         let to_object = rot.transpose();
         let v_obj = to_object * (cam - center).normalize_or(Vec3::Y);
-        let l_obj = to_object * self.view.to_sun;
+        let mut l_obj = to_object * self.view.to_sun;
         let scene = self.scene;
+        // A tree-level billboard reads its lights' blend, made for its yaw bin.
+        let bins = scene.light_bins;
+        let light_blend = if level == Level::Tree && bins > 0 && self.settings.light_blend {
+            let bin = yaw_bin(l_obj, self.view.to_sun, bins);
+            l_obj = bin_direction(self.view.to_sun, bin, bins);
+            scene.light_blend_first(set.prototype, bin)
+        } else {
+            NO_LIGHT_BLEND
+        };
         let views = &scene.views[level];
         let mut vb = views.blend(v_obj);
         vb.cull(self.settings.weight_threshold);
-        let mut lb = scene.lights.blend(l_obj);
-        lb.cull(self.settings.weight_threshold);
         // The light weights carry the gain that brightens the blend towards the sun.
-        let strength = self.settings.light_gain.clamp(0.0, 1.0);
-        if strength > 0.0 {
-            let gain = scene.lights.light_gain(&lb, l_obj).powf(strength);
-            lb.weight = lb.weight.map(|w| w * gain);
-        }
-        let lights_used = lb.weight.iter().filter(|&&w| w > 0.0).count() as u64;
+        let lb = light_weights(&scene.lights, l_obj, self.settings);
+        let lights_used = if light_blend == NO_LIGHT_BLEND {
+            lb.weight.iter().filter(|&&w| w > 0.0).count() as u64
+        } else {
+            1
+        };
         let views_used = vb.weight.iter().filter(|&&w| w > 0.0).count() as u64;
         // Per view: its lights, its sky-lit and its ground-lit image.
         let fetches =
@@ -228,6 +237,7 @@ impl Pusher<'_, '_> {
         self.stats.images_sampled += fetches;
         self.stats.fetches_saved += FETCHES_AT_MOST - fetches.min(FETCHES_AT_MOST);
         self.stats.billboards[level] += 1;
+        self.stats.light_blended += u32::from(light_blend != NO_LIGHT_BLEND);
         let depth = (center - cam).dot(self.view.camera.forward());
         // The quad faces the eye in both modes; with crossed planes it only bounds the
         // three planes, one facing each sampled view, which the fragment shader intersects.
@@ -251,6 +261,7 @@ impl Pusher<'_, '_> {
             view_weight: vb.weight,
             view_count: views.len() as u32,
             light_weight: lb.weight,
+            light_blend,
             tint: self.tint.0,
             mode: self.tint.1 as u32,
             ..BillboardGpu::UNSHADED

@@ -52,6 +52,11 @@ pub struct BtfScene {
     /// Texture layers every set together takes.
     layers: u32,
     resolution: u32,
+    /// Yaw bins of the tree level's light blends ([`super::light_blend`]) on the GPU; 0
+    /// while there are none.
+    light_bins: u32,
+    /// Their first image in the texture array (after every set's).
+    light_blend_first: u32,
 }
 
 pub use crate::render::method::view::PrepareView;
@@ -122,6 +127,7 @@ impl BtfScene {
             };
             let mut sets = level_bounds.map(|bounds| SetInfo {
                 layer_base: 0,
+                prototype: sp as u32,
                 center: Vec3::ZERO,
                 radius: 1.0,
                 bounds,
@@ -134,6 +140,7 @@ impl BtfScene {
                 let set = &baked.btf[i];
                 sets[level] = SetInfo {
                     layer_base: layers,
+                    prototype: sp as u32,
                     center: Vec3::from(set.center),
                     radius: set.radius,
                     bounds: level_bounds[level],
@@ -165,7 +172,33 @@ impl BtfScene {
             bases,
             layers,
             resolution: s.resolution,
+            light_bins: 0,
+            light_blend_first: 0,
         })
+    }
+
+    /// Yaw bins of the tree level's light blends on the GPU (0: none; the billboards blend
+    /// their light images themselves).
+    pub fn light_bins(&self) -> u32 {
+        self.light_bins
+    }
+
+    /// Says that the texture array holds light blends of `bins` yaw bins (0: none) from
+    /// image `first` on.
+    pub fn set_light_blend(&mut self, bins: u32, first: u32) {
+        self.light_bins = bins;
+        self.light_blend_first = first;
+    }
+
+    /// Light-blended images at `bins` yaw bins: one per prototype, bin and tree-level view.
+    pub fn light_blend_count(&self, bins: u32) -> u64 {
+        self.species.len() as u64 * u64::from(bins) * self.views.tree.len() as u64
+    }
+
+    /// The first light-blended image of prototype `sp`'s tree level at yaw bin `bin`
+    /// (one per view sample follows).
+    pub fn light_blend_first(&self, sp: u32, bin: u32) -> u32 {
+        self.light_blend_first + (sp * self.light_bins + bin) * self.views.tree.len() as u32
     }
 
     /// Texture layers every image set together needs.
@@ -667,6 +700,7 @@ impl BtfScene {
         }
         frame.stats.images_sampled += cpu.stats.images_sampled;
         frame.stats.fetches_saved += cpu.stats.fetches_saved;
+        frame.stats.light_blended += cpu.stats.light_blended;
         frame.billboards = cpu.billboards;
         (frame, records, gpu, at)
     }

@@ -1,7 +1,7 @@
 //! The CPU prepare step: levels, fades, expansion, culling by weight, sorting.
 
 use super::*;
-use crate::render::btf::LOD_COLORS;
+use crate::render::btf::{LOD_COLORS, NO_LIGHT_BLEND};
 use crate::render::camera::Camera;
 
 const BRANCHES: usize = 4;
@@ -34,6 +34,7 @@ pub(crate) fn scene() -> BtfScene {
     let per_set = 18 * (18 + crate::format::AMBIENT_IMAGES_PER_VIEW);
     let sets = PerLevel::from_fn(|l| SetInfo {
         layer_base: l.index() as u32 * per_set,
+        prototype: 0,
         center: bounds[l].center(),
         radius: (bounds[l].max - bounds[l].min).length() / 2.0,
         bounds: bounds[l],
@@ -71,6 +72,8 @@ pub(crate) fn scene() -> BtfScene {
         bases: vec![0, per_set, 2 * per_set],
         layers: 3 * per_set,
         resolution: 16,
+        light_bins: 0,
+        light_blend_first: 0,
     }
 }
 
@@ -104,6 +107,82 @@ fn run_as(
     let visible = vec![(0..trees.len() as u32).collect::<Vec<_>>()];
     let frame = scene().prepare(trees, &visible, &view, settings, usize::MAX, hybrid);
     (frame, camera)
+}
+
+#[test]
+fn tree_level_billboards_read_their_yaw_bins_light_blend() {
+    use crate::render::method::btf::light_blend::{bin_direction, light_weights, yaw_bin};
+    let bins = 8;
+    let mut scene = scene();
+    scene.set_light_blend(bins, 1000);
+    let to_sun = Vec3::new(0.3, 0.8, 0.2).normalize();
+    let camera = Camera::look_at(Vec3::new(0.0, 40.0, -300.0), Vec3::ZERO, 60.0);
+    let frustum = camera.frustum(16.0 / 9.0);
+    let view = PrepareView {
+        camera: &camera,
+        focal_px: FOCAL,
+        to_sun,
+        frustum: &frustum,
+    };
+    // Far (tree level), at yaws on and between the bins; one near (finer levels).
+    let yaws = [0.0, 0.3, 1.0, 2.5, -2.0];
+    let mut trees: Vec<TreeGpu> = yaws.iter().map(|&y| tree_at(0.0, 0.0, y)).collect();
+    trees.push(tree_at(0.0, 0.0, 0.5));
+    let s = BtfSettings {
+        lod_fade: 0.0,
+        ..BtfSettings::default()
+    };
+    let far = vec![(0..yaws.len() as u32).collect::<Vec<_>>()];
+    let frame = scene.prepare(&trees, &far, &view, &s, usize::MAX, false);
+    assert_eq!(frame.records.len(), yaws.len());
+    assert_eq!(frame.stats.light_blended, yaws.len() as u32);
+    // Per view used: the blend, the sky-lit and the ground-lit image.
+    let views_used = |f: &BtfFrame| -> u64 {
+        f.records
+            .iter()
+            .map(|r| r.view_weight.iter().filter(|&&w| w > 0.0).count() as u64)
+            .sum()
+    };
+    assert_eq!(frame.stats.images_sampled, 3 * views_used(&frame));
+    for (r, &yaw) in frame.records.iter().zip(&yaws) {
+        let l_obj = Mat3::from_rotation_y(yaw).transpose() * to_sun;
+        let bin = yaw_bin(l_obj, to_sun, bins);
+        assert_eq!(r.light_blend, 1000 + bin * 18, "yaw {yaw}");
+        let lb = light_weights(&scene.lights, bin_direction(to_sun, bin, bins), &s);
+        assert_eq!((r.light_index, r.light_weight), (lb.index, lb.weight));
+    }
+    // Off: every billboard blends its lights itself, 15 reads.
+    let off = BtfSettings {
+        light_blend: false,
+        ..s
+    };
+    let frame = scene.prepare(&trees, &far, &view, &off, usize::MAX, false);
+    assert!(
+        frame
+            .records
+            .iter()
+            .all(|r| r.light_blend == NO_LIGHT_BLEND)
+    );
+    assert_eq!(frame.stats.images_sampled, 5 * views_used(&frame));
+    // Near: the finer levels' billboards keep their 3 lights.
+    let near_cam = Camera::look_at(Vec3::new(0.0, 5.0, -8.0), Vec3::new(0.0, 5.0, 0.0), 60.0);
+    let near_frustum = near_cam.frustum(16.0 / 9.0);
+    let near_view = PrepareView {
+        camera: &near_cam,
+        frustum: &near_frustum,
+        ..view
+    };
+    let near = vec![vec![yaws.len() as u32]];
+    let frame = scene.prepare(&trees, &near, &near_view, &s, usize::MAX, false);
+    assert!(!frame.records.is_empty());
+    assert_eq!(frame.stats.trees_per_level.tree, 0);
+    assert!(
+        frame
+            .records
+            .iter()
+            .all(|r| r.light_blend == NO_LIGHT_BLEND)
+    );
+    assert_eq!(frame.stats.light_blended, 0);
 }
 
 #[test]

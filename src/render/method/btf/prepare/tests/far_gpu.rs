@@ -147,6 +147,8 @@ fn gpu_against_cpu(
     scene.views.branch = DirectionSet::with_count(18).unwrap();
     scene.views.twig = DirectionSet::with_count(6).unwrap();
     scene.lights = DirectionSet::with_count(6).unwrap();
+    // The tree level reads light blends of 16 yaw bins (the record says which).
+    scene.set_light_blend(16, 5000);
     if vcm {
         scene.vcm = Some(VcmShading::synthetic(
             4,
@@ -281,6 +283,7 @@ fn gpu_against_cpu(
             (c.layer_base, c.view_count, c.light_count, c.planes, c.mode)
         );
         assert_eq!((g.opacity, g.tint), (c.opacity, c.tint));
+        assert_eq!(g.light_blend, c.light_blend, "record {k}: light blend");
         assert!(close(g.vcm_box_origin, c.vcm_box_origin, 1e-5));
         assert!(close(g.vcm_box_scale, c.vcm_box_scale, 1e-5));
         let factors = |r: &BillboardGpu| {
