@@ -10,6 +10,7 @@ pub mod far;
 pub mod knobs;
 pub mod light_blend;
 pub mod method;
+mod pipelines_btf;
 pub mod prepare;
 pub mod settings;
 pub mod shading;
@@ -600,8 +601,9 @@ impl BtfAssets {
         light_frame_layout: &wgpu::BindGroupLayout,
     ) -> &wgpu::RenderPipeline {
         let layout = &self.layout;
-        self.opacity_pipeline
-            .get_or_insert_with(|| build_opacity_pipeline(device, light_frame_layout, layout))
+        self.opacity_pipeline.get_or_insert_with(|| {
+            pipelines_btf::build_opacity_pipeline(device, light_frame_layout, layout)
+        })
     }
 
     pub fn sun_bind_group(&self) -> &wgpu::BindGroup {
@@ -617,7 +619,7 @@ impl BtfAssets {
         let layout = &self.layout;
         self.pipelines
             .entry(format)
-            .or_insert_with(|| build_pipeline(device, frame_layout, layout, format))
+            .or_insert_with(|| pipelines_btf::build_pipeline(device, frame_layout, layout, format))
     }
 
     pub fn bind_group(&self) -> &wgpu::BindGroup {
@@ -718,80 +720,6 @@ fn upload_image(
         }
     }
     bytes
-}
-
-fn build_opacity_pipeline(
-    device: &wgpu::Device,
-    frame_layout: &wgpu::BindGroupLayout,
-    btf_layout: &wgpu::BindGroupLayout,
-) -> wgpu::RenderPipeline {
-    // dst = dst * (1 - alpha): transmittance multiplies.
-    let transmit = wgpu::BlendComponent {
-        src_factor: wgpu::BlendFactor::Zero,
-        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-        operation: wgpu::BlendOperation::Add,
-    };
-    billboard_pipeline(
-        device,
-        [frame_layout, btf_layout],
-        ("ground_map.wgsl", crate::render::shaders::ground_map()),
-        "fs_opacity",
-        crate::render::GROUND_FORMAT,
-        transmit,
-        (crate::render::SHADOW_FORMAT, wgpu::CompareFunction::Less),
-    )
-}
-
-fn build_pipeline(
-    device: &wgpu::Device,
-    frame_layout: &wgpu::BindGroupLayout,
-    btf_layout: &wgpu::BindGroupLayout,
-    format: wgpu::TextureFormat,
-) -> wgpu::RenderPipeline {
-    // Premultiplied "over": T = M + (1 - M_alpha) T0.
-    let over = wgpu::BlendComponent {
-        src_factor: wgpu::BlendFactor::One,
-        dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-        operation: wgpu::BlendOperation::Add,
-    };
-    // Reversed Z in the main view.
-    billboard_pipeline(
-        device,
-        [frame_layout, btf_layout],
-        ("btf.wgsl", crate::render::shaders::btf()),
-        "fs_billboard",
-        format,
-        over,
-        (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
-    )
-}
-
-/// A pipeline drawing the billboards of `billboard.wgsl` with `fragment` of the module
-/// `source` (named, source), blended by `blend`,
-/// depth-tested (never written) against `depth`.
-fn billboard_pipeline(
-    device: &wgpu::Device,
-    layouts: [&wgpu::BindGroupLayout; 2],
-    source: (&str, String),
-    fragment: &str,
-    format: wgpu::TextureFormat,
-    blend: wgpu::BlendComponent,
-    depth: (wgpu::TextureFormat, wgpu::CompareFunction),
-) -> wgpu::RenderPipeline {
-    crate::render::pipelines::blended_pipeline(
-        device,
-        crate::render::pipelines::Blended {
-            label: source.0,
-            layouts,
-            source: source.1,
-            vertex: "vs_billboard",
-            fragment,
-            format,
-            blend,
-            cull: None,
-            depth,
-        },
-    )
 }
 
 #[cfg(test)]
