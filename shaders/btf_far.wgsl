@@ -91,8 +91,19 @@ struct FarParams {
     light_bins: u32,
     // The first light-blended image in the BTF atlas (prototype 0, bin 0, view 0).
     light_blend_first: u32,
-    _blend_pad0: u32,
-    _blend_pad1: u32,
+    // The far canopy (btf_far_canopy.wgsl, canopy.wgsl): trees from `canopy_near` (m, to
+    // their bounds' centre) fade out by `canopy_far`, past which the canopy alone stands
+    // for them; 0 and 0: no canopy.
+    canopy_near: f32,
+    canopy_far: f32,
+    // The frame's lights (colour x intensity), which the canopy's colours are lit by.
+    sun_color: vec3<f32>,
+    // Where each BTF image's mean starts in `tables` (one row an image).
+    means_at: u32,
+    sky_ambient: vec3<f32>,
+    _canopy_pad0: u32,
+    ground_ambient: vec3<f32>,
+    _canopy_pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: FarParams;
@@ -471,6 +482,19 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let tree = tree_at(i);
+    // Past the canopy's near distance the tree fades out, and the canopy takes its colour
+    // (whether in view or not: a coarse canopy texel may show it from outside).
+    var fade = 1.0;
+    if params.canopy_far > 0.0 {
+        let d = distance(params.camera, 0.5 * (tree.bounds_min + tree.bounds_max));
+        if d > params.canopy_near {
+            canopy_colour(i, tree);
+        }
+        if d >= params.canopy_far {
+            return;
+        }
+        fade = 1.0 - smoothstep(params.canopy_near, params.canopy_far, d);
+    }
     // The tree's bounds, then its billboard's sphere, against each plane
     // (`Frustum::intersects`), as the CPU culls then builds.
     for (var p = 0u; p < params.plane_count; p++) {
@@ -488,6 +512,7 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
     if r.planes == 0u {
         return;
     }
+    r.opacity = fade;
     if params.vcm != 0u {
         let sh = shade_of(i);
         r.vcm_direct = sh.direct;

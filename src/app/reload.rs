@@ -63,6 +63,8 @@ pub fn apply_frame_edit(old: &Scene, new: &Scene, frame: &mut FrameDesc) {
         frame.btf.weight_threshold = fresh.btf.weight_threshold;
         frame.btf.lod_fade = fresh.btf.lod_fade;
         frame.btf.planes = fresh.btf.planes;
+        frame.btf.far_canopy = fresh.btf.far_canopy;
+        frame.btf.canopy_px = fresh.btf.canopy_px;
     }
 }
 

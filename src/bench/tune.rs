@@ -196,11 +196,13 @@ pub fn choose(summaries: &[ConfigSummary], target: &TuneTarget) -> Option<usize>
 /// else appended); everything else, comments included, is kept as it was.
 pub fn with_render_table(text: &str, s: &BtfSettings) -> String {
     let table = format!(
-        "[render]\n# Chosen by `canopy tune`.\nlod_scale = {}\nweight_threshold = {}\nlod_fade = {}\nplanes = \"{}\"\n",
+        "[render]\n# Chosen by `canopy tune`.\nlod_scale = {}\nweight_threshold = {}\nlod_fade = {}\nplanes = \"{}\"\nfar_canopy = {}\ncanopy_px = {}\n",
         s.lod_scale,
         s.weight_threshold,
         s.lod_fade,
-        s.planes.name()
+        s.planes.name(),
+        s.far_canopy,
+        s.canopy_px
     );
     let lines: Vec<&str> = text.lines().collect();
     let is_header = |l: &str| l.trim_start().starts_with('[');
@@ -303,10 +305,10 @@ mod tests {
     fn the_grid_covers_every_knob_value_once() {
         let base = FrameDesc::from_scene(&crate::scene::Scene::default_scene());
         let c = candidates(&base);
-        assert_eq!(c.len(), 5 * 4 * 2 * 2);
+        assert_eq!(c.len(), 5 * 4 * 2 * 2 * 2);
         assert_eq!(
             c[1].label,
-            "btf lod_scale=1 weight_threshold=0 lod_fade=0 planes=single"
+            "btf lod_scale=1 weight_threshold=0 lod_fade=0 planes=single far_canopy=off"
         );
         let mut d = base;
         c[c.len() - 1].knobs.apply_to(&mut d);
@@ -315,6 +317,7 @@ mod tests {
             (8.0, 0.3, 0.2)
         );
         assert_eq!(d.btf.planes, PlaneMode::Crossed);
+        assert!(d.btf.far_canopy);
         let mut labels: Vec<&str> = c.iter().map(|c| c.label.as_str()).collect();
         labels.sort();
         labels.dedup();

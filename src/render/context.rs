@@ -85,6 +85,10 @@ impl GpuContext {
             max_texture_array_layers: supported.max_texture_array_layers,
             max_buffer_size: supported.max_buffer_size,
             max_storage_buffer_binding_size: supported.max_storage_buffer_binding_size,
+            // The far trees' compute passes bind 9 storage buffers.
+            max_storage_buffers_per_shader_stage: supported
+                .max_storage_buffers_per_shader_stage
+                .min(16),
             ..wgpu::Limits::default()
         };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {

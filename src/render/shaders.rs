@@ -9,6 +9,8 @@ const INSTANCING: &str = include_str!("../../shaders/instancing.wgsl");
 const BILLBOARD_RECORD: &str = include_str!("../../shaders/billboard_record.wgsl");
 const BILLBOARD: &str = include_str!("../../shaders/billboard.wgsl");
 const BTF_FAR: &str = include_str!("../../shaders/btf_far.wgsl");
+const BTF_FAR_CANOPY: &str = include_str!("../../shaders/btf_far_canopy.wgsl");
+const CANOPY: &str = include_str!("../../shaders/canopy.wgsl");
 const GEOMETRY: &str = include_str!("../../shaders/geometry.wgsl");
 const SHADOW: &str = include_str!("../../shaders/shadow.wgsl");
 const SKY: &str = include_str!("../../shaders/sky.wgsl");
@@ -57,6 +59,7 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("sky", sky()),
         ("btf", btf()),
         ("btf_far", btf_far()),
+        ("canopy", canopy()),
         ("light_blend", light_blend()),
         ("ground_map", ground_map()),
         ("texel", texel()),
@@ -82,9 +85,14 @@ pub fn btf() -> String {
 }
 
 /// The `btf` method's far trees, built, sorted and gathered in compute passes: the
-/// billboard record, then its file.
+/// billboard record, its file, then the far canopy's colours.
 pub fn btf_far() -> String {
-    format!("{BILLBOARD_RECORD}\n{BTF_FAR}")
+    format!("{BILLBOARD_RECORD}\n{BTF_FAR}\n{BTF_FAR_CANOPY}")
+}
+
+/// The `btf` method's far canopy: frame uniforms, then its file.
+pub fn canopy() -> String {
+    with_frame(CANOPY)
 }
 
 /// The `texel` method's pass: frame uniforms, then its file.

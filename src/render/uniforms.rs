@@ -66,18 +66,25 @@ pub struct FrameUniforms {
     pub overdraw: [u32; 4],
 }
 
+/// The frame's sun, sky and ground light (colour x intensity; the sun 0 below the horizon
+/// except in the studio).
+pub fn frame_lights(frame: &FrameDesc) -> [Vec3; 3] {
+    let sun = if frame.stage == Stage::Studio {
+        frame.sun.color * frame.sun.intensity
+    } else {
+        frame.sun.radiance()
+    };
+    let sky = frame.sky.color * frame.sky.intensity;
+    let ground = frame.sky.ground_color * frame.sky.intensity;
+    [sun, sky, ground]
+}
+
 impl FrameUniforms {
     /// Uniforms for the main view.
     pub fn new(frame: &FrameDesc, aspect: f32, cascades: &Cascades) -> Self {
         let vp = frame.camera.view_projection(aspect);
         let studio = frame.stage == Stage::Studio;
-        let sun = if studio {
-            frame.sun.color * frame.sun.intensity
-        } else {
-            frame.sun.radiance()
-        };
-        let sky = frame.sky.color * frame.sky.intensity;
-        let ground = frame.sky.ground_color * frame.sky.intensity;
+        let [sun, sky, ground] = frame_lights(frame);
         let horizon = frame.sky.color.lerp(Vec3::new(0.85, 0.88, 0.92), 0.55);
         let shadows_on = frame.shadows.enabled && (studio || frame.sun.elevation_deg > 0.0);
         Self {

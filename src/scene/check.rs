@@ -19,6 +19,7 @@ impl RenderParams {
         range("lod_scale", self.lod_scale, 0.05, 64.0)?;
         range("weight_threshold", self.weight_threshold, 0.0, 1.0)?;
         range("lod_fade", self.lod_fade, 0.0, 1.0)?;
+        range("canopy_px", self.canopy_px, 0.5, 64.0)?;
         if let Some(p) = &self.planes
             && p != "single"
             && p != "crossed"

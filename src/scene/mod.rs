@@ -76,6 +76,11 @@ pub struct RenderParams {
     pub lod_fade: Option<f32>,
     /// `single` or `crossed`.
     pub planes: Option<String>,
+    /// Draw the far forest as one canopy layer (true) or a billboard per tree (false).
+    pub far_canopy: Option<bool>,
+    /// The on-screen crown width (px) below which trees are drawn by the far canopy
+    /// (0.5..=64).
+    pub canopy_px: Option<f32>,
 }
 
 /// `[sun]`: the directional light.

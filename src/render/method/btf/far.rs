@@ -43,6 +43,21 @@ use crate::render::timing::{MappedRead, PassSpans};
 use crate::render::world_gpu::TreeGpu;
 use crate::sphere::{DirectionRows, DirectionSet};
 
+/// The far trees' band widens by this share of its start: trees fade out and the canopy in
+/// from `near` to `near · (1 + CANOPY_BAND)`.
+pub const CANOPY_BAND: f32 = 0.25;
+
+/// What the build pass needs for the far canopy this frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CanopyFrame {
+    /// A typical crown's width (m) and the on-screen width (px) below which a tree is
+    /// drawn by the canopy.
+    pub crown_width: f32,
+    pub below_px: f32,
+    /// The frame's sun, sky and ground light (colour x intensity).
+    pub lights: [Vec3; 3],
+}
+
 /// One tree instance as the build pass reads it (`FarTree` in `btf_far.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
@@ -115,8 +130,17 @@ pub struct FarParamsGpu {
     pub light_bins: u32,
     /// The first light-blended image in the BTF atlas.
     pub light_blend_first: u32,
-    pub _blend_pad0: u32,
-    pub _blend_pad1: u32,
+    /// The far canopy's fade band (m; both 0: no canopy).
+    pub canopy_near: f32,
+    pub canopy_far: f32,
+    /// The frame's lights, which the canopy's colours are lit by.
+    pub sun_color: [f32; 3],
+    /// Where each BTF image's mean starts in the tables (one row an image).
+    pub means_at: u32,
+    pub sky_ambient: [f32; 3],
+    pub _canopy_pad0: u32,
+    pub ground_ambient: [f32; 3],
+    pub _canopy_pad1: u32,
 }
 
 /// One step of the bitonic sort (`SortStep`).
@@ -156,6 +180,8 @@ pub struct FarGpu {
     /// The largest scale of any tree.
     max_scale: f32,
     tables: wgpu::Buffer,
+    /// Each tree's far-canopy colour (`canopy_colours` in `btf_far_canopy.wgsl`).
+    canopy_colours: wgpu::Buffer,
     params: wgpu::Buffer,
     base: FarParamsGpu,
     /// Each tree's VCM factors (`FarShade`, 16 words; uploaded when the sun moves), one bit
@@ -196,6 +222,9 @@ pub struct FarGpu {
     finish: wgpu::ComputePipeline,
     /// The frame's uniforms once its near trees are found, before their records come.
     pending: Option<FarParamsGpu>,
+    /// The frame's far-canopy band (m from the eye: trees fade out from the first, the
+    /// canopy alone past the second); None without a canopy.
+    canopy_band: Option<(f32, f32)>,
     /// The frame's near bits, written with the near draws.
     bits: Vec<u32>,
     /// The frame's key count, records to sort, and slots expanded by `near_build` (set by
@@ -240,6 +269,7 @@ impl FarGpu {
         bounds: &[Aabb],
         layout: &wgpu::BindGroupLayout,
         draw: (&wgpu::Buffer, &wgpu::TextureView, &wgpu::Sampler),
+        means: &[[f32; 4]],
     ) -> Result<Option<Self>> {
         let n = trees.len().min(species.len()).min(bounds.len());
         if n == 0 {
@@ -260,7 +290,7 @@ impl FarGpu {
         if keys.div_ceil(WORKGROUP) > limits.max_compute_workgroups_per_dimension
             || n as u64 >= limit
             || u64::from(keys) * 8 > limits.max_storage_buffer_binding_size
-            || limits.max_storage_buffers_per_shader_stage < 8
+            || limits.max_storage_buffers_per_shader_stage < 9
         {
             return Ok(None);
         }
@@ -298,6 +328,9 @@ impl FarGpu {
         // the near records.
         let trees_at = tables.len() as u32;
         tables.extend_from_slice(bytemuck::cast_slice::<FarTreeGpu, [u32; 4]>(&far_trees));
+        // Every BTF image's mean, for the far canopy's colours.
+        let means_at = tables.len() as u32;
+        tables.extend(means.iter().map(|m| m.map(f32::to_bits)));
         if (tables.len() * 16) as u64 > limits.max_storage_buffer_binding_size {
             log::warn!(
                 "the trees' GPU tables ({} bytes, cube maps included) pass one storage binding",
@@ -337,8 +370,14 @@ impl FarGpu {
             near_room: limit.min(u64::from(u32::MAX)) as u32,
             light_bins: 0,
             light_blend_first: scene.light_blend_first(0, 0),
-            _blend_pad0: 0,
-            _blend_pad1: 0,
+            canopy_near: 0.0,
+            canopy_far: 0.0,
+            sun_color: [0.0; 3],
+            means_at,
+            sky_ambient: [0.0; 3],
+            _canopy_pad0: 0,
+            ground_ambient: [0.0; 3],
+            _canopy_pad1: 0,
         };
         let init = |label: &str, contents: &[u8]| {
             wgpu::util::DeviceExt::create_buffer_init(
@@ -373,9 +412,11 @@ impl FarGpu {
                     DRAW_WORDS * 4,
                     U::STORAGE | U::INDIRECT | U::COPY_DST | U::COPY_SRC,
                 ),
+                // Zeroed: no tree has a colour before its first frame in the canopy.
+                buffer(ctx, "canopy colours", 16 * n as u64, U::STORAGE),
             )
         })?;
-        let (tables_buf, params, frame_words, draw_args) = bufs;
+        let (tables_buf, params, frame_words, draw_args, canopy_colours) = bufs;
         let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
@@ -411,6 +452,7 @@ impl FarGpu {
                     storage(6, false),
                     storage(7, false),
                     storage(8, false),
+                    storage(9, false),
                 ],
             });
         let layout1 = ctx
@@ -477,7 +519,7 @@ impl FarGpu {
         let (bind_group, step_bind_group, draw_bind_group) = bind_groups(
             ctx,
             [&layout0, &layout1, layout],
-            [&params, &near_second, &tables_buf],
+            [&params, &near_second, &tables_buf, &canopy_colours],
             [
                 &near_first,
                 &frame_words,
@@ -499,6 +541,7 @@ impl FarGpu {
             grid,
             max_scale,
             tables: tables_buf,
+            canopy_colours,
             params,
             base,
             frame_words,
@@ -527,6 +570,7 @@ impl FarGpu {
             gather,
             finish,
             pending: None,
+            canopy_band: None,
             bits: Vec::new(),
             frame: None,
             count: CountReadback::new(ctx),
@@ -541,6 +585,7 @@ impl FarGpu {
             &self.near_records[0],
             &self.near_records[1],
             &self.tables,
+            &self.canopy_colours,
             &self.frame_words,
             &self.records,
             &self.keys,
@@ -676,7 +721,12 @@ impl FarGpu {
         let (bind_group, step_bind_group, draw_bind_group) = bind_groups(
             ctx,
             [&self.layouts[0], &self.layouts[1], &self.draw_layout],
-            [&self.params, &self.near_records[1], &self.tables],
+            [
+                &self.params,
+                &self.near_records[1],
+                &self.tables,
+                &self.canopy_colours,
+            ],
             [
                 &self.near_records[0],
                 &self.frame_words,
@@ -709,9 +759,11 @@ impl FarGpu {
         view: &PrepareView,
         settings: &BtfSettings,
         trees_on: bool,
+        canopy: Option<&CanopyFrame>,
     ) -> (Vec<Vec<u32>>, f64) {
         self.frame = None;
         self.pending = None;
+        self.canopy_band = None;
         let mut near = vec![Vec::new(); scene.species_count()];
         let count = self.tree_count as u32;
         if !trees_on || count == 0 {
@@ -721,6 +773,13 @@ impl FarGpu {
         // test; their bits are set whether in view or not (the GPU skips them all).
         let bound = BtfScene::far_bound(settings);
         let radius = scene.near_radius(view.focal_px, bound, self.max_scale);
+        // The canopy starts where a typical crown is narrower than its pixel bound on
+        // screen, and never among the near trees, which the CPU prepares.
+        let band = canopy.and_then(|c| {
+            let near = (c.crown_width * view.focal_px / c.below_px).max(radius);
+            (near.is_finite() && near > 0.0).then_some((near, near * (1.0 + CANOPY_BAND)))
+        });
+        self.canopy_band = band;
         let mut bits = vec![0u32; self.tree_count.div_ceil(32).max(1)];
         let cam = view.camera.position;
         self.grid.for_each_near(cam, radius, |t| {
@@ -793,6 +852,11 @@ impl FarGpu {
             } else {
                 0
             },
+            canopy_near: band.map_or(0.0, |b| b.0),
+            canopy_far: band.map_or(0.0, |b| b.1),
+            sun_color: canopy.map_or([0.0; 3], |c| c.lights[0].to_array()),
+            sky_ambient: canopy.map_or([0.0; 3], |c| c.lights[1].to_array()),
+            ground_ambient: canopy.map_or([0.0; 3], |c| c.lights[2].to_array()),
             ..self.base
         });
         self.bits = bits;
@@ -965,6 +1029,17 @@ impl FarGpu {
     pub fn clear(&mut self) {
         self.frame = None;
         self.pending = None;
+        self.canopy_band = None;
+    }
+
+    /// The frame's far-canopy band (m from the eye), if it has a canopy.
+    pub fn canopy_band(&self) -> Option<(f32, f32)> {
+        self.canopy_band
+    }
+
+    /// Each tree's far-canopy colour, made by the build pass.
+    pub fn canopy_colours(&self) -> &wgpu::Buffer {
+        &self.canopy_colours
     }
 
     /// Whether the frame has GPU work.
@@ -999,7 +1074,7 @@ fn buffer(ctx: &GpuContext, label: &str, size: u64, usage: wgpu::BufferUsages) -
 fn bind_groups(
     ctx: &GpuContext,
     layouts: [&wgpu::BindGroupLayout; 3],
-    fixed: [&wgpu::Buffer; 3],
+    fixed: [&wgpu::Buffer; 4],
     sized: [&wgpu::Buffer; 6],
     steps: &wgpu::Buffer,
     draw: &(wgpu::Buffer, wgpu::TextureView, wgpu::Sampler),
@@ -1017,6 +1092,7 @@ fn bind_groups(
             entry(6, sized[3]),
             entry(7, sized[4]),
             entry(8, sized[5]),
+            entry(9, fixed[3]),
         ],
     });
     let step = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {

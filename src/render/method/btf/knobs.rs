@@ -104,6 +104,25 @@ pub static KNOBS: &[Knob] = &[
         |d| d.btf.light_blend,
         |d, v| d.btf.light_blend = v,
     ),
+    Knob::toggle(
+        "far_canopy",
+        "far canopy",
+        "past the distance where a typical crown is narrower than canopy_px pixels, draw the forest as one layer over the ground (its trees' colours, seen from above) instead of a billboard per tree",
+        |d| d.btf.far_canopy,
+        |d, v| d.btf.far_canopy = v,
+    )
+    .when(|d| d.btf.gpu_far)
+    .tuned(&["off", "on"]),
+    Knob::number(
+        "canopy_px",
+        "far canopy below (px)",
+        "a tree whose crown is narrower than this on screen is drawn by the far canopy (the band where its billboard fades out starts there)",
+        (0.5, 64.0),
+        |d| d.btf.canopy_px,
+        |d, v| d.btf.canopy_px = v,
+    )
+    .slider(1.0, 16.0, true)
+    .when(|d| d.btf.gpu_far && d.btf.far_canopy),
 ];
 
 /// `frame`'s `btf` knobs as a label, `btf lod_scale=2 ...`, those `tune` varies.

@@ -234,6 +234,7 @@ impl RenderMethod for BtfMethod {
             cx.view.frustum,
             &frame.btf,
             self.hybrid,
+            crate::render::uniforms::frame_lights(frame),
         );
         // The far trees' VCM factors, uploaded after the sun moved.
         sun.ms += shade_ms;
@@ -263,6 +264,9 @@ impl RenderMethod for BtfMethod {
         format: wgpu::TextureFormat,
     ) -> Result<()> {
         self.pipeline = billboard_pipeline(bake, ctx, layouts, format);
+        if let Some(b) = bake.btf.as_mut() {
+            b.ensure_canopy_pipeline(&ctx.device, &layouts.frame, format);
+        }
         Ok(())
     }
 

@@ -6,6 +6,7 @@
 //! file): one instanced draw samples a single texture array holding every image set.
 
 mod billboard;
+pub mod canopy;
 pub mod far;
 pub mod knobs;
 pub mod light_blend;
@@ -24,7 +25,9 @@ pub use billboard::{BillboardGpu, BillboardMode, NO_LIGHT_BLEND};
 pub use prepare::{
     BtfFrame, BtfScene, LevelChoice, NearDrawGpu, PrepareView, SortedBillboards, choose_level,
 };
-pub use settings::{BtfSettings, BtfStats, FETCHES_AT_MOST, GEOMETRY_COLOR, LOD_COLORS, PlaneMode};
+pub use settings::{
+    BtfSettings, BtfStats, CANOPY_COLOR, FETCHES_AT_MOST, GEOMETRY_COLOR, LOD_COLORS, PlaneMode,
+};
 
 use crate::format::Baked;
 use crate::lod::LevelTexels;
@@ -63,6 +66,11 @@ pub struct BtfAssets {
     /// The tree level's light blends, in the texture array's last layers (None where the
     /// GPU cannot hold them).
     light_blend: Option<light_blend::LightBlend>,
+    /// Every baked image's mean (premultiplied linear colour, coverage), for the canopy.
+    means: Vec<[f32; 4]>,
+    /// The forest seen from above, for the far canopy; on the GPU once a frame wants it.
+    canopy_map: Option<canopy::map::CanopyMap>,
+    canopy: Option<canopy::CanopyGpu>,
     /// Bytes of the texture array, mipmaps included.
     pub bytes: u64,
 }
@@ -131,15 +139,27 @@ impl BtfAssets {
         };
         let image_bytes = (res * res * 4) as usize;
         let mut bytes = 0u64;
+        let mut means = vec![[0.0f32; 4]; images as usize];
+        let lut = crate::color::srgb_lut();
         for (base, set) in scene.image_sets(baked) {
             let images = set
                 .direct
                 .chunks_exact(image_bytes)
                 .chain(set.ambient.chunks_exact(image_bytes));
             for (i, img) in images.enumerate() {
-                bytes += upload_image(ctx, &texture, base + i as u32, res, img, mips);
+                let (b, mean) = upload_image(ctx, &texture, base + i as u32, res, img, mips, &lut);
+                bytes += b;
+                if let Some(m) = means.get_mut((base + i as u32) as usize) {
+                    *m = mean;
+                }
             }
         }
+        let t0 = std::time::Instant::now();
+        let canopy_map = canopy_map(world);
+        log::debug!(
+            "btf: the far canopy's map in {:.0} ms",
+            t0.elapsed().as_secs_f64() * 1e3
+        );
         let texture_view = texture.create_view(&wgpu::TextureViewDescriptor {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
@@ -212,6 +232,9 @@ impl BtfAssets {
             sun_bind_group,
             far: None,
             light_blend: blend,
+            means,
+            canopy_map,
+            canopy: None,
             bytes,
         })
     }
@@ -284,6 +307,7 @@ impl BtfAssets {
         frustum: &Frustum,
         settings: &BtfSettings,
         hybrid: bool,
+        lights: [Vec3; 3],
     ) -> (BtfFrame, f64) {
         let view = PrepareView {
             camera,
@@ -302,6 +326,7 @@ impl BtfAssets {
                     &world.tree_bounds,
                     &self.layout,
                     (&self.view_axes, &self.texture_view, &self.sampler),
+                    &self.means,
                 )
                 .unwrap_or_else(|e| {
                     log::warn!("the far trees stay on the CPU: {e}");
@@ -316,6 +341,23 @@ impl BtfAssets {
             .filter(|_| settings.gpu_far);
         if let Some(f) = far {
             let t0 = std::time::Instant::now();
+            // The far canopy, where the scene has a map and the knob asks for it.
+            if settings.far_canopy && self.canopy.is_none() {
+                self.canopy = self.canopy_map.as_ref().and_then(|m| {
+                    canopy::CanopyGpu::new(ctx, m)
+                        .map_err(|e| log::warn!("no far canopy: {e}"))
+                        .ok()
+                });
+            }
+            let canopy_frame = self
+                .canopy
+                .as_ref()
+                .filter(|c| settings.far_canopy && c.crown_width > 0.0 && settings.canopy_px > 0.0)
+                .map(|c| far::CanopyFrame {
+                    crown_width: c.crown_width,
+                    below_px: settings.canopy_px,
+                    lights,
+                });
             let (near, shade_ms) = f.prepare(
                 ctx,
                 &self.scene,
@@ -324,6 +366,22 @@ impl BtfAssets {
                 &view,
                 settings,
                 trees_on,
+                canopy_frame.as_ref(),
+            );
+            let canopy_tiles = match (f.canopy_band(), self.canopy.as_mut()) {
+                (Some(band), Some(c)) if trees_on => c.prepare(
+                    ctx,
+                    camera.position,
+                    frustum,
+                    band,
+                    settings.show_lod.then_some(CANOPY_COLOR),
+                    f.canopy_colours(),
+                ),
+                _ => 0,
+            };
+            log::debug!(
+                "btf prepare: far canopy {:?} m, {canopy_tiles} tiles",
+                f.canopy_band()
             );
             let t1 = std::time::Instant::now();
             // Unsorted: the GPU sorts them with the far trees' billboards. With `gpu_near`
@@ -361,6 +419,7 @@ impl BtfAssets {
             match uploaded {
                 Ok(true) => {
                     out.far = true;
+                    out.stats.canopy_tiles = canopy_tiles;
                     return (out, shade_ms);
                 }
                 Ok(false) => {}
@@ -452,6 +511,23 @@ impl BtfAssets {
     }
 
     /// GPU bytes of the far trees' buffers (0 until used).
+    /// Builds the far canopy's pipeline for `format` (when the canopy is on the GPU).
+    pub fn ensure_canopy_pipeline(
+        &mut self,
+        device: &wgpu::Device,
+        frame_layout: &wgpu::BindGroupLayout,
+        format: wgpu::TextureFormat,
+    ) {
+        if let Some(c) = self.canopy.as_mut() {
+            c.ensure_pipeline(device, frame_layout, format);
+        }
+    }
+
+    /// GPU bytes of the far canopy's map (0 before it is first drawn).
+    pub fn canopy_bytes(&self) -> u64 {
+        self.canopy.as_ref().map_or(0, |c| c.bytes)
+    }
+
     pub fn far_bytes(&self) -> u64 {
         self.far
             .as_ref()
@@ -535,6 +611,16 @@ impl BtfAssets {
         stats.triangles += t0 + t1 + t2 + 2 * u64::from(bf.billboards);
         stats.trees_drawn = bf.stats.trees_per_level.iter().sum::<u32>() + bf.stats.geometry_trees;
         stats.draw_calls += c0 + c1 + c2;
+        // The far canopy under the billboards that fade into it.
+        if bf.far
+            && bf.stats.canopy_tiles > 0
+            && let Some(c) = &self.canopy
+        {
+            cx.spans.mark(pass, "far canopy");
+            if c.draw(pass) {
+                stats.draw_calls += 1;
+            }
+        }
         cx.spans.mark(pass, "billboards");
         // Sorted on the GPU with the far trees' billboards, or on the CPU.
         if let Some(pipeline) = pipeline
@@ -687,7 +773,8 @@ pub fn atlas_layers(images: u64) -> u64 {
 }
 
 /// Uploads image `index` and its mip chain (box-filtered in linear light) into its square
-/// of the atlas. Returns the bytes uploaded.
+/// of the atlas. Returns the bytes uploaded and the image's mean (its last level: linear
+/// colour, premultiplied as stored, and coverage).
 fn upload_image(
     ctx: &GpuContext,
     texture: &wgpu::Texture,
@@ -695,13 +782,14 @@ fn upload_image(
     res: u32,
     rgba: &[u8],
     mips: u32,
-) -> u64 {
+    lut: &[f32],
+) -> (u64, [f32; 4]) {
     let per_layer = ATLAS_SIDE * ATLAS_SIDE;
     let layer = index / per_layer;
     let slot = index % per_layer;
     let (cx, cy) = (slot % ATLAS_SIDE, slot / ATLAS_SIDE);
     let Some(mut img) = image::RgbaImage::from_raw(res, res, rgba.to_vec()) else {
-        return 0;
+        return (0, [0.0; 4]);
     };
     let mut bytes = 0u64;
     for level in 0..mips {
@@ -719,7 +807,44 @@ fn upload_image(
             img = crate::render::target::downsample(&img, 2);
         }
     }
-    bytes
+    (bytes, image_mean(rgba, lut))
+}
+
+/// The mean of an sRGB-encoded RGBA8 image: linear colour (premultiplied as stored) and
+/// coverage.
+fn image_mean(rgba: &[u8], lut: &[f32]) -> [f32; 4] {
+    let mut sum = [0.0f64; 4];
+    for px in rgba.chunks_exact(4) {
+        for c in 0..3 {
+            sum[c] += f64::from(lut[usize::from(px[c])]);
+        }
+        sum[3] += f64::from(px[3]) / 255.0;
+    }
+    let n = (rgba.len() / 4).max(1) as f64;
+    sum.map(|v| (v / n) as f32)
+}
+
+/// The far canopy's map of `world`'s forest, from each prototype's full geometry.
+fn canopy_map(world: &World) -> Option<canopy::map::CanopyMap> {
+    if world.forest.instances.is_empty() {
+        return None;
+    }
+    let footprints: Vec<canopy::map::Footprint> = world
+        .species
+        .iter()
+        .map(|s| canopy::map::Footprint::of(&s.flatten()))
+        .collect();
+    let trees: Vec<(glam::Mat4, usize)> = world
+        .forest
+        .instances
+        .iter()
+        .map(|t| (t.transform(), t.species as usize))
+        .collect();
+    Some(canopy::map::CanopyMap::new(
+        &world.terrain,
+        &trees,
+        &footprints,
+    ))
 }
 
 #[cfg(test)]

@@ -68,6 +68,10 @@ pub struct BtfSettings {
     /// Tree-level billboards read their 3 lights' images blended once per sun and yaw bin
     /// (`light_blend`): 9 image reads a fragment instead of 15.
     pub light_blend: bool,
+    /// Past the distance where a typical crown is narrower than `canopy_px` pixels, the
+    /// forest is drawn as the far canopy (needs `gpu_far`).
+    pub far_canopy: bool,
+    pub canopy_px: f32,
 }
 
 /// The default [`BtfSettings::light_gain`]. Bench, 320x180, 3 frames, mean FLIP against
@@ -75,6 +79,9 @@ pub struct BtfSettings {
 /// 0.0285, sunset 0.0899 / 0.0875 / 0.0869, walk 0.0497 / 0.0471 / 0.0458; the dense
 /// stand.toml's overview 0.1295 / 0.1283 / 0.1329, sunset 0.2791 / 0.2817 / 0.2888.
 pub const LIGHT_GAIN: f32 = 0.5;
+
+/// Default on-screen crown width (px) below which trees are drawn as the far canopy.
+pub const CANOPY_PX: f32 = 4.0;
 
 impl Default for BtfSettings {
     fn default() -> Self {
@@ -91,6 +98,8 @@ impl Default for BtfSettings {
             gpu_far: true,
             gpu_near: true,
             light_blend: true,
+            far_canopy: true,
+            canopy_px: CANOPY_PX,
         }
     }
 }
@@ -103,6 +112,8 @@ impl BtfSettings {
             s.lod_scale = r.lod_scale.unwrap_or(s.lod_scale);
             s.weight_threshold = r.weight_threshold.unwrap_or(s.weight_threshold);
             s.lod_fade = r.lod_fade.unwrap_or(s.lod_fade);
+            s.far_canopy = r.far_canopy.unwrap_or(s.far_canopy);
+            s.canopy_px = r.canopy_px.unwrap_or(s.canopy_px);
             if let Some(p) = r.planes.as_deref().and_then(PlaneMode::parse) {
                 s.planes = p;
             }
@@ -150,6 +161,8 @@ pub struct BtfStats {
     /// Billboards that read their lights' blend (`light_blend`: 3 images a view instead of
     /// 5, 9 a fragment instead of 15).
     pub light_blended: u32,
+    /// Tiles of the far canopy drawn (0: none this frame).
+    pub canopy_tiles: u32,
     /// Billboards left out because the instance buffer would pass the GPU's limit.
     pub dropped: u32,
     /// Of `billboards`, those built on the GPU (far trees, and near ones with `gpu_near`);
@@ -171,6 +184,7 @@ impl BtfStats {
         self.images_sampled += o.images_sampled;
         self.fetches_saved += o.fetches_saved;
         self.light_blended += o.light_blended;
+        self.canopy_tiles += o.canopy_tiles;
         self.dropped += o.dropped;
         self.gpu_billboards += o.gpu_billboards;
         self.vcm |= o.vcm;
@@ -201,3 +215,6 @@ pub const LOD_COLORS: PerLevel<[f32; 3]> = PerLevel {
 /// The show-level overlay's colour of `hybrid`'s trees drawn as geometry (their foliage
 /// tint; white on the leaves' own colour reads as pale, so a strong magenta).
 pub const GEOMETRY_COLOR: [f32; 3] = [1.6, 0.3, 1.8];
+
+/// The far canopy's colour in the LOD view.
+pub const CANOPY_COLOR: [f32; 3] = [0.1, 0.8, 0.75];

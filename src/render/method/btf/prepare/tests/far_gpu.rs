@@ -59,13 +59,14 @@ fn gpu_far_records(
         &bounds,
         &layout,
         (&axes, &texture_view, &sampler),
+        &[],
     )
     .unwrap()
     .expect("the far trees fit");
     if let Some(room) = near_room {
         gpu.set_near_room(room);
     }
-    let (near, _) = gpu.prepare(&ctx, scene, trees, &bounds, view, settings, true);
+    let (near, _) = gpu.prepare(&ctx, scene, trees, &bounds, view, settings, true, None);
     if settings.gpu_near {
         let (_, records, draws, slots) =
             scene.prepare_near(trees, &species, &near, view, settings, false, budget);
