@@ -128,7 +128,8 @@ struct FarParams {
 // The indirect draw: vertex count, instance count, first vertex, first instance; then the
 // far billboards made, and the near ones expanded here per level (twig, branch, tree);
 // then the image fetches of every billboard made here, and those image-weight culling saved;
-// then the billboards made here that read the light blends.
+// then the billboards made here that read the light blends; then the trees in view past
+// the far canopy's band (drawn by the canopy alone).
 @group(0) @binding(7) var<storage, read_write> draw_args: array<atomic<u32>, 12>;
 @group(0) @binding(8) var<storage, read_write> sorted: array<Billboard>;
 
@@ -454,6 +455,18 @@ fn make_record(m: mat4x4<f32>, set_at: u32, views: DirSet, tint: vec3<f32>, blen
     return r;
 }
 
+// Whether the tree's bounds meet the view (`Frustum::intersects`).
+fn in_view(tree: FarTree) -> bool {
+    for (var p = 0u; p < params.plane_count; p++) {
+        let pl = params.planes[p];
+        let corner = select(tree.bounds_min, tree.bounds_max, pl.xyz >= vec3<f32>(0.0));
+        if dot(pl.xyz, corner) + pl.w < 0.0 {
+            return false;
+        }
+    }
+    return true;
+}
+
 // Tree `t`'s VCM factors, at the start of `frame_words`.
 fn shade_of(t: u32) -> FarShade {
     let at = 16u * t;
@@ -491,18 +504,17 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
             canopy_colour(i, tree);
         }
         if d >= params.canopy_far {
+            if in_view(tree) {
+                atomicAdd(&draw_args[11], 1u);
+            }
             return;
         }
         fade = 1.0 - smoothstep(params.canopy_near, params.canopy_far, d);
     }
     // The tree's bounds, then its billboard's sphere, against each plane
     // (`Frustum::intersects`), as the CPU culls then builds.
-    for (var p = 0u; p < params.plane_count; p++) {
-        let pl = params.planes[p];
-        let corner = select(tree.bounds_min, tree.bounds_max, pl.xyz >= vec3<f32>(0.0));
-        if dot(pl.xyz, corner) + pl.w < 0.0 {
-            return;
-        }
+    if !in_view(tree) {
+        return;
     }
     var tint = tree.tint;
     if params.mode != MODE_IMAGES {

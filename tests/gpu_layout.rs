@@ -6,6 +6,7 @@
 use std::mem::{offset_of, size_of};
 
 use canopy::render::btf::far::{DirSetGpu, FarParamsGpu, FarShadeGpu, FarTreeGpu, SortStepGpu};
+use canopy::render::btf::canopy::CanopyGpuParams;
 use canopy::render::btf::{BillboardGpu, NearDrawGpu};
 use canopy::render::self_shadow::SelfLightGpu;
 use canopy::render::uniforms::FrameUniforms;
@@ -330,13 +331,39 @@ fn far_tree_structs_match_btf_far_wgsl() {
         near_room,
         light_bins,
         light_blend_first,
-        _blend_pad0,
-        _blend_pad1
+        canopy_near,
+        canopy_far,
+        sun_color,
+        means_at,
+        sky_ambient,
+        _canopy_pad0,
+        ground_ambient,
+        _canopy_pad1
     });
     check(
         "FarParams",
         wgsl_layout(&source, "FarParams"),
         (size, fields),
+    );
+    let canopy_source = canopy::render::shaders::canopy();
+    check(
+        "Canopy",
+        wgsl_layout(&canopy_source, "Canopy"),
+        rust_layout!(CanopyGpuParams {
+            origin,
+            texel,
+            side,
+            levels,
+            lid_side,
+            lid_texels,
+            tile_cells,
+            near,
+            far,
+            show_overlay,
+            _pad0,
+            overlay,
+            _pad1
+        }),
     );
     let (size, mut fields) = rust_layout!(SortStepGpu { k, j, _pad });
     let pad = fields.pop().expect("the padding").1;

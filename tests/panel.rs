@@ -79,6 +79,8 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
             images_sampled: 540,
             fetches_saved: 180,
             light_blended: 0,
+            canopy_tiles: 3,
+            canopy_trees: 1200,
             dropped: 0,
             gpu_billboards: 0,
             vcm: true,

@@ -163,6 +163,15 @@ pub fn controls(
                 ui.label(format_count(u64::from(s.gpu_billboards)));
                 ui.end_row();
             }
+            if s.canopy_tiles > 0 {
+                ui.label("far canopy: tiles, trees");
+                ui.label(format!(
+                    "{}, {}",
+                    s.canopy_tiles,
+                    format_count(u64::from(s.canopy_trees))
+                ));
+                ui.end_row();
+            }
             ui.label("images per billboard");
             ui.label(format!("{:.2}", s.images_per_billboard()));
             ui.end_row();

@@ -278,6 +278,8 @@ pub struct BtfReport {
     pub far_bytes: u64,
     /// GPU bytes of the tree level's light blends (0 without them).
     pub light_blend_bytes: u64,
+    /// GPU bytes of the far canopy's map and lid (0 before it is first drawn).
+    pub canopy_bytes: u64,
     pub vcm_bytes: u64,
     pub vcm_resolution: Option<u32>,
     #[serde(flatten)]
@@ -301,6 +303,7 @@ impl FrameReport {
             btf_bytes: renderer.btf_bytes(),
             far_bytes: renderer.far_bytes(),
             light_blend_bytes: renderer.light_blend_bytes(),
+            canopy_bytes: renderer.canopy_bytes(),
             vcm_bytes: renderer.vcm_bytes(),
             vcm_resolution: renderer.vcm_resolution(),
             sun_update: m.sun_update.unwrap_or_default(),
@@ -369,6 +372,8 @@ fn btf_counts<S: Serializer>(b: &BtfStats, ser: S) -> Result<S::Ok, S::Error> {
         images_per_billboard: f64,
         fetches_saved: u64,
         light_blended: u32,
+        canopy_tiles: u32,
+        canopy_trees: u32,
         gpu_billboards: u32,
         vcm: bool,
     }
@@ -380,6 +385,8 @@ fn btf_counts<S: Serializer>(b: &BtfStats, ser: S) -> Result<S::Ok, S::Error> {
         images_per_billboard: b.images_per_billboard(),
         fetches_saved: b.fetches_saved,
         light_blended: b.light_blended,
+        canopy_tiles: b.canopy_tiles,
+        canopy_trees: b.canopy_trees,
         gpu_billboards: b.gpu_billboards,
         vcm: b.vcm,
     }

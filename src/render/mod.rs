@@ -204,6 +204,11 @@ impl Renderer {
         self.bake.btf.as_ref().map_or(0, |b| b.far_bytes())
     }
 
+    /// GPU bytes of the btf method's far canopy (0 before it is first drawn).
+    pub fn canopy_bytes(&self) -> u64 {
+        self.bake.btf.as_ref().map_or(0, |b| b.canopy_bytes())
+    }
+
     /// GPU bytes of the btf method's tree-level light blends (0 without them).
     pub fn light_blend_bytes(&self) -> u64 {
         self.bake.btf.as_ref().map_or(0, |b| b.light_blend_bytes())

@@ -483,7 +483,7 @@ impl BtfAssets {
         if !f.has_frame() {
             return;
         }
-        let Some([n, twigs, branches, trees, images, saved, blended, _]) = f.drawn(ctx, wait)
+        let Some([n, twigs, branches, trees, images, saved, blended, canopy]) = f.drawn(ctx, wait)
         else {
             return;
         };
@@ -498,6 +498,7 @@ impl BtfAssets {
             b.images_sampled += u64::from(images);
             b.fetches_saved += u64::from(saved);
             b.light_blended += blended;
+            b.canopy_trees += canopy;
         }
         stats.trees_drawn += n;
         stats.triangles += 2 * u64::from(n + near);

@@ -163,6 +163,8 @@ pub struct BtfStats {
     pub light_blended: u32,
     /// Tiles of the far canopy drawn (0: none this frame).
     pub canopy_tiles: u32,
+    /// Trees in view past the far canopy's band, drawn by the canopy alone.
+    pub canopy_trees: u32,
     /// Billboards left out because the instance buffer would pass the GPU's limit.
     pub dropped: u32,
     /// Of `billboards`, those built on the GPU (far trees, and near ones with `gpu_near`);
@@ -185,6 +187,7 @@ impl BtfStats {
         self.fetches_saved += o.fetches_saved;
         self.light_blended += o.light_blended;
         self.canopy_tiles += o.canopy_tiles;
+        self.canopy_trees += o.canopy_trees;
         self.dropped += o.dropped;
         self.gpu_billboards += o.gpu_billboards;
         self.vcm |= o.vcm;

@@ -12,8 +12,8 @@
 //! holds rather than a blend no tree has.
 //!
 //! The lid is the surface the canopy is drawn on: a coarser grid of heights, each vertex at
-//! the ground plus the mean height of the crowns' tops around it (weighted by coverage), so
-//! that it follows the stands, rises at their edges and lies on the ground in clearings.
+//! the ground plus nearly the height of the highest crown around it, so that it follows
+//! the stands' outline, rises at their edges and lies on the ground in clearings.
 
 use glam::{Mat4, Vec2, Vec3};
 
@@ -32,9 +32,10 @@ pub const MAP_MAX_SIDE: u32 = 2048;
 const SPLAT_SAMPLES: u32 = 3;
 /// Map texels per lid cell side.
 pub const LID_TEXELS: u32 = 4;
-/// The lid sits at this share of the crowns' mean height above the ground: the crowns'
-/// tops are cones and domes, and a lid at their tips would hang above most of them.
-const LID_FILL: f32 = 0.85;
+/// The lid sits at this share of the highest crown's height above the ground around it:
+/// seen from the side, a forest's outline is its trees' tips, and a lid at the crowns'
+/// mean height (a third of a cone's) would cut them off.
+const LID_FILL: f32 = 0.9;
 /// The lid stays at least this far above the ground, so that it never fights the terrain
 /// for depth.
 const LID_LIFT: f32 = 0.5;
@@ -352,8 +353,8 @@ fn halve(l: &MapLevel) -> MapLevel {
     MapLevel { side, cover, tree }
 }
 
-/// The lid's vertex heights: ground plus [`LID_FILL`] of the covered texels' mean top
-/// above it within one lid cell of the vertex, weighted by coverage.
+/// The lid's vertex heights: ground plus [`LID_FILL`] of the highest covered texel's top
+/// above it within one lid cell of the vertex.
 fn lid_heights(
     terrain: &Terrain,
     origin: Vec2,
@@ -376,7 +377,7 @@ fn lid_heights(
                 (vi as u32 * LID_TEXELS) as isize,
                 (vj as u32 * LID_TEXELS) as isize,
             );
-            let (mut sum, mut weight) = (0.0f32, 0.0f32);
+            let mut above = 0.0f32;
             for j in (cj - reach).max(0)..(cj + reach).min(n as isize) {
                 for i in (ci - reach).max(0)..(ci + reach).min(n as isize) {
                     let k = j as usize * n + i as usize;
@@ -384,12 +385,10 @@ fn lid_heights(
                     if c > 0.0 && top[k].is_finite() {
                         let gx = origin.x + (i as f32 + 0.5) * texel;
                         let gz = origin.y + (j as f32 + 0.5) * texel;
-                        sum += c * (top[k] - terrain.height_at(gx, gz)).max(0.0);
-                        weight += c;
+                        above = above.max(top[k] - terrain.height_at(gx, gz));
                     }
                 }
             }
-            let above = if weight > 0.0 { sum / weight } else { 0.0 };
             lid[vj * verts + vi] = ground + (LID_FILL * above).max(LID_LIFT);
         }
     }

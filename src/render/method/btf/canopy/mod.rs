@@ -30,20 +30,20 @@ pub const TILE_CELLS: u32 = 16;
 /// The canopy pass's uniforms (`Canopy` in `canopy.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct CanopyGpuParams {
-    origin: [f32; 2],
-    texel: f32,
-    side: u32,
-    levels: u32,
-    lid_side: u32,
-    lid_texels: u32,
-    tile_cells: u32,
-    near: f32,
-    far: f32,
-    show_overlay: u32,
-    _pad0: u32,
-    overlay: [f32; 3],
-    _pad1: u32,
+pub struct CanopyGpuParams {
+    pub origin: [f32; 2],
+    pub texel: f32,
+    pub side: u32,
+    pub levels: u32,
+    pub lid_side: u32,
+    pub lid_texels: u32,
+    pub tile_cells: u32,
+    pub near: f32,
+    pub far: f32,
+    pub show_overlay: u32,
+    pub _pad0: u32,
+    pub overlay: [f32; 3],
+    pub _pad1: u32,
 }
 
 /// One tile of the lid: its first cell, whether any crown covers it, its box.
