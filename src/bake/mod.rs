@@ -367,6 +367,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         render_scale: Default::default(),
         pixel_classes: false,
         overdraw: None,
+        studio_output: Default::default(),
     }
 }
 
