@@ -5,17 +5,17 @@
 //! unlit colour, and its normal with its depth ([`StudioOutput`]); the CPU resolves,
 //! dilates and mips each frame on its own ([`super::atlas`]).
 //!
-//! Cost (lavapipe, 2 cores, `canopy bake` of tests/data/lone_tree.toml, one fir of
-//! 123,800 triangles at the tree level; docs/RESULTS.md has the table): see
-//! `SECONDS_PER_IMPOSTOR_FRAME` in [`super::estimate`].
+//! Cost: about 0.1 s a frame on lavapipe (2 cores) for a tree of 124k triangles, nearly
+//! whatever the frame's size (docs/RESULTS.md, "Impostors: frames, frame size, bytes and
+//! bake time"; the estimate's fit is in [`super::estimate`]).
 
 use glam::Vec3;
 
-use super::atlas::{self, Atlas};
+use super::atlas::{self, Atlas, FrameMaps};
 use super::{bounding_sphere, level_object, studio_frame, studio_world};
 use crate::format::{self, BakeSettings, Impostor};
 use crate::model::{Level, World};
-use crate::render::{Camera, GpuContext, Renderer, StudioOutput, Sun};
+use crate::render::{Camera, FrameDesc, GpuContext, Renderer, StudioOutput, Sun};
 use crate::sphere::{OctaGrid, billboard_axes};
 use crate::{Error, Result};
 
@@ -46,6 +46,49 @@ pub fn frame_camera(center: Vec3, radius: f32, dir: Vec3) -> Camera {
     Camera::orthographic(center + dir * (2.0 * radius), -dir, up, radius)
 }
 
+/// The studio frame that draws one of the impostor maps (`output`) with `camera`: the
+/// object alone, no shadows, no sky visibility.
+pub fn maps_frame(camera: Camera, output: StudioOutput) -> FrameDesc {
+    let mut frame = studio_frame(
+        camera,
+        Sun::from_direction(Vec3::Y, Vec3::ZERO, 0.0),
+        0.0,
+        256,
+    );
+    frame.shadows.enabled = false;
+    frame.reference = None;
+    frame.studio_output = output;
+    frame
+}
+
+/// One frame's maps, `res` pixels a side, drawn `ss` times larger by `renderer` (which holds
+/// the object alone) from `dir`, resolved and dilated: what the bake lays into the atlas.
+pub fn draw_frame(
+    ctx: &GpuContext,
+    renderer: &mut Renderer,
+    (center, radius): (Vec3, f32),
+    dir: Vec3,
+    res: u32,
+    ss: u32,
+) -> Result<FrameMaps> {
+    let camera = frame_camera(center, radius, dir);
+    let mut pictures = Vec::with_capacity(2);
+    for output in [
+        StudioOutput::Albedo,
+        StudioOutput::NormalDepth {
+            near: radius,
+            far: 3.0 * radius,
+        },
+    ] {
+        let frame = maps_frame(camera, output);
+        let (img, _) = renderer.render_image(ctx, &frame, res * ss, res * ss, 1)?;
+        pictures.push(img.into_raw());
+    }
+    let mut maps = atlas::resolve(&pictures[0], &pictures[1], res, ss)?;
+    atlas::dilate(&mut maps);
+    Ok(maps)
+}
+
 /// Bakes the impostor of every species of `world` (none when the settings' frames are 0).
 /// `progress` sees (frames done, what).
 pub fn bake_impostors(
@@ -71,29 +114,8 @@ pub fn bake_impostors(
         let what = format!("{} impostor", tree.name);
         for k in 0..grid.len() {
             let f = grid.frame(k);
-            let camera = frame_camera(center, radius, grid.frame_dir(f));
-            let mut pictures = Vec::with_capacity(2);
-            for output in [
-                StudioOutput::Albedo,
-                StudioOutput::NormalDepth {
-                    near: radius,
-                    far: 3.0 * radius,
-                },
-            ] {
-                let mut frame = studio_frame(
-                    camera,
-                    Sun::from_direction(Vec3::Y, Vec3::ZERO, 0.0),
-                    0.0,
-                    256,
-                );
-                frame.shadows.enabled = false;
-                frame.reference = None;
-                frame.studio_output = output;
-                let (img, _) = renderer.render_image(ctx, &frame, res * ss, res * ss, 1)?;
-                pictures.push(img.into_raw());
-            }
-            let mut frame_maps = atlas::resolve(&pictures[0], &pictures[1], res, ss)?;
-            atlas::dilate(&mut frame_maps);
+            let dir = grid.frame_dir(f);
+            let frame_maps = draw_frame(ctx, &mut renderer, (center, radius), dir, res, ss)?;
             maps.put(f, frame_maps)?;
             done += 1;
             progress(done, &what);
