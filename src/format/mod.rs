@@ -43,7 +43,7 @@
 //! PAYLOADS: the N section payloads, back to back in table order, starting right after
 //! header_crc; their lengths sum to exactly file_size - (76 + 16N) and the file ends there.
 //!
-//! SECTION PAYLOAD (either kind)
+//! SECTION PAYLOAD (any kind)
 //!    0     4   record_count    u32 R
 //!    4     ..  R records of the section's kind, back to back, filling the payload exactly
 //!
@@ -124,11 +124,11 @@
 //! A set's own views, lights and resolution are checked against the allowed values but need
 //! not equal the header's settings (nor need an impostor's layout, frames and resolution).
 //! A BTF set of one `(species, level)` appears at most once, a texel volume or an impostor
-//! of one species too. Records of one kind keep their
-//! order across sections; the writer puts all BTF sections first, then all VCM sections,
-//! then the texel volumes and the impostors,
-//! packing records greedily so no section exceeds [`MAX_SECTION_BYTES`] (one record must
-//! fit in one section). A reader accepts the sections of both kinds in any order.
+//! of one species too. Records of one kind keep their order across sections; the writer
+//! puts all BTF sections first, then the VCM sections, the texel volumes and the
+//! impostors, packing records greedily so no section exceeds [`MAX_SECTION_BYTES`] (one
+//! record must fit in one section). A reader accepts the sections of every kind in any
+//! order.
 //!
 //! # Reading
 //!
