@@ -119,6 +119,28 @@ fn a_view_exactly_on_a_frame_reproduces_that_frame() {
     let dir = grid.frame_dir(Frame { i: 1, j: 2 });
     let view = draw_frame(&ctx, &mut renderer, sphere, dir, 32, s.supersample).unwrap();
     assert_ne!(view.albedo, tile(imp, Frame { i: 2, j: 1 }));
+
+    // The hemi layout: its frames look from the upper hemisphere, laid out the same way.
+    let hemi = BakeSettings {
+        impostor_layout: OctaLayout::Hemi,
+        ..settings(4, 16)
+    };
+    let imp = &bake_impostors(&ctx, &world, &hemi, &mut |_, _| {}).unwrap()[0];
+    assert_eq!((imp.layout, imp.mip_levels), (OctaLayout::Hemi, 3));
+    let grid = OctaGrid::new(OctaLayout::Hemi, 4);
+    let f = Frame { i: 2, j: 1 };
+    let dir = grid.frame_dir(f);
+    assert!(dir.y > 0.3, "{dir}");
+    let view = draw_frame(&ctx, &mut renderer, sphere, dir, 16, hemi.supersample).unwrap();
+    let baked = tile(imp, f);
+    assert!(baked.chunks(4).any(|p| p[3] > 0));
+    assert!(
+        view.albedo
+            .iter()
+            .zip(&baked)
+            .all(|(a, b)| a.abs_diff(*b) <= 2),
+        "hemi frame {f:?}"
+    );
 }
 
 /// Bilinear sample of an RGBA8 frame (straight colour, coverage) at `uv` (0..1, v down),
