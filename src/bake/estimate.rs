@@ -111,7 +111,8 @@ pub struct Estimate {
     pub tree_vcm_bytes: u64,
     pub tree_vcm_objects: u64,
     pub texel_bytes: u64,
-    /// Octahedral impostors (both atlases, every mip level).
+    /// Octahedral impostor records (both atlases, every mip level, and each record's 52
+    /// bytes of fields).
     pub impostor_bytes: u64,
     /// The share of `seconds` the impostors take.
     pub impostor_seconds: f64,
