@@ -62,6 +62,13 @@ struct Frame {
     // and height (the counters' row length and rows); w = what the heat map shows (0:
     // fragments, 1: image reads).
     overdraw: vec4<u32>,
+    // What a studio frame draws (the impostor bake's maps): 0 its lit picture, 1 albedo,
+    // 2 normal and depth (geometry.wgsl, `studio_map`); 0 in the world.
+    studio_output: u32,
+    // The view depth (m) the depth map reads 0 at, and 1 / the depth it reads 1 further on.
+    studio_depth_near: f32,
+    studio_depth_scale: f32,
+    studio_pad: u32,
 }
 
 @group(0) @binding(0) var<uniform> frame: Frame;

@@ -246,10 +246,33 @@ fn lit_by(in: VertexOut, n: vec3<f32>, vis: f32) -> vec3<f32> {
 @fragment
 fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     count_fragment(in.clip, 0u);
+    if frame.studio_output != 0u {
+        return studio_map(in, front);
+    }
     if frame.pixel_classes != 0u {
         return pixel_class(in);
     }
     return lit_and_fogged(in, front, false);
+}
+
+// The impostor bake's maps of a studio frame (`frame.studio_output`): 1, the unlit colour;
+// 2, the normal as n * 0.5 + 0.5 with its sRGB encoding undone, so that the target's bytes
+// hold it linearly, and the view depth mapped to [0, 1] in alpha (which is not encoded).
+fn studio_map(in: VertexOut, front: bool) -> vec4<f32> {
+    if frame.studio_output == 1u {
+        return vec4<f32>(in.color, 1.0);
+    }
+    let n = surface_normal(in, front);
+    let view_depth = dot(in.world - frame.camera_pos, frame.camera_forward);
+    let depth = clamp((view_depth - frame.studio_depth_near) * frame.studio_depth_scale, 0.0, 1.0);
+    return vec4<f32>(srgb_to_linear(n * 0.5 + 0.5), depth);
+}
+
+// The linear value whose sRGB encoding is `c` (IEC 61966-2-1).
+fn srgb_to_linear(c: vec3<f32>) -> vec3<f32> {
+    let lo = c / 12.92;
+    let hi = pow((c + 0.055) / 1.055, vec3<f32>(2.4));
+    return select(hi, lo, c <= vec3<f32>(0.04045));
 }
 
 // The pixel's class (see `Frame::pixel_classes`): ground red, near trees green (the
@@ -335,6 +358,9 @@ fn fs_voxel(in: VertexOut, @builtin(front_facing) front: bool) {
 @fragment
 fn fs_reference(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     count_fragment(in.clip, 0u);
+    if frame.studio_output != 0u {
+        return studio_map(in, front);
+    }
     if frame.pixel_classes != 0u {
         return pixel_class(in);
     }

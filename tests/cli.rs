@@ -485,14 +485,17 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     // One byte changed inside the texel volumes' section (kind 3): refused, naming it.
     let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
     let sections = u32_at(12) as usize;
-    // The format's header: 60 fixed bytes, the section table, the header checksum.
-    let mut at = 64 + 16 * sections;
+    // The format's header: 72 fixed bytes, the section table, the header checksum.
+    let mut at = 76 + 16 * sections;
     let mut texel_section = None;
+    let mut impostor_section = None;
     for i in 0..sections {
-        let entry = 60 + 16 * i;
+        let entry = 72 + 16 * i;
         let len = u64::from_le_bytes(bytes[entry + 8..entry + 16].try_into().unwrap()) as usize;
-        if u32_at(entry) == 3 {
-            texel_section = Some((at, len));
+        match u32_at(entry) {
+            3 => texel_section = Some((at, len)),
+            4 => impostor_section = Some((at, len)),
+            _ => {}
         }
         at += len;
     }
@@ -503,6 +506,13 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     std::fs::write(&bad, &flipped).unwrap();
     refused(render(&lone, &bad, "texel"), "texel");
     refused(render(&lone, &bad, "btf"), "checksum");
+    // One byte changed inside the impostors' section (kind 4): refused, naming it.
+    let (start, len) = impostor_section.expect("the bake has an impostor section");
+    let mut flipped = bytes.clone();
+    flipped[start + len / 3] ^= 0x04;
+    let bad = tmp("bad-impostors.canopy");
+    std::fs::write(&bad, &flipped).unwrap();
+    refused(render(&lone, &bad, "btf"), "(impostors)");
     // Missing.
     refused(render(&lone, &tmp("none.canopy"), "btf"), "could not open");
     // A method without baked images.
@@ -688,6 +698,33 @@ fn bakes_are_estimated_and_refused_before_they_start() {
     let written = std::fs::metadata(&file).unwrap().len();
     assert_eq!(estimate["file_bytes"].as_u64(), Some(written), "{estimate}");
     assert!(estimate["memory_bytes"].as_u64().unwrap() > written);
+    // The impostor section, in both: the lone fir's 4 x 4 frames of 32², mipped to 4 pixels
+    // (4 levels), two RGBA8 atlases, and 52 bytes of record in the estimate.
+    let atlas = (128 * 128 + 64 * 64 + 32 * 32 + 16 * 16) * 4;
+    let baked: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(baked["impostor_frames"], 4, "{baked}");
+    assert_eq!(baked["impostor_resolution"], 32);
+    assert_eq!(baked["impostor_layout"], "full");
+    assert_eq!(baked["impostor_mip_levels"], 4);
+    assert_eq!(baked["impostor_bytes"], 2 * atlas);
+    assert_eq!(baked["impostors"][0]["species"], "fir");
+    assert_eq!(estimate["impostor_bytes"], 2 * atlas + 52, "{estimate}");
+    let imp = &info["impostors"];
+    assert_eq!(
+        (
+            &imp["frames"],
+            &imp["resolution"],
+            &imp["layout"],
+            &imp["mip_levels"]
+        ),
+        (
+            &serde_json::json!(4),
+            &serde_json::json!(32),
+            &serde_json::json!("full"),
+            &serde_json::json!(4)
+        ),
+        "{info}"
+    );
 
     let refused = |o: std::process::Output, want: &str| {
         let err = String::from_utf8_lossy(&o.stderr).to_string();

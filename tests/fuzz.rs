@@ -16,9 +16,10 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::time::{Duration, Instant};
 
-use canopy::format::{self, BakeSettings, Baked, BtfImageSet, TexelVolume, VcmSet};
+use canopy::format::{self, BakeSettings, Baked, BtfImageSet, Impostor, TexelVolume, VcmSet};
 use canopy::model::Level;
 use canopy::scene::Scene;
+use canopy::sphere::OctaLayout;
 
 /// The system allocator, remembering the largest single allocation of the current thread
 /// while it tracks.
@@ -168,11 +169,11 @@ fn fix_checksums(b: &mut [u8]) {
     let Some(n) = u32_at(b, 12).map(|n| n as usize).filter(|&n| n <= 64) else {
         return;
     };
-    // The format's header: 60 fixed bytes, then the section table.
-    let table_end = 60 + 16 * n;
+    // The format's header: 72 fixed bytes, then the section table.
+    let table_end = 72 + 16 * n;
     let mut at = table_end + 4;
     for i in 0..n {
-        let entry = 60 + 16 * i;
+        let entry = 72 + 16 * i;
         let Some(len) = b
             .get(entry + 8..entry + 16)
             .map(|s| u64::from_le_bytes(s.try_into().unwrap_or([0; 8])) as usize)
@@ -197,7 +198,8 @@ fn noise(seed: u32, len: usize) -> Vec<u8> {
     (0..len).map(|_| r.next() as u8).collect()
 }
 
-/// Small valid baked files: VCM sets and texel volumes only, and one with a BTF set.
+/// Small valid baked files: VCM sets, texel volumes and an impostor, and the same with a
+/// BTF set.
 fn baked_seeds() -> Vec<Vec<u8>> {
     let settings = BakeSettings {
         views: 6,
@@ -207,6 +209,22 @@ fn baked_seeds() -> Vec<Vec<u8>> {
         supersample: 2,
         vcm_resolution: 8,
         texel_resolution: 16,
+        impostor_frames: 4,
+        impostor_resolution: 16,
+        impostor_layout: OctaLayout::Hemi,
+    };
+    // 4 x 4 frames of 16², 2 levels: (64² + 32²) x 4 bytes an atlas.
+    let atlas = (64 * 64 + 32 * 32) * 4;
+    let impostor = Impostor {
+        species: 0,
+        layout: OctaLayout::Hemi,
+        frames: 4,
+        resolution: 16,
+        mip_levels: 2,
+        center: [0.0, 4.0, 0.0],
+        radius: 5.0,
+        albedo: noise(5, atlas),
+        normal_depth: noise(6, atlas),
     };
     let vcm = |owner: u32, level: Level| VcmSet {
         species: 0,
@@ -230,6 +248,7 @@ fn baked_seeds() -> Vec<Vec<u8>> {
         btf: Vec::new(),
         vcm: vec![vcm(0, Level::Twig), vcm(3, Level::Tree)],
         texels: vec![texel(0, [2, 3, 2]), texel(1, [3, 2, 1])],
+        impostors: vec![impostor],
     };
     let image = 32 * 32 * 4;
     let with_btf = Baked {

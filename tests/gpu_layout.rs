@@ -95,6 +95,10 @@ fn frame_uniforms_match_frame_wgsl() {
         ground_texel_world,
         ground_uv_scale,
         overdraw,
+        studio_output,
+        studio_depth_near,
+        studio_depth_scale,
+        studio_pad,
     });
     // Every module sees the same block; one is enough to lay it out.
     check(

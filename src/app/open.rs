@@ -168,11 +168,15 @@ mod tests {
             scene_hash: 42,
             settings: crate::format::BakeSettings {
                 texel_resolution: 0,
+                impostor_frames: 0,
+                impostor_resolution: 64,
+                impostor_layout: Default::default(),
                 ..crate::format::test_support::settings()
             },
             btf: Vec::new(),
             vcm: Vec::new(),
             texels: Vec::new(),
+            impostors: Vec::new(),
         };
         let other = tmp("other.canopy");
         crate::format::write_atomic(&other, &baked).unwrap();

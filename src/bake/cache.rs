@@ -20,6 +20,9 @@ pub fn settings_of(scene: &Scene) -> BakeSettings {
         supersample: scene.bake.supersample,
         vcm_resolution: 32,
         texel_resolution: scene.bake.texel_resolution,
+        impostor_frames: scene.bake.impostor_frames,
+        impostor_resolution: scene.bake.impostor_resolution,
+        impostor_layout: scene.bake.impostor_layout,
     }
 }
 

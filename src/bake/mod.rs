@@ -4,11 +4,14 @@
 //! same render core as the ground truth, offscreen and
 //! supersampled so that alpha is coverage. Views and lights are in the object's own frame,
 //! so one bake serves every rotated, scaled instance. Then the visibility cube maps of every
-//! object of every level (`vcm`), drawn from the BTF images' alpha, and each species' texel
-//! volumes (`texel`), photographed slab by slab.
+//! object of every level (`vcm`), drawn from the BTF images' alpha, each species' texel
+//! volumes (`texel`), photographed slab by slab, and each species' octahedral impostor
+//! (`impostor`, its frames' image work in `atlas`).
 
+pub mod atlas;
 pub mod cache;
 pub mod estimate;
+pub mod impostor;
 pub mod report;
 pub mod texel;
 pub mod vcm;
@@ -82,6 +85,7 @@ pub fn step_count(settings: &BakeSettings, world: &World) -> u64 {
     image_count(settings, world.species.len())
         + vcm::object_count(world)
         + texel::step_count(world, settings.texel_resolution, settings.lights)
+        + impostor::step_count(settings, world)
 }
 
 /// How long a bake and each of its parts took.
@@ -92,8 +96,9 @@ pub struct BakeTimes {
     pub btf_seconds: f64,
     pub vcm_seconds: f64,
     pub texel_seconds: f64,
+    pub impostor_seconds: f64,
     /// Seconds per stage, named as the progress names them (`fir 1 tree`, `fir 1 VCMs`,
-    /// `tree VCMs`, `fir 1 texel volume`), in the order they ran.
+    /// `tree VCMs`, `fir 1 texel volume`, `fir 1 impostor`), in the order they ran.
     pub stages: Vec<(String, f64)>,
 }
 
@@ -134,7 +139,8 @@ impl StageClock {
     }
 }
 
-/// The whole bake of `world`: the BTF image sets, then the visibility cube maps.
+/// The whole bake of `world`: the BTF image sets, the visibility cube maps, the texel
+/// volumes and the impostors.
 pub fn bake(
     ctx: &GpuContext,
     world: &World,
@@ -187,11 +193,24 @@ pub fn bake(
             })
         },
     )?;
+    let texel_seconds = t2.elapsed().as_secs_f64();
+    let t3 = std::time::Instant::now();
+    let before_impostors =
+        before_texels + texel::step_count(world, settings.texel_resolution, settings.lights);
+    baked.impostors = impostor::bake_impostors(ctx, world, settings, &mut |done, what| {
+        clock.step(what);
+        progress(&Progress {
+            done: before_impostors + done,
+            total,
+            what: what.to_owned(),
+        })
+    })?;
     let times = BakeTimes {
         seconds: t0.elapsed().as_secs_f64(),
         btf_seconds,
         vcm_seconds,
-        texel_seconds: t2.elapsed().as_secs_f64(),
+        texel_seconds,
+        impostor_seconds: t3.elapsed().as_secs_f64(),
         stages: clock.stages,
     };
     Ok((baked, times))
@@ -311,6 +330,7 @@ pub fn bake_btf(
         btf,
         vcm: Vec::new(),
         texels: Vec::new(),
+        impostors: Vec::new(),
     })
 }
 
@@ -367,6 +387,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         render_scale: Default::default(),
         pixel_classes: false,
         overdraw: None,
+        studio_output: Default::default(),
     }
 }
 

@@ -38,6 +38,17 @@ pub struct BakeReport {
     pub texel_bytes: u64,
     /// One per species' texel volumes.
     pub texels: Vec<TexelReport>,
+    /// The impostors' section: frames per side (0: none baked), pixels a frame side, the
+    /// layout (`full` or `hemi`), mip levels, bytes (both atlases, every level) and
+    /// seconds.
+    pub impostor_frames: u32,
+    pub impostor_resolution: u32,
+    pub impostor_layout: &'static str,
+    pub impostor_mip_levels: u32,
+    pub impostor_bytes: u64,
+    pub impostor_seconds: f64,
+    /// One per species' impostor.
+    pub impostors: Vec<ImpostorReport>,
     /// Views of the twig and main-branch sets, and of the tree-level ones.
     pub views: u32,
     pub tree_views: u32,
@@ -58,6 +69,18 @@ pub struct TexelReport {
     pub volumes: u32,
     pub bytes: usize,
     /// Seconds its volumes took to bake.
+    pub seconds: f64,
+}
+
+/// One species' impostor in a [`BakeReport`].
+#[derive(Clone, Debug, Serialize)]
+pub struct ImpostorReport {
+    pub species: String,
+    /// Both atlases, every level.
+    pub bytes: usize,
+    /// The bounding sphere its frames frame.
+    pub radius_m: f32,
+    /// Seconds its frames took to bake.
     pub seconds: f64,
 }
 
@@ -118,6 +141,16 @@ impl BakeReport {
                 seconds: times.stage(&format!("{} texel volume", name(t.species))),
             })
             .collect();
+        let impostors = baked
+            .impostors
+            .iter()
+            .map(|i| ImpostorReport {
+                species: name(i.species),
+                bytes: i.albedo.len() + i.normal_depth.len(),
+                radius_m: i.radius,
+                seconds: times.stage(&format!("{} impostor", name(i.species))),
+            })
+            .collect();
         let tree_sets: Vec<&crate::format::VcmSet> = baked
             .vcm
             .iter()
@@ -150,6 +183,13 @@ impl BakeReport {
             texel_source: "slabs".into(),
             texel_bytes: baked.texel_bytes(),
             texels,
+            impostor_frames: settings.impostor_frames,
+            impostor_resolution: settings.impostor_resolution,
+            impostor_layout: settings.impostor_layout.name(),
+            impostor_mip_levels: baked.impostors.first().map_or(0, |i| i.mip_levels),
+            impostor_bytes: baked.impostor_bytes(),
+            impostor_seconds: times.impostor_seconds,
+            impostors,
             views: settings.views,
             tree_views: settings.tree_views,
             lights: settings.lights,

@@ -1,4 +1,5 @@
-//! `canopy bake`: a scene's BTF image sets, visibility cube maps and texel volumes, into
+//! `canopy bake`: a scene's BTF image sets, visibility cube maps, texel volumes and
+//! octahedral impostors, into
 //! the cache the viewer and `render` use or into `--out`.
 
 use std::path::PathBuf;
@@ -108,6 +109,26 @@ pub fn bake(args: BakeArgs) -> anyhow::Result<()> {
                 t.seconds
             );
         }
+        if r.impostors.is_empty() {
+            println!("  no impostors (impostor_frames = 0)");
+        } else {
+            println!(
+                "  impostors ({} x {} frames of {}² pixels, {} layout, {} mip levels, albedo + coverage and normal + depth): {} bytes, {:.1} s",
+                r.impostor_frames,
+                r.impostor_frames,
+                r.impostor_resolution,
+                r.impostor_layout,
+                r.impostor_mip_levels,
+                r.impostor_bytes,
+                r.impostor_seconds
+            );
+        }
+        for i in &r.impostors {
+            println!(
+                "  {:<12} impostor {} bytes, radius {:.2} m, {:.1} s",
+                i.species, i.bytes, i.radius_m, i.seconds
+            );
+        }
         println!("wrote {} ({} bytes)", r.out, r.file_bytes);
     }
     Ok(())
@@ -116,12 +137,14 @@ pub fn bake(args: BakeArgs) -> anyhow::Result<()> {
 /// One line with a bake's estimated time, file size and memory.
 pub(super) fn estimate_line(e: &crate::bake::estimate::Estimate) -> String {
     format!(
-        "bake estimate: about {:.0} s on a software renderer, a {:.1} MB file ({:.1} MB BTF images, {:.1} MB visibility cube maps, {:.1} MB texel volumes), about {:.0} MB of memory to view",
+        "bake estimate: about {:.0} s on a software renderer ({:.0} s of impostors), a {:.1} MB file ({:.1} MB BTF images, {:.1} MB visibility cube maps, {:.1} MB texel volumes, {:.1} MB impostors), about {:.0} MB of memory to view",
         e.seconds,
+        e.impostor_seconds,
         e.file_bytes as f64 / 1e6,
         e.btf_bytes as f64 / 1e6,
         e.vcm_bytes as f64 / 1e6,
         e.texel_bytes as f64 / 1e6,
+        e.impostor_bytes as f64 / 1e6,
         e.memory_bytes as f64 / 1e6
     )
 }

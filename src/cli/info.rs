@@ -45,6 +45,27 @@ fn tree_vcm_line(e: &crate::bake::estimate::Estimate, world: &crate::model::Worl
     )
 }
 
+/// The impostors the bake makes: frames, frame size, layout and bytes.
+fn impostor_line(
+    s: &crate::format::BakeSettings,
+    e: &crate::bake::estimate::Estimate,
+    species: usize,
+) -> String {
+    if s.impostor_frames == 0 {
+        return "octahedral impostors: none (impostor_frames = 0)".into();
+    }
+    format!(
+        "octahedral impostors: {species} ({} x {} frames of {}² pixels, {} layout, {} mip levels), {:.1} MB, about {:.0} s to bake",
+        s.impostor_frames,
+        s.impostor_frames,
+        s.impostor_resolution,
+        s.impostor_layout.name(),
+        crate::format::impostor_mip_levels(s.impostor_resolution),
+        e.impostor_bytes as f64 / 1e6,
+        e.impostor_seconds
+    )
+}
+
 pub fn info(args: InfoArgs) -> anyhow::Result<()> {
     let InfoArgs {
         scene,
@@ -78,11 +99,31 @@ pub fn info(args: InfoArgs) -> anyhow::Result<()> {
             world: &'a WorldSummary,
             bake_estimate: Option<crate::bake::estimate::Estimate>,
             bake_refused: Option<String>,
+            impostors: Impostors,
+        }
+        #[derive(serde::Serialize)]
+        struct Impostors {
+            frames: u32,
+            resolution: u32,
+            layout: &'static str,
+            mip_levels: u32,
+            bytes: Option<u64>,
         }
         let info = Info {
             world: &r,
             bake_estimate: estimate.as_ref().ok().copied(),
             bake_refused: estimate.as_ref().err().map(|e| e.to_string()),
+            impostors: Impostors {
+                frames: settings.impostor_frames,
+                resolution: settings.impostor_resolution,
+                layout: settings.impostor_layout.name(),
+                mip_levels: if settings.impostor_frames == 0 {
+                    0
+                } else {
+                    crate::format::impostor_mip_levels(settings.impostor_resolution)
+                },
+                bytes: estimate.as_ref().ok().map(|e| e.impostor_bytes),
+            },
         };
         println!("{}", serde_json::to_string(&info).context("encoding JSON")?);
     } else {
@@ -115,6 +156,7 @@ pub fn info(args: InfoArgs) -> anyhow::Result<()> {
             Ok(e) => {
                 println!("{}", estimate_line(e));
                 println!("  {}", tree_vcm_line(e, &world));
+                println!("  {}", impostor_line(&settings, e, world.species.len()));
             }
             Err(e) => println!("bake refused: {e}"),
         }

@@ -46,6 +46,20 @@ impl BakeSettings {
                 SETTINGS_TEXEL_RESOLUTION,
             );
         }
+        if self.impostor_frames != 0 && !IMPOSTOR_FRAMES_RANGE.contains(&self.impostor_frames) {
+            return bad(
+                "impostor_frames",
+                self.impostor_frames,
+                SETTINGS_IMPOSTOR_FRAMES,
+            );
+        }
+        if !IMPOSTOR_RESOLUTIONS.contains(&self.impostor_resolution) {
+            return bad(
+                "impostor_resolution",
+                self.impostor_resolution,
+                SETTINGS_IMPOSTOR_RESOLUTION,
+            );
+        }
         Ok(())
     }
 }
@@ -170,6 +184,48 @@ impl TexelVolume {
     }
 }
 
+impl Impostor {
+    /// What is wrong with this impostor's fields given its atlas lengths, if anything.
+    pub(super) fn problem(&self, albedo_len: u64, normal_depth_len: u64) -> Option<String> {
+        if !IMPOSTOR_FRAMES_RANGE.contains(&self.frames) {
+            return Some(format!("frames is {}, not 4 to 32", self.frames));
+        }
+        if !IMPOSTOR_RESOLUTIONS.contains(&self.resolution) {
+            return Some(format!(
+                "resolution is {}, not {SETTINGS_IMPOSTOR_RESOLUTION}",
+                self.resolution
+            ));
+        }
+        let most = impostor_mip_levels(self.resolution);
+        if !(1..=most).contains(&self.mip_levels) {
+            return Some(format!(
+                "mip_levels is {}, not 1 to {most} (frames of {} pixels, down to {})",
+                self.mip_levels, self.resolution, IMPOSTOR_MIN_MIP_SIDE
+            ));
+        }
+        if let Some(i) = self.center.iter().position(|c| !c.is_finite()) {
+            return Some(format!("center[{i}] is {}, not finite", self.center[i]));
+        }
+        if !(self.radius.is_finite() && self.radius > 0.0) {
+            return Some(format!("radius is {}, not finite and > 0", self.radius));
+        }
+        let expected = self.expected_atlas_len();
+        for (name, len) in [("albedo", albedo_len), ("normal_depth", normal_depth_len)] {
+            if expected != Some(len) {
+                return Some(format!(
+                    "{name} holds {len} bytes, expected {} ({} x {} frames of {}² pixels x 4, {} levels)",
+                    show_len(expected),
+                    self.frames,
+                    self.frames,
+                    self.resolution,
+                    self.mip_levels
+                ));
+            }
+        }
+        None
+    }
+}
+
 impl Baked {
     /// Checks everything [`write_atomic`] checks before writing: the settings, every set
     /// (sizes, finite floats, ...), no BTF `(species, level)` twice, and that the data fits
@@ -205,8 +261,18 @@ impl Baked {
                 });
             }
         }
+        for (i, imp) in self.impostors.iter().enumerate() {
+            let lens = (imp.albedo.len() as u64, imp.normal_depth.len() as u64);
+            if let Some(reason) = imp.problem(lens.0, lens.1) {
+                return Err(FormatError::MalformedContent {
+                    section: format!("impostor {i} (species {})", imp.species),
+                    reason,
+                });
+            }
+        }
         check_unique_btf(&self.btf)?;
         check_unique_texels(&self.texels)?;
+        check_unique_impostors(&self.impostors)?;
         let plans = plan_sections(self, section_limit);
         if let Some(p) = plans.iter().find(|p| p.len > section_limit) {
             return Err(FormatError::AbsurdSize {
@@ -259,6 +325,15 @@ pub(super) fn check_unique_texels(volumes: &[TexelVolume]) -> Result<(), FormatE
     )
 }
 
+pub(super) fn check_unique_impostors(impostors: &[Impostor]) -> Result<(), FormatError> {
+    check_unique(
+        impostors,
+        |t| t.species,
+        |i, t| format!("impostor {i} (species {})", t.species),
+        "an impostor of this species",
+    )
+}
+
 pub(super) fn check_unique_btf(sets: &[BtfImageSet]) -> Result<(), FormatError> {
     check_unique(
         sets,
@@ -279,7 +354,7 @@ mod tests {
         let dir = scratch_dir("settings");
         let path = dir.join("bad.canopy");
         type Change = fn(&mut BakeSettings);
-        let cases: [(Change, &str); 8] = [
+        let cases: [(Change, &str); 11] = [
             (|s| s.views = 7, "views"),
             (|s| s.lights = 0, "lights"),
             (|s| s.resolution = 256, "resolution"),
@@ -288,6 +363,9 @@ mod tests {
             (|s| s.vcm_resolution = 4, "vcm_resolution"),
             (|s| s.texel_resolution = 8, "texel_resolution"),
             (|s| s.texel_resolution = 512, "texel_resolution"),
+            (|s| s.impostor_frames = 3, "impostor_frames"),
+            (|s| s.impostor_frames = 33, "impostor_frames"),
+            (|s| s.impostor_resolution = 48, "impostor_resolution"),
         ];
         for (change, name) in cases {
             let mut baked = small();

@@ -1,18 +1,18 @@
 //! The `.canopy` file: everything one bake produces (BTF image sets, visibility cube maps,
-//! texel volumes),
+//! texel volumes, octahedral impostors),
 //! in one versioned, checksummed file that the viewer caches and validates on load.
 //!
-//! # Byte layout (format version 5)
+//! # Byte layout (format version 6)
 //!
 //! All integers are little-endian, `f32` is IEEE 754 binary32 (little-endian bits). Offsets
 //! are in bytes. There is no padding anywhere.
 //!
 //! ```text
-//! HEADER (64 + 16*N bytes)
+//! HEADER (76 + 16*N bytes)
 //!   off  size  field
 //!    0     8   magic           "CANOPY\r\n" (43 41 4E 4F 50 59 0D 0A); the CR LF pair catches
 //!                              a file whose line endings were converted in transfer
-//!    8     4   version         u32, 5
+//!    8     4   version         u32, 6
 //!   12     4   section_count   u32 N, at most MAX_SECTIONS (4096)
 //!   16     8   file_size       u64, total length of the file in bytes, header included
 //!   24     8   scene_hash      u64, hash of the scene text + bake settings (from the caller)
@@ -24,19 +24,26 @@
 //!   48     4   vcm_resolution  u32, 8..=128                         |
 //!   52     4   texel_resolution u32, 0 (no texel volumes) or 16..=256: voxels along the
 //!                              longest side of each species' box    |
-//!   56     4   tree_views      u32, one of 6, 18, 66, 258 (tree-   /
-//!                              level sets)
-//!   60  16*N   section table, one 16-byte entry per section, in file order:
-//!                +0  u32 kind      1 = BTF image sets, 2 = VCM sets, 3 = texel volumes
-//!                                  (0 and others invalid)
+//!   56     4   tree_views      u32, one of 6, 18, 66, 258 (tree-    |
+//!                              level sets)                          |
+//!   60     4   impostor_frames u32, 0 (no impostors) or 4..=32:     |
+//!                              frames per side of each species'     |
+//!                              octahedral impostor                  |
+//!   64     4   impostor_resolution u32, one of 16, 32, 64, 128, 256 |
+//!                              (pixels a frame side)                |
+//!   68     4   impostor_layout u32, 0 = full sphere, 1 = upper     /
+//!                              hemisphere (`crate::sphere::OctaLayout`)
+//!   72  16*N   section table, one 16-byte entry per section, in file order:
+//!                +0  u32 kind      1 = BTF image sets, 2 = VCM sets, 3 = texel volumes,
+//!                                  4 = impostors (0 and others invalid)
 //!                +4  u32 crc32     CRC-32 (IEEE, as crc32fast) of the section's payload
 //!                +8  u64 length    payload length in bytes, 4..=MAX_SECTION_BYTES (1 GiB)
-//!   60+16N  4  header_crc      u32, CRC-32 of header bytes [0, 60+16N)
+//!   72+16N  4  header_crc      u32, CRC-32 of header bytes [0, 72+16N)
 //!
 //! PAYLOADS: the N section payloads, back to back in table order, starting right after
-//! header_crc; their lengths sum to exactly file_size - (64 + 16N) and the file ends there.
+//! header_crc; their lengths sum to exactly file_size - (76 + 16N) and the file ends there.
 //!
-//! SECTION PAYLOAD (either kind)
+//! SECTION PAYLOAD (any kind)
 //!    0     4   record_count    u32 R
 //!    4     ..  R records of the section's kind, back to back, filling the payload exactly
 //!
@@ -84,14 +91,44 @@
 //!                              shadowed), volume `lights` by the sky alone; in a volume,
 //!                              voxel (i, j, k) at ((k*y + j)*x + i)*4, j = 0 the lowest row;
 //!                              alpha is the coverage of one voxel-thick slab
+//!
+//! IMPOSTOR RECORD (kind 4; 52 bytes + atlas data)
+//!    0     4   species         u32
+//!    4     4   layout          u32, 0 = full sphere, 1 = upper hemisphere
+//!    8     4   frames          u32, 4..=32 frames per side (frame (i, j) looks from the
+//!                              direction `crate::sphere::OctaGrid` gives it)
+//!   12     4   resolution      u32, one of 16, 32, 64, 128, 256: pixels a frame side
+//!   16     4   mip_levels      u32, 1..=log2(resolution) - 1 (the smallest frame is at
+//!                              least 4 pixels a side)
+//!   20    12   center          3 x f32, finite (bounding-sphere centre, object frame)
+//!   32     4   radius          f32, finite, > 0: a frame shows a square of side 2*radius
+//!                              centred on the centre, seen from its direction, with the
+//!                              image axes `crate::sphere::billboard_axes` gives
+//!   36     8   albedo_len      u64, must equal the atlas bytes: the sum over levels m of
+//!                              (frames * (resolution >> m))² * 4
+//!   44     C   albedo          RGBA8 atlases, level 0 first: unlit colour (sRGB, not
+//!                              premultiplied) and coverage in alpha; in level m, frame
+//!                              (i, j) is the tile of (resolution >> m)² pixels at column i,
+//!                              row j, rows top to bottom; colour spread into uncovered
+//!                              texels from the covered ones of the same frame; each level
+//!                              made from the one above frame by frame, so no texel mixes
+//!                              two frames
+//!   44+C   8   normal_depth_len u64, must equal albedo_len
+//!   52+C   C   normal_depth    RGBA8 atlases as albedo: the surface normal in the object
+//!                              frame as rgb = n * 0.5 + 0.5 (linear bytes), and in alpha
+//!                              the depth from the frame's plane, 0 at the bounding
+//!                              sphere's side towards the frame's camera, 0.5 at its
+//!                              centre, 1 at its far side; spread like the albedo
 //! ```
 //!
 //! A set's own views, lights and resolution are checked against the allowed values but need
-//! not equal the header's settings. A BTF set of one `(species, level)` appears at most once,
-//! a texel volume of one species too. Records of one kind keep their
-//! order across sections; the writer puts all BTF sections first, then all VCM sections,
-//! packing records greedily so no section exceeds [`MAX_SECTION_BYTES`] (one record must
-//! fit in one section). A reader accepts the sections of both kinds in any order.
+//! not equal the header's settings (nor need an impostor's layout, frames and resolution).
+//! A BTF set of one `(species, level)` appears at most once, a texel volume or an impostor
+//! of one species too. Records of one kind keep their order across sections; the writer
+//! puts all BTF sections first, then the VCM sections, the texel volumes and the
+//! impostors, packing records greedily so no section exceeds [`MAX_SECTION_BYTES`] (one
+//! record must fit in one section). A reader accepts the sections of every kind in any
+//! order.
 //!
 //! # Reading
 //!
@@ -122,6 +159,7 @@ use std::ops::RangeInclusive;
 use std::path::PathBuf;
 
 use crate::model::Level;
+use crate::sphere::OctaLayout;
 
 mod check;
 mod plan;
@@ -130,7 +168,9 @@ mod read;
 pub(crate) mod test_support;
 mod write;
 
-pub use plan::{btf_record_bytes, file_bytes_for, texel_record_bytes, vcm_record_bytes};
+pub use plan::{
+    btf_record_bytes, file_bytes_for, impostor_record_bytes, texel_record_bytes, vcm_record_bytes,
+};
 pub use read::{from_bytes, read, read_expecting};
 pub use write::{to_bytes, write_atomic};
 
@@ -140,7 +180,7 @@ pub const MAGIC: [u8; 8] = *b"CANOPY\r\n";
 /// cell's index in `crate::vcm::cells::ForestCells`), not one tree's.
 pub const VCM_CELL_SPECIES: u32 = u32::MAX;
 /// The format version this code writes and the only one it reads.
-pub const VERSION: u32 = 5;
+pub const VERSION: u32 = 6;
 /// Ambient images per view in a BTF image set: lit by the sky alone, then by the light the
 /// ground sends up alone (the two halves of the renderer's hemispherical ambient).
 pub const AMBIENT_IMAGES_PER_VIEW: u32 = 2;
@@ -164,9 +204,17 @@ pub const TEXEL_RESOLUTION_RANGE: RangeInclusive<u32> = 16..=256;
 pub const TEXEL_DIM_RANGE: RangeInclusive<u32> = 1..=256;
 /// Cube faces per visibility cube map.
 pub const CUBE_FACES: usize = 6;
+/// Allowed impostor frames per side; 0 in the settings means no impostors.
+pub const IMPOSTOR_FRAMES_RANGE: RangeInclusive<u32> = 4..=32;
+/// Allowed impostor frame sides (pixels).
+pub const IMPOSTOR_RESOLUTIONS: [u32; 5] = [16, 32, 64, 128, 256];
+/// The smallest frame side an impostor's mip chain goes down to (pixels).
+pub const IMPOSTOR_MIN_MIP_SIDE: u32 = 4;
 
 /// Bytes of the header before the section table.
-const FIXED_HEADER_BYTES: usize = 60;
+const FIXED_HEADER_BYTES: usize = 72;
+/// Words of the settings in the header (from offset 32).
+const SETTINGS_WORDS: usize = 10;
 /// Bytes of one section-table entry.
 const SECTION_ENTRY_BYTES: usize = 16;
 /// Bytes of a section payload before its records (the record count).
@@ -177,12 +225,17 @@ const BTF_RECORD_FIXED_BYTES: u64 = 56;
 const VCM_RECORD_FIXED_BYTES: u64 = 56;
 /// Fixed part of a texel volume record (before the voxels).
 const TEXEL_RECORD_FIXED_BYTES: u64 = 44;
+/// Bytes of an impostor record besides its atlases.
+const IMPOSTOR_RECORD_FIXED_BYTES: u64 = 52;
 
 const SETTINGS_DIRECTIONS: &str = "6, 18, 66 or 258";
 const SETTINGS_RESOLUTIONS: &str = "32, 64 or 128";
 const SETTINGS_SUPERSAMPLE: &str = "1 to 8";
 const SETTINGS_VCM_RESOLUTION: &str = "8 to 128";
 const SETTINGS_TEXEL_RESOLUTION: &str = "0 (none) or 16 to 256";
+const SETTINGS_IMPOSTOR_FRAMES: &str = "0 (none) or 4 to 32";
+const SETTINGS_IMPOSTOR_RESOLUTION: &str = "16, 32, 64, 128 or 256";
+const SETTINGS_IMPOSTOR_LAYOUT: &str = "0 (full) or 1 (hemi)";
 
 /// Everything that can go wrong reading or writing a `.canopy` file. Every variant but
 /// [`FormatError::Io`] means the file (or the data given to write) is unusable and the
@@ -304,6 +357,9 @@ pub struct Baked {
     pub vcm: Vec<VcmSet>,
     /// Texel volumes, one per species (none when the settings' texel resolution is 0).
     pub texels: Vec<TexelVolume>,
+    /// Octahedral impostors, one per species (none when the settings' impostor frames
+    /// are 0).
+    pub impostors: Vec<Impostor>,
 }
 
 /// The bake parameters stored in the header.
@@ -324,6 +380,13 @@ pub struct BakeSettings {
     /// Voxels along the longest side of each species' texel volume: 0 (no texels) or in
     /// [`TEXEL_RESOLUTION_RANGE`].
     pub texel_resolution: u32,
+    /// Frames per side of each species' octahedral impostor: 0 (none) or in
+    /// [`IMPOSTOR_FRAMES_RANGE`].
+    pub impostor_frames: u32,
+    /// Pixels a side of one impostor frame: one of [`IMPOSTOR_RESOLUTIONS`].
+    pub impostor_resolution: u32,
+    /// The directions the impostor frames cover.
+    pub impostor_layout: OctaLayout,
 }
 
 /// The billboard images of one species at one level.
@@ -382,6 +445,28 @@ pub struct TexelVolume {
     pub voxels: Vec<u8>,
 }
 
+/// One species' whole tree as an octahedral impostor: a grid of orthographic views of the
+/// tree level, unlit colour with coverage and normal with depth, each frame with its own
+/// mip chain (see the record layout above).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Impostor {
+    pub species: u32,
+    pub layout: OctaLayout,
+    /// Frames per side.
+    pub frames: u32,
+    /// Pixels a frame side at level 0.
+    pub resolution: u32,
+    /// Levels stored, level 0 included.
+    pub mip_levels: u32,
+    /// Bounding-sphere centre (object frame) and radius: what every frame frames.
+    pub center: [f32; 3],
+    pub radius: f32,
+    /// RGBA8 atlases, level 0 first: sRGB albedo, coverage in alpha.
+    pub albedo: Vec<u8>,
+    /// RGBA8 atlases as `albedo`: normal * 0.5 + 0.5, depth in alpha.
+    pub normal_depth: Vec<u8>,
+}
+
 /// The kind tag of a section.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u32)]
@@ -392,6 +477,8 @@ pub enum SectionKind {
     Vcm = 2,
     /// [`TexelVolume`] records.
     Texel = 3,
+    /// [`Impostor`] records.
+    Impostor = 4,
 }
 
 impl SectionKind {
@@ -401,6 +488,7 @@ impl SectionKind {
             1 => Some(SectionKind::Btf),
             2 => Some(SectionKind::Vcm),
             3 => Some(SectionKind::Texel),
+            4 => Some(SectionKind::Impostor),
             _ => None,
         }
     }
@@ -410,6 +498,7 @@ impl SectionKind {
             SectionKind::Btf => "btf image sets",
             SectionKind::Vcm => "vcm sets",
             SectionKind::Texel => "texel volumes",
+            SectionKind::Impostor => "impostors",
         }
     }
 }
@@ -436,7 +525,7 @@ fn level_from_tag(tag: u8) -> Option<Level> {
 impl BakeSettings {
     /// The settings as the header stores them, in its order (what the scene hash folds in
     /// too).
-    pub fn header_words(&self) -> [u32; 7] {
+    pub fn header_words(&self) -> [u32; SETTINGS_WORDS] {
         [
             self.views,
             self.lights,
@@ -445,12 +534,23 @@ impl BakeSettings {
             self.vcm_resolution,
             self.texel_resolution,
             self.tree_views,
+            self.impostor_frames,
+            self.impostor_resolution,
+            self.impostor_layout.tag(),
         ]
     }
 
-    /// The settings from the header's words (see [`Self::header_words`]).
-    pub fn from_header_words(w: [u32; 7]) -> Self {
-        Self {
+    /// The settings from the header's words (see [`Self::header_words`]), or the layout
+    /// tag when it names no layout.
+    pub fn from_header_words(w: [u32; SETTINGS_WORDS]) -> Result<Self, FormatError> {
+        let Some(impostor_layout) = OctaLayout::from_tag(w[9]) else {
+            return Err(FormatError::InvalidSettings {
+                field: "impostor_layout",
+                value: w[9],
+                allowed: SETTINGS_IMPOSTOR_LAYOUT,
+            });
+        };
+        Ok(Self {
             views: w[0],
             lights: w[1],
             resolution: w[2],
@@ -458,7 +558,10 @@ impl BakeSettings {
             vcm_resolution: w[4],
             texel_resolution: w[5],
             tree_views: w[6],
-        }
+            impostor_frames: w[7],
+            impostor_resolution: w[8],
+            impostor_layout,
+        })
     }
 
     /// View directions of the image sets of `level`: the tree level has its own count.
@@ -543,6 +646,47 @@ impl TexelVolume {
     }
 }
 
+impl Impostor {
+    /// The bytes of one atlas (`albedo` or `normal_depth`) of these sizes, every level
+    /// included, or None on overflow.
+    pub fn atlas_bytes(frames: u32, resolution: u32, mip_levels: u32) -> Option<u64> {
+        let mut sum: u64 = 0;
+        for m in 0..mip_levels.min(32) {
+            let side = u64::from(frames).checked_mul(u64::from(resolution >> m))?;
+            sum = sum.checked_add(side.checked_mul(side)?.checked_mul(4)?)?;
+        }
+        Some(sum)
+    }
+
+    /// The length `albedo` (and `normal_depth`) must have, or None on overflow.
+    pub fn expected_atlas_len(&self) -> Option<u64> {
+        Self::atlas_bytes(self.frames, self.resolution, self.mip_levels)
+    }
+
+    /// Byte offset and side (pixels) of level `m` in an atlas, if the record has it.
+    pub fn level(&self, m: u32) -> Option<(usize, u32)> {
+        if m >= self.mip_levels {
+            return None;
+        }
+        let at = Self::atlas_bytes(self.frames, self.resolution, m)?;
+        Some((
+            usize::try_from(at).ok()?,
+            self.frames * (self.resolution >> m),
+        ))
+    }
+}
+
+/// Levels of an impostor's mip chain for frames of `resolution` pixels: down to frames of
+/// [`IMPOSTOR_MIN_MIP_SIDE`] pixels (1 for smaller frames).
+pub fn impostor_mip_levels(resolution: u32) -> u32 {
+    let min = IMPOSTOR_MIN_MIP_SIDE.max(1);
+    let mut levels = 1;
+    while (resolution >> levels) >= min {
+        levels += 1;
+    }
+    levels
+}
+
 impl Baked {
     /// Bytes of BTF image data (direct + ambient) over all sets.
     pub fn btf_bytes(&self) -> u64 {
@@ -560,6 +704,14 @@ impl Baked {
     /// Bytes of texel voxels over all volumes.
     pub fn texel_bytes(&self) -> u64 {
         self.texels.iter().map(|t| t.voxels.len() as u64).sum()
+    }
+
+    /// Bytes of impostor atlases (both maps, every level) over all impostors.
+    pub fn impostor_bytes(&self) -> u64 {
+        self.impostors
+            .iter()
+            .map(|i| i.albedo.len() as u64 + i.normal_depth.len() as u64)
+            .sum()
     }
 }
 
@@ -598,5 +750,23 @@ mod tests {
             ..set.clone()
         };
         assert_eq!(huge.expected_direct_len(), None);
+    }
+
+    #[test]
+    fn impostor_levels_are_laid_out_one_after_the_other() {
+        let imp = impostor(0);
+        assert_eq!(imp.level(0), Some((0, 64)));
+        assert_eq!(imp.level(1), Some((64 * 64 * 4, 32)));
+        assert_eq!(imp.level(2), None);
+        assert_eq!(
+            imp.expected_atlas_len(),
+            Some((64 * 64 + 32 * 32) * 4),
+            "every level, nothing between"
+        );
+        assert_eq!(Impostor::atlas_bytes(u32::MAX, u32::MAX, 3), None);
+        // Down to frames of 4 pixels.
+        for (res, levels) in [(16, 3), (32, 4), (64, 5), (128, 6), (256, 7)] {
+            assert_eq!(impostor_mip_levels(res), levels, "{res}");
+        }
     }
 }

@@ -25,6 +25,18 @@ pub(super) fn texel_record_len(t: &TexelVolume) -> u64 {
     TEXEL_RECORD_FIXED_BYTES + t.voxels.len() as u64
 }
 
+pub(super) fn impostor_record_len(i: &Impostor) -> u64 {
+    IMPOSTOR_RECORD_FIXED_BYTES + i.albedo.len() as u64 + i.normal_depth.len() as u64
+}
+
+/// Bytes of an impostor record of these sizes (both atlases, `mip_levels` levels each),
+/// saturating on overflow.
+pub fn impostor_record_bytes(frames: u32, resolution: u32, mip_levels: u32) -> u64 {
+    Impostor::atlas_bytes(frames, resolution, mip_levels)
+        .and_then(|a| a.checked_mul(2))
+        .map_or(u64::MAX, |a| a.saturating_add(IMPOSTOR_RECORD_FIXED_BYTES))
+}
+
 /// Bytes of a BTF image-set record of these sizes.
 pub fn btf_record_bytes(views: u32, lights: u32, resolution: u32) -> u64 {
     let image = u64::from(resolution).pow(2) * 4;
@@ -44,13 +56,19 @@ pub fn texel_record_bytes(lights: u32, dims: [u32; 3]) -> u64 {
 }
 
 /// The length of the file the writer makes of records of these sizes (each list in file
-/// order: BTF sets, VCM sets, texel volumes), or `Err` with the size of a record too
-/// large for any section ([`MAX_SECTION_BYTES`]).
-pub fn file_bytes_for(btf: &[u64], vcm: &[u64], texel: &[u64]) -> Result<u64, u64> {
+/// order: BTF sets, VCM sets, texel volumes, impostors), or `Err` with the size of a
+/// record too large for any section ([`MAX_SECTION_BYTES`]).
+pub fn file_bytes_for(
+    btf: &[u64],
+    vcm: &[u64],
+    texel: &[u64],
+    impostor: &[u64],
+) -> Result<u64, u64> {
     if let Some(&big) = btf
         .iter()
         .chain(vcm)
         .chain(texel)
+        .chain(impostor)
         .find(|&&s| s.saturating_add(SECTION_PREFIX_BYTES) > MAX_SECTION_BYTES)
     {
         return Err(big);
@@ -60,6 +78,7 @@ pub fn file_bytes_for(btf: &[u64], vcm: &[u64], texel: &[u64]) -> Result<u64, u6
         (SectionKind::Btf, btf),
         (SectionKind::Vcm, vcm),
         (SectionKind::Texel, texel),
+        (SectionKind::Impostor, impostor),
     ] {
         pack(kind, sizes.iter().copied(), MAX_SECTION_BYTES, &mut plans);
     }
@@ -86,6 +105,12 @@ pub(super) fn plan_sections(baked: &Baked, limit: u64) -> Vec<PlannedSection> {
     pack(
         SectionKind::Texel,
         baked.texels.iter().map(texel_record_len),
+        limit,
+        &mut plans,
+    );
+    pack(
+        SectionKind::Impostor,
+        baked.impostors.iter().map(impostor_record_len),
         limit,
         &mut plans,
     );
@@ -143,13 +168,22 @@ mod tests {
                 .iter()
                 .map(|t| texel_record_bytes(t.lights, t.dims))
                 .collect();
+            let impostor: Vec<u64> = b
+                .impostors
+                .iter()
+                .map(|i| impostor_record_bytes(i.frames, i.resolution, i.mip_levels))
+                .collect();
             assert_eq!(
-                file_bytes_for(&btf, &vcm, &texel),
+                file_bytes_for(&btf, &vcm, &texel, &impostor),
                 Ok(to_bytes(&b).len() as u64)
             );
         }
         // 258 views x 258 lights at 128² is one 4.4 GB record: no section holds it.
         let huge = btf_record_bytes(258, 258, 128);
-        assert_eq!(file_bytes_for(&[huge], &[], &[]), Err(huge));
+        assert_eq!(file_bytes_for(&[huge], &[], &[], &[]), Err(huge));
+        // The largest impostor (32 x 32 frames of 256², every level) fits a section.
+        let most = impostor_record_bytes(32, 256, impostor_mip_levels(256));
+        assert!(most + 4 <= MAX_SECTION_BYTES, "{most}");
+        assert_eq!(file_bytes_for(&[], &[], &[], &[most]).map(|_| ()), Ok(()));
     }
 }

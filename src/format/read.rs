@@ -6,7 +6,7 @@ use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::Path;
 
-use super::check::{check_unique_btf, check_unique_texels, show_len};
+use super::check::{check_unique_btf, check_unique_impostors, check_unique_texels, show_len};
 use super::*;
 
 /// Reads and validates a `.canopy` file.
@@ -196,7 +196,7 @@ fn decode<R: Read>(
         });
     }
     let settings =
-        BakeSettings::from_header_words(std::array::from_fn(|i| u32_at(&rest, 20 + 4 * i)));
+        BakeSettings::from_header_words(std::array::from_fn(|i| u32_at(&rest, 20 + 4 * i)))?;
     settings.validate()?;
 
     let mut entries = Vec::with_capacity(section_count as usize);
@@ -208,7 +208,9 @@ fn decode<R: Read>(
         let Some(kind) = SectionKind::from_u32(tag) else {
             return Err(FormatError::MalformedContent {
                 section: format!("section {i}"),
-                reason: format!("unknown section kind {tag} (known: 1 = btf, 2 = vcm, 3 = texel)"),
+                reason: format!(
+                    "unknown section kind {tag} (known: 1 = btf, 2 = vcm, 3 = texel, 4 = impostor)"
+                ),
             });
         };
         if len > MAX_SECTION_BYTES {
@@ -244,6 +246,7 @@ fn decode<R: Read>(
         btf: Vec::new(),
         vcm: Vec::new(),
         texels: Vec::new(),
+        impostors: Vec::new(),
     };
     for (i, &(kind, stored, len)) in entries.iter().enumerate() {
         let name = format!("section {i} ({})", kind.name());
@@ -257,6 +260,7 @@ fn decode<R: Read>(
             SectionKind::Btf => decode_btf(&mut section, &mut baked.btf),
             SectionKind::Vcm => decode_vcm(&mut section, &mut baked.vcm),
             SectionKind::Texel => decode_texels(&mut section, &mut baked.texels),
+            SectionKind::Impostor => decode_impostors(&mut section, &mut baked.impostors),
         };
         if result.is_ok() && section.remaining != 0 {
             result = Err(section.malformed(format!(
@@ -282,6 +286,7 @@ fn decode<R: Read>(
     }
     check_unique_btf(&baked.btf)?;
     check_unique_texels(&baked.texels)?;
+    check_unique_impostors(&baked.impostors)?;
     Ok(baked)
 }
 
@@ -485,6 +490,50 @@ fn decode_texels<R: Read>(
         }
         t.voxels = s.bytes(len, "the voxels")?;
         out.push(t);
+    }
+    Ok(())
+}
+
+fn decode_impostors<R: Read>(
+    s: &mut Section<'_, '_, R>,
+    out: &mut Vec<Impostor>,
+) -> Result<(), FormatError> {
+    let count = s.record_count(IMPOSTOR_RECORD_FIXED_BYTES)?;
+    for index in 0..count {
+        let species = s.u32("species")?;
+        let tag = s.u32("layout")?;
+        let Some(layout) = OctaLayout::from_tag(tag) else {
+            return Err(s.malformed(format!(
+                "impostor record {index} (species {species}): layout {tag} is not 0 (full) or 1 (hemi)"
+            )));
+        };
+        let mut imp = Impostor {
+            species,
+            layout,
+            frames: s.u32("frames")?,
+            resolution: s.u32("resolution")?,
+            mip_levels: s.u32("mip_levels")?,
+            center: [s.f32("center")?, s.f32("center")?, s.f32("center")?],
+            radius: s.f32("radius")?,
+            albedo: Vec::new(),
+            normal_depth: Vec::new(),
+        };
+        let albedo_len = s.u64("albedo length")?;
+        // The normal-depth length comes after the albedo; both must be the same.
+        if let Some(reason) = imp.problem(albedo_len, albedo_len) {
+            return Err(s.malformed(format!(
+                "impostor record {index} (species {species}): {reason}"
+            )));
+        }
+        imp.albedo = s.bytes(albedo_len, "the albedo atlas")?;
+        let normal_len = s.u64("normal-depth length")?;
+        if normal_len != albedo_len {
+            return Err(s.malformed(format!(
+                "impostor record {index} (species {species}): normal_depth holds {normal_len} bytes, expected {albedo_len}"
+            )));
+        }
+        imp.normal_depth = s.bytes(normal_len, "the normal-depth atlas")?;
+        out.push(imp);
     }
     Ok(())
 }

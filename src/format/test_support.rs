@@ -104,6 +104,25 @@ pub(crate) fn settings() -> BakeSettings {
         supersample: 2,
         vcm_resolution: 8,
         texel_resolution: 16,
+        impostor_frames: 4,
+        impostor_resolution: 16,
+        impostor_layout: OctaLayout::Full,
+    }
+}
+
+/// A 4 x 4-frame impostor of 16² frames, 2 levels (40 KB).
+pub(crate) fn impostor(species: u32) -> Impostor {
+    let len = Impostor::atlas_bytes(4, 16, 2).unwrap() as usize;
+    Impostor {
+        species,
+        layout: OctaLayout::Hemi,
+        frames: 4,
+        resolution: 16,
+        mip_levels: 2,
+        center: [0.0, 6.0, -0.5],
+        radius: 7.5,
+        albedo: noise(species + 300, len),
+        normal_depth: noise(species + 400, len),
     }
 }
 
@@ -150,7 +169,7 @@ pub(crate) fn vcm_set(owner: u32, level: Level, resolution: u32) -> VcmSet {
     }
 }
 
-/// Two BTF sets and two VCM sets (about 350 KB).
+/// Two BTF sets, two VCM sets, a texel volume and an impostor (about 400 KB).
 pub(crate) fn sample() -> Baked {
     Baked {
         scene_hash: 0x0123_4567_89ab_cdef,
@@ -158,10 +177,11 @@ pub(crate) fn sample() -> Baked {
         btf: vec![btf_set(0, Level::Twig), btf_set(1, Level::Tree)],
         vcm: vec![vcm_set(0, Level::Twig, 8), vcm_set(7, Level::Branch, 16)],
         texels: vec![texel_volume(0, [8, 16, 8])],
+        impostors: vec![impostor(0)],
     }
 }
 
-/// A few KB: two small VCM sets, no BTF.
+/// A few KB: two small VCM sets and a texel volume, no BTF, no impostor.
 pub(crate) fn small() -> Baked {
     Baked {
         scene_hash: 42,
@@ -169,6 +189,7 @@ pub(crate) fn small() -> Baked {
         btf: Vec::new(),
         vcm: vec![vcm_set(3, Level::Twig, 8), vcm_set(4, Level::Tree, 8)],
         texels: vec![texel_volume(1, [2, 3, 2])],
+        impostors: Vec::new(),
     }
 }
 

@@ -77,6 +77,27 @@ fn write_section_payload<W: Write + ?Sized>(
                 w.write_all(&t.voxels)?;
             }
         }
+        SectionKind::Impostor => {
+            for i in &baked.impostors[range] {
+                for v in [
+                    i.species,
+                    i.layout.tag(),
+                    i.frames,
+                    i.resolution,
+                    i.mip_levels,
+                ] {
+                    w.write_all(&v.to_le_bytes())?;
+                }
+                for c in i.center {
+                    w.write_all(&c.to_le_bytes())?;
+                }
+                w.write_all(&i.radius.to_le_bytes())?;
+                w.write_all(&(i.albedo.len() as u64).to_le_bytes())?;
+                w.write_all(&i.albedo)?;
+                w.write_all(&(i.normal_depth.len() as u64).to_le_bytes())?;
+                w.write_all(&i.normal_depth)?;
+            }
+        }
     }
     Ok(())
 }
@@ -193,14 +214,16 @@ mod tests {
         assert_eq!(u64_at(&bytes, 16), bytes.len() as u64);
         assert_eq!(
             bytes.len() as u64,
-            64 + 3 * 16
-                + 3 * 4
+            76 + 4 * 16
+                + 4 * 4
                 + 2 * 56
                 + 2 * 56
                 + 44
+                + 52
                 + baked.btf_bytes()
                 + baked.vcm_bytes()
                 + baked.texel_bytes()
+                + baked.impostor_bytes()
         );
         assert_eq!(to_bytes(&baked), bytes, "encoding is deterministic");
         let (back, peak) = peak_during(|| from_bytes(&bytes).unwrap());
@@ -220,9 +243,10 @@ mod tests {
             btf: Vec::new(),
             vcm: Vec::new(),
             texels: Vec::new(),
+            impostors: Vec::new(),
         };
         let bytes = to_bytes(&baked);
-        assert_eq!(bytes.len(), 64);
+        assert_eq!(bytes.len(), 76);
         assert_eq!(from_bytes(&bytes).unwrap(), baked);
     }
 
@@ -239,11 +263,12 @@ mod tests {
                 (SectionKind::Btf, 1),
                 (SectionKind::Btf, 1),
                 (SectionKind::Vcm, 2),
-                (SectionKind::Texel, 1)
+                (SectionKind::Texel, 1),
+                (SectionKind::Impostor, 1)
             ]
         );
         let bytes = Encoding::new(&baked, limit).into_bytes();
-        assert_eq!(section_count(&bytes), 4);
+        assert_eq!(section_count(&bytes), 5);
         assert!(from_bytes(&bytes).unwrap() == baked);
 
         // Sections of both kinds in any order decode too: put VCM first.
@@ -378,8 +403,8 @@ mod tests {
         // One more byte of room and it is written, one record per section.
         write_atomic_with_hook(&path, &baked, limit + 1, |_| Ok(())).unwrap();
         let bytes = fs::read(&path).unwrap();
-        // Two btf sections, the vcm sets together, the texel volume.
-        assert_eq!(section_count(&bytes), 4);
+        // Two btf sections, the vcm sets together, the texel volume, the impostor.
+        assert_eq!(section_count(&bytes), 5);
         assert!(from_bytes(&bytes).unwrap() == baked);
         fs::remove_dir_all(&dir).unwrap();
     }

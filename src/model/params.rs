@@ -39,6 +39,14 @@ pub struct BakeParams {
     /// shared by the trees of one forest cell, whose memory grows with the forest's area;
     /// or `per-tree`, 8 cube maps for every tree (the thesis' layout, 48 KB a tree).
     pub tree_vcm: TreeVcm,
+    /// Frames per side of each species' octahedral impostor (the `impostor` method): 0
+    /// bakes none, else 4..=32 (default 12, see docs/RESULTS.md).
+    pub impostor_frames: u32,
+    /// Pixels a side of one impostor frame: 16, 32, 64, 128 or 256 (default 64).
+    pub impostor_resolution: u32,
+    /// The directions the impostor frames cover: `full` (default, the whole sphere: from
+    /// the ground every crown is seen from below its centre) or `hemi` (the upper half).
+    pub impostor_layout: crate::sphere::OctaLayout,
 }
 
 /// The layout of the tree-level visibility cube maps (see `crate::vcm::cells`).
@@ -63,6 +71,9 @@ impl Default for BakeParams {
             supersample: 4,
             texel_resolution: 64,
             tree_vcm: TreeVcm::Cells,
+            impostor_frames: 12,
+            impostor_resolution: 64,
+            impostor_layout: crate::sphere::OctaLayout::Full,
         }
     }
 }
@@ -71,6 +82,8 @@ impl Default for BakeParams {
 pub const BAKE_DIRECTIONS: [u32; 4] = [6, 18, 66, 258];
 /// Image sides the bake accepts.
 pub const BAKE_RESOLUTIONS: [u32; 3] = [32, 64, 128];
+/// Impostor frame sides the bake accepts.
+pub const BAKE_IMPOSTOR_RESOLUTIONS: [u32; 5] = [16, 32, 64, 128, 256];
 
 impl BakeParams {
     pub fn check(&self) -> Result<(), FieldError> {
@@ -90,6 +103,16 @@ impl BakeParams {
         check::range_u32("supersample", self.supersample, 1, 8)?;
         if self.texel_resolution != 0 {
             check::range_u32("texel_resolution", self.texel_resolution, 16, 256)?;
+        }
+        if self.impostor_frames != 0 {
+            check::range_u32("impostor_frames", self.impostor_frames, 4, 32)?;
+        }
+        if !BAKE_IMPOSTOR_RESOLUTIONS.contains(&self.impostor_resolution) {
+            return Err(FieldError::new(
+                "impostor_resolution",
+                "must be one of 16, 32, 64, 128, 256",
+            )
+            .with_found(self.impostor_resolution));
         }
         Ok(())
     }

@@ -68,6 +68,22 @@ pub enum Stage {
     Studio,
 }
 
+/// What a [`Stage::Studio`] frame draws of the `geometry` method: its lit picture, or one
+/// of the maps the impostor bake stores. (A world frame is always lit.)
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum StudioOutput {
+    /// The lit picture.
+    #[default]
+    Lit,
+    /// Each surface's unlit colour (its albedo), alpha 1 where something is drawn.
+    Albedo,
+    /// Each surface's normal (the world frame, which is the object's in the studio),
+    /// facing the camera for two-sided leaves, as `n * 0.5 + 0.5` in the target's bytes as
+    /// they are (the shader undoes the sRGB target's encoding); in alpha its view depth,
+    /// `near` (m) -> 0 to `far` -> 1, clamped.
+    NormalDepth { near: f32, far: f32 },
+}
+
 /// Sun shadows by cascaded shadow maps.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShadowSettings {
@@ -155,6 +171,8 @@ pub struct FrameDesc {
     /// Draw the overdraw view over the frame instead of its picture: fragments shaded, or
     /// images read, per pixel ([`super::overdraw`]); `None`: the picture.
     pub overdraw: Option<super::overdraw::OverdrawView>,
+    /// What a studio frame draws (the world's frames ignore it).
+    pub studio_output: StudioOutput,
 }
 
 /// Where the pixel classes' near trees end (m).
@@ -198,6 +216,7 @@ impl FrameDesc {
             render_scale: Default::default(),
             pixel_classes: false,
             overdraw: None,
+            studio_output: StudioOutput::Lit,
         }
     }
 }

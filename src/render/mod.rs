@@ -39,7 +39,9 @@ use image::RgbaImage;
 
 pub use camera::{Camera, Frustum, OrthoView};
 pub use context::{AdapterPreference, GpuContext};
-pub use frame::{FrameDesc, FrameStats, Method, Reference, ShadowSettings, Sky, Stage, Sun};
+pub use frame::{
+    FrameDesc, FrameStats, Method, Reference, ShadowSettings, Sky, Stage, StudioOutput, Sun,
+};
 pub use ground::{GROUND_FORMAT, GROUND_MAP_SIZE, GROUND_PREVIEW_SIZE};
 pub use method::btf;
 pub use target::{OFFSCREEN_FORMAT, OffscreenTarget};

@@ -3,7 +3,7 @@
 
 use glam::{Mat4, Vec3};
 
-use super::frame::{FrameDesc, Method, Stage};
+use super::frame::{FrameDesc, Method, Stage, StudioOutput};
 use super::shadow::Cascades;
 
 /// The uniform block of `frame.wgsl` (`struct Frame`), byte for byte: each `[f32; 3]` is a
@@ -64,6 +64,15 @@ pub struct FrameUniforms {
     /// The overdraw view: on (1) or off (0), the target's width and height, what the heat
     /// map shows ([`super::overdraw::OverdrawView::index`]).
     pub overdraw: [u32; 4],
+    /// What a studio frame draws: 0 its lit picture, 1 albedo, 2 normal and depth
+    /// ([`StudioOutput`]; 0 in the world).
+    pub studio_output: u32,
+    /// The view depth (m) the studio's depth map reads 0 at, and 1 / the depth it reads 1
+    /// further on.
+    pub studio_depth_near: f32,
+    pub studio_depth_scale: f32,
+    /// Fills the block to a multiple of 16 bytes.
+    pub studio_pad: u32,
 }
 
 /// The frame's sun, sky and ground light (colour x intensity; the sun 0 below the horizon
@@ -87,6 +96,12 @@ impl FrameUniforms {
         let [sun, sky, ground] = frame_lights(frame);
         let horizon = frame.sky.color.lerp(Vec3::new(0.85, 0.88, 0.92), 0.55);
         let shadows_on = frame.shadows.enabled && (studio || frame.sun.elevation_deg > 0.0);
+        let (studio_output, depth_near, depth_far) = match frame.studio_output {
+            _ if !studio => (0, 0.0, 1.0),
+            StudioOutput::Lit => (0, 0.0, 1.0),
+            StudioOutput::Albedo => (1, 0.0, 1.0),
+            StudioOutput::NormalDepth { near, far } => (2, near, far),
+        };
         Self {
             view_proj: vp.to_cols_array_2d(),
             inv_view_proj: vp.inverse().to_cols_array_2d(),
@@ -117,6 +132,10 @@ impl FrameUniforms {
             ground_texel_world: 0.0,
             ground_uv_scale: 0.0,
             overdraw: [0; 4],
+            studio_output,
+            studio_depth_near: depth_near,
+            studio_depth_scale: 1.0 / (depth_far - depth_near).max(1e-6),
+            studio_pad: 0,
         }
     }
 

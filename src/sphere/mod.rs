@@ -18,11 +18,14 @@
 //! The set and its lookup tables are built in `subdivide`; `locate` finds a direction's
 //! triangle and nearest sample, `blend` its weights; `gpu` lays the tables out for a copy on
 //! the GPU and `billboard` holds the image axes shared by the bake and the billboards.
+//! `octa` is the other way to sample directions, for octahedral impostors: a square grid
+//! of frames on an octahedral map of the sphere or of its upper half.
 
 mod billboard;
 mod blend;
 mod gpu;
 mod locate;
+mod octa;
 mod subdivide;
 #[cfg(test)]
 mod test_support;
@@ -32,6 +35,7 @@ use glam::{Mat3A, Vec3};
 pub use billboard::billboard_axes;
 pub use blend::Blend;
 pub use gpu::DirectionRows;
+pub use octa::{Frame, FrameBlend, OctaGrid, OctaLayout};
 
 /// Why a [`DirectionSet`] could not be built.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

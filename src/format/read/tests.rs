@@ -33,7 +33,17 @@ fn flipped_payload_byte_is_a_checksum_mismatch() {
 fn flipped_header_byte_is_a_checksum_mismatch() {
     let clean = to_bytes(&sample());
     // scene hash, settings, a section crc, a section length, the header crc itself
-    for at in [24, 33, 48, 57, 60 + 5, 60 + 16 + 8, header_end(&clean) + 1] {
+    for at in [
+        24,
+        33,
+        48,
+        57,
+        61,
+        69,
+        72 + 5,
+        72 + 16 + 8,
+        header_end(&clean) + 1,
+    ] {
         let mut bytes = clean.clone();
         bytes[at] ^= 0x01;
         match from_bytes(&bytes) {
@@ -148,13 +158,16 @@ fn wrong_magic_is_not_a_canopy_file() {
 
 #[test]
 fn wrong_version_is_unsupported() {
-    for version in [0u32, 1, 2, 3, 4, 6, u32::MAX] {
+    // Version 5 is the last one before impostors: its files are refused, with the hint.
+    for version in [0u32, 1, 2, 3, 4, 5, 7, u32::MAX] {
         let mut bytes = to_bytes(&small());
         bytes[8..12].copy_from_slice(&version.to_le_bytes());
         reseal_header(&mut bytes);
         match from_bytes(&bytes) {
-            Err(FormatError::UnsupportedVersion { found, supported }) => {
-                assert_eq!((found, supported), (version, VERSION))
+            Err(e @ FormatError::UnsupportedVersion { found, supported }) => {
+                assert_eq!((found, supported), (version, VERSION));
+                assert!(e.to_string().contains("re-bake with `canopy bake`"), "{e}");
+                assert!(e.needs_rebake());
             }
             other => panic!("version {version}: {other:?}"),
         }
@@ -250,7 +263,9 @@ fn inconsistent_payload_with_valid_checksums_is_malformed() {
     // mean opacity out of range: each caught on write and on read.
     // Texel volumes: voxels one byte short, a zero or huge dimension, a NaN corner, a
     // negative voxel, a light count that is no direction set.
-    let breakers: [fn(&mut Baked); 11] = [
+    // Impostors: an atlas one byte short, the two atlases of different sizes, frames,
+    // resolution or levels out of range, a NaN centre, an infinite radius.
+    let breakers: [fn(&mut Baked); 20] = [
         |b| b.texels[0].voxels.pop().map_or((), drop),
         |b| b.texels[0].dims[1] = 0,
         |b| b.texels[0].dims[2] = 100_000,
@@ -262,6 +277,15 @@ fn inconsistent_payload_with_valid_checksums_is_malformed() {
         |b| b.btf[1].texel_size = f32::NAN,
         |b| b.vcm[1].opacity.truncate(10),
         |b| b.vcm[0].mean_opacity[3] = 1.5,
+        |b| b.impostors[0].albedo.pop().map_or((), drop),
+        |b| b.impostors[0].normal_depth.extend([0; 4]),
+        |b| b.impostors[0].frames = 3,
+        |b| b.impostors[0].frames = 64,
+        |b| b.impostors[0].resolution = 24,
+        |b| b.impostors[0].mip_levels = 0,
+        |b| b.impostors[0].mip_levels = 4,
+        |b| b.impostors[0].center[2] = f32::NAN,
+        |b| b.impostors[0].radius = f32::INFINITY,
     ];
     for (i, breaker) in breakers.iter().enumerate() {
         let mut baked = sample();
@@ -300,6 +324,15 @@ fn inconsistent_payload_with_valid_checksums_is_malformed() {
     // The same species' texel volume twice.
     let mut baked = sample();
     baked.texels.push(baked.texels[0].clone());
+    assert!(baked.validate().is_err());
+    assert!(matches!(
+        from_bytes(&to_bytes(&baked)),
+        Err(FormatError::MalformedContent { reason, .. }) if reason.contains("twice")
+    ));
+
+    // The same species' impostor twice.
+    let mut baked = sample();
+    baked.impostors.push(baked.impostors[0].clone());
     assert!(baked.validate().is_err());
     assert!(matches!(
         from_bytes(&to_bytes(&baked)),
@@ -356,4 +389,83 @@ fn reading_a_missing_file_is_an_io_error_naming_it() {
     assert!(!err.needs_rebake());
     assert!(err.to_string().contains(&*path.to_string_lossy()), "{err}");
     fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The impostor section (kind 4, the last of `sample`'s sections): every count and size is
+/// checked against the section before anything is allocated, with the checksums made
+/// right again so only the decoding can notice.
+#[test]
+fn corrupt_impostor_records_are_malformed_without_allocating() {
+    let clean = to_bytes(&sample());
+    let last = section_count(&clean) - 1;
+    let entry = FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * last;
+    assert_eq!(u32_at(&clean, entry), SectionKind::Impostor as u32);
+    let record = payload_start(&clean, last) + 4;
+    // (offset in the record, value, what the reason names)
+    let cases: [(usize, u64, &str); 6] = [
+        (4, 9, "layout 9"),
+        (8, 32, "albedo holds"),
+        (12, 256, "albedo holds"),
+        (16, 40, "mip_levels"),
+        (36, u64::MAX, "albedo holds"),
+        (36, 1 << 40, "albedo holds"),
+    ];
+    for (at, value, want) in cases {
+        let mut bytes = clean.clone();
+        let at = record + at;
+        if at == record + 36 {
+            bytes[at..at + 8].copy_from_slice(&value.to_le_bytes());
+        } else {
+            bytes[at..at + 4].copy_from_slice(&(value as u32).to_le_bytes());
+        }
+        reseal(&mut bytes);
+        let (result, peak) = peak_during(|| from_bytes(&bytes));
+        match result {
+            Err(FormatError::MalformedContent { section, reason }) => {
+                assert!(section.contains("impostors"), "{section}");
+                assert!(reason.contains(want), "{want:?} in {reason}");
+            }
+            other => panic!("{at}={value}: expected malformed content, got {other:?}"),
+        }
+        assert!(peak <= bytes.len() + SMALL_OVERHEAD, "held {peak}");
+    }
+    // A record count of more records than the section could hold.
+    let mut bytes = clean.clone();
+    bytes[record - 4..record].copy_from_slice(&u32::MAX.to_le_bytes());
+    reseal(&mut bytes);
+    let (result, peak) = peak_during(|| from_bytes(&bytes));
+    assert!(
+        matches!(&result, Err(FormatError::MalformedContent { reason, .. }) if reason.contains("cannot fit")),
+        "{result:?}"
+    );
+    assert!(peak <= bytes.len() + SMALL_OVERHEAD);
+    // The normal-depth length disagreeing with the albedo's.
+    let mut bytes = clean.clone();
+    let albedo_len = u64_at(&bytes, record + 36) as usize;
+    let at = record + 44 + albedo_len;
+    bytes[at..at + 8].copy_from_slice(&7u64.to_le_bytes());
+    reseal(&mut bytes);
+    assert!(matches!(
+        from_bytes(&bytes),
+        Err(FormatError::MalformedContent { reason, .. }) if reason.contains("normal_depth holds 7")
+    ));
+    // Unresealed, a flipped byte in the atlases is the impostor section's checksum.
+    let mut bytes = clean.clone();
+    bytes[record + 44 + 100] ^= 0x08;
+    assert!(matches!(
+        from_bytes(&bytes),
+        Err(FormatError::ChecksumMismatch { section, .. }) if section.contains("impostors")
+    ));
+    // The header's impostor layout naming none.
+    let mut bytes = clean.clone();
+    bytes[68..72].copy_from_slice(&2u32.to_le_bytes());
+    reseal_header(&mut bytes);
+    assert!(matches!(
+        from_bytes(&bytes),
+        Err(FormatError::InvalidSettings {
+            field: "impostor_layout",
+            value: 2,
+            ..
+        })
+    ));
 }

@@ -723,10 +723,14 @@ mod tests {
                 supersample: 1,
                 vcm_resolution: 8,
                 texel_resolution: 0,
+                impostor_frames: 0,
+                impostor_resolution: 64,
+                impostor_layout: Default::default(),
             },
             btf: Vec::new(),
             vcm,
             texels: Vec::new(),
+            impostors: Vec::new(),
         }
     }
 

@@ -265,10 +265,14 @@ mod tests {
                 supersample: 4,
                 vcm_resolution: 32,
                 texel_resolution: 64,
+                impostor_frames: 0,
+                impostor_resolution: 64,
+                impostor_layout: Default::default(),
             },
             btf: Vec::new(),
             vcm: Vec::new(),
             texels,
+            impostors: Vec::new(),
         };
         let scene = TexelScene::new(&baked, &world, 2048).unwrap();
         let atlas = scene.atlas_size();
