@@ -1,4 +1,4 @@
-// The far canopy (src/render/method/btf/canopy/): past the distance where a tree covers a
+// The far canopy (src/render/method/btf/far_canopy/): past the distance where a tree covers a
 // few pixels, the forest is one layer over the ground instead of a billboard per tree. The
 // layer is a lid of heights over the terrain (ground plus nearly the highest crown), drawn
 // in tiles; each pixel reads the map of the forest seen from above (how much of the land

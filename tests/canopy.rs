@@ -16,13 +16,15 @@ use common::*;
 
 const SIZE: (u32, u32) = (192, 192);
 
-/// Mean FLIP between the canopy and the billboards it replaces over the pixels the trees
-/// cover, (from above, from the side). Measured on lavapipe (llvmpipe 15, 2026-11-27):
-/// see `docs/RESULTS.md`.
-const STANDS_FOR_MAX_MEAN_FLIP: (f32, f32) = (0.16, 0.16);
+/// Mean FLIP between the canopy and the billboards it replaces over the pixels either
+/// covers, (from above, from the side). Measured on lavapipe (llvmpipe 15, 2026-11-27) on
+/// the dense stand at 260 m: 0.099 and 0.188. The canopy keeps each tree's colour but not
+/// the texture inside its crown, nor the gaps between crowns seen from the side.
+const STANDS_FOR_MAX_MEAN_FLIP: (f32, f32) = (0.12, 0.22);
 
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
-    let scene = Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses");
+    let scene =
+        Scene::load(&data("canopy_stand.toml")).expect("tests/data/canopy_stand.toml parses");
     let world = scene.build_world().unwrap();
     let cache = std::env::temp_dir()
         .join(format!("canopy-canopy-test-{}", std::process::id()))
@@ -78,21 +80,23 @@ fn masked_flip(a: &RgbaImage, b: &RgbaImage, m: &[bool]) -> f32 {
         .iter()
         .zip(m)
         .filter(|(_, m)| **m)
-        .fold((0.0f64, 0usize), |(s, n), (e, _)| (s + f64::from(*e), n + 1));
+        .fold((0.0f64, 0usize), |(s, n), (e, _)| {
+            (s + f64::from(*e), n + 1)
+        });
     (sum / n.max(1) as f64) as f32
 }
 
 /// Mean linear luminance of `img` over `m`.
 fn luminance(img: &RgbaImage, m: &[bool]) -> f32 {
     let lut = canopy::color::srgb_lut();
-    let (sum, n) = img
-        .pixels()
-        .zip(m)
-        .filter(|(_, m)| **m)
-        .fold((0.0f64, 0usize), |(s, n), (p, _)| {
-            let [r, g, b, _] = p.0.map(|c| lut[usize::from(c)]);
-            (s + f64::from(0.2126 * r + 0.7152 * g + 0.0722 * b), n + 1)
-        });
+    let (sum, n) =
+        img.pixels()
+            .zip(m)
+            .filter(|(_, m)| **m)
+            .fold((0.0f64, 0usize), |(s, n), (p, _)| {
+                let [r, g, b, _] = p.0.map(|c| lut[usize::from(c)]);
+                (s + f64::from(0.2126 * r + 0.7152 * g + 0.0722 * b), n + 1)
+            });
     (sum / n.max(1) as f64) as f32
 }
 
@@ -143,14 +147,17 @@ fn a_sweep_across_the_switch_leaves_no_gap_and_draws_nothing_twice() {
     let (scene, _, mut renderer) = setup(&ctx);
     let frame = frame_from(&scene, Vec3::new(0.3, 0.35, -1.0));
     // The band's start sweeps from past the stand (all billboards) to before it (all
-    // canopy): crown width x focal length / px, the stand 220-300 m from the eye.
+    // canopy): crown width x focal length / px, the stand 220-300 m from the eye. Where
+    // the band crosses the stand, the coverage must stay between the billboards' alone and
+    // the canopy's alone (which covers about 0.85 of it from the side): below, a gap; above,
+    // both drawn over each other.
     let mut coverage = Vec::new();
     let mut lum = Vec::new();
     let (off, _, bare, _) = three(&ctx, &mut renderer, &frame, 64.0);
     let trees = mask(&off, &bare);
     let base = trees.iter().filter(|&&m| m).count() as f32;
     let base_lum = luminance(&off, &trees);
-    for px in [10.0, 14.0, 16.0, 18.0, 20.0, 24.0, 32.0] {
+    for px in [14.0, 18.0, 20.0, 22.0, 24.0, 28.0, 40.0] {
         let (_, on, _, tiles) = three(&ctx, &mut renderer, &frame, px);
         let m = mask(&on, &bare);
         coverage.push(m.iter().filter(|&&m| m).count() as f32 / base);
@@ -161,12 +168,14 @@ fn a_sweep_across_the_switch_leaves_no_gap_and_draws_nothing_twice() {
             lum.last().unwrap()
         );
     }
+    let all_canopy = *coverage.last().unwrap();
+    assert!(all_canopy > 0.75, "the canopy alone covers {all_canopy}");
     for (c, l) in coverage.iter().zip(&lum) {
         assert!(
-            (0.85..1.2).contains(c),
+            (all_canopy.min(1.0) - 0.03..1.03).contains(c),
             "coverage against the billboards' {coverage:?}"
         );
-        assert!((l - 1.0).abs() < 0.2, "luminance {lum:?}");
+        assert!((l - 1.0).abs() < 0.1, "luminance {lum:?}");
     }
 }
 
@@ -196,7 +205,7 @@ fn clearings_stay_clear() {
         }
     }
     eprintln!("{drawn} of {clear} clear pixels drawn on by the canopy");
-    assert!(clear > 5000, "only {clear} clear pixels");
+    assert!(clear > 2000, "only {clear} clear pixels");
     assert!(
         drawn * 1000 < clear,
         "the canopy draws {drawn} of {clear} pixels where no tree stands"

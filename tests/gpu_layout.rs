@@ -6,7 +6,7 @@
 use std::mem::{offset_of, size_of};
 
 use canopy::render::btf::far::{DirSetGpu, FarParamsGpu, FarShadeGpu, FarTreeGpu, SortStepGpu};
-use canopy::render::btf::canopy::CanopyGpuParams;
+use canopy::render::btf::far_canopy::CanopyGpuParams;
 use canopy::render::btf::{BillboardGpu, NearDrawGpu};
 use canopy::render::self_shadow::SelfLightGpu;
 use canopy::render::uniforms::FrameUniforms;

@@ -259,8 +259,10 @@ fn entry(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
 impl FarGpu {
     /// The buffers for every tree of `trees` (`species[i]` the species of tree `i`,
     /// `bounds[i]` its bounds in the world), the tables of `scene`, and the btf pass's
-    /// `layout` with its bindings 1..4 (`draw`): None when the GPU cannot hold them (the
-    /// CPU then prepares every tree).
+    /// `layout` with its bindings 1..4 (`draw`), and every BTF image's mean (`means`, for
+    /// the far canopy's colours): None when the GPU cannot hold them (the CPU then prepares
+    /// every tree).
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         ctx: &GpuContext,
         scene: &BtfScene,

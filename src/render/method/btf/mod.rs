@@ -6,8 +6,8 @@
 //! file): one instanced draw samples a single texture array holding every image set.
 
 mod billboard;
-pub mod canopy;
 pub mod far;
+pub mod far_canopy;
 pub mod knobs;
 pub mod light_blend;
 pub mod method;
@@ -69,8 +69,8 @@ pub struct BtfAssets {
     /// Every baked image's mean (premultiplied linear colour, coverage), for the canopy.
     means: Vec<[f32; 4]>,
     /// The forest seen from above, for the far canopy; on the GPU once a frame wants it.
-    canopy_map: Option<canopy::map::CanopyMap>,
-    canopy: Option<canopy::CanopyGpu>,
+    canopy_map: Option<far_canopy::map::CanopyMap>,
+    canopy: Option<far_canopy::CanopyGpu>,
     /// Bytes of the texture array, mipmaps included.
     pub bytes: u64,
 }
@@ -344,7 +344,7 @@ impl BtfAssets {
             // The far canopy, where the scene has a map and the knob asks for it.
             if settings.far_canopy && self.canopy.is_none() {
                 self.canopy = self.canopy_map.as_ref().and_then(|m| {
-                    canopy::CanopyGpu::new(ctx, m)
+                    far_canopy::CanopyGpu::new(ctx, m)
                         .map_err(|e| log::warn!("no far canopy: {e}"))
                         .ok()
                 });
@@ -826,14 +826,14 @@ fn image_mean(rgba: &[u8], lut: &[f32]) -> [f32; 4] {
 }
 
 /// The far canopy's map of `world`'s forest, from each prototype's full geometry.
-fn canopy_map(world: &World) -> Option<canopy::map::CanopyMap> {
+fn canopy_map(world: &World) -> Option<far_canopy::map::CanopyMap> {
     if world.forest.instances.is_empty() {
         return None;
     }
-    let footprints: Vec<canopy::map::Footprint> = world
+    let footprints: Vec<far_canopy::map::Footprint> = world
         .species
         .iter()
-        .map(|s| canopy::map::Footprint::of(&s.flatten()))
+        .map(|s| far_canopy::map::Footprint::of(&s.flatten()))
         .collect();
     let trees: Vec<(glam::Mat4, usize)> = world
         .forest
@@ -841,7 +841,7 @@ fn canopy_map(world: &World) -> Option<canopy::map::CanopyMap> {
         .iter()
         .map(|t| (t.transform(), t.species as usize))
         .collect();
-    Some(canopy::map::CanopyMap::new(
+    Some(far_canopy::map::CanopyMap::new(
         &world.terrain,
         &trees,
         &footprints,
