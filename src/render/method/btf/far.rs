@@ -19,6 +19,8 @@
 //! its own frame (the main branches' and twigs' maps are in the tables, one byte a texel)
 //! and its parents' factors at its centre. Its records and keys then go through the same
 //! sort.
+//! Past the far canopy's band ([`far_canopy`](super::far_canopy)), the build pass lights
+//! each tree for the canopy instead (`btf_far_canopy.wgsl`) and makes no billboard for it.
 //! How many billboards were made comes back a frame or two later (at once when the frame
 //! is measured).
 //!

@@ -5,6 +5,7 @@
 //! frame with their weights, small weights culled, sorted back to front. On the GPU (this
 //! file): one instanced draw samples a single texture array holding every image set.
 
+mod atlas;
 mod billboard;
 pub mod far;
 pub mod far_canopy;
@@ -18,9 +19,11 @@ pub mod shading;
 
 use std::collections::HashMap;
 
-use glam::{UVec3, Vec3};
+use glam::Vec3;
 
 pub use crate::render::consts::ATLAS_SIDE;
+pub use atlas::atlas_layers;
+use atlas::upload_image;
 pub use billboard::{BillboardGpu, BillboardMode, NO_LIGHT_BLEND};
 pub use prepare::{
     BtfFrame, BtfScene, LevelChoice, NearDrawGpu, PrepareView, SortedBillboards, choose_level,
@@ -37,7 +40,7 @@ use crate::render::camera::Frustum;
 use crate::render::frame::FrameStats;
 use crate::render::method::interface::DrawCx;
 use crate::render::pipelines::{
-    FILTERABLE, sampler_entry, storage_buffer_of, storage_entry, texture_entry, write_rgba8,
+    FILTERABLE, sampler_entry, storage_buffer_of, storage_entry, texture_entry,
 };
 use crate::render::timing::PassSpans;
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
@@ -68,7 +71,7 @@ pub struct BtfAssets {
     light_blend: Option<light_blend::LightBlend>,
     /// Every baked image's mean (premultiplied linear colour, coverage), for the canopy.
     means: Vec<[f32; 4]>,
-    /// The forest seen from above, for the far canopy; on the GPU once a frame wants it.
+    /// The forest seen from above, for the far canopy, until a frame wants it on the GPU.
     canopy_map: Option<far_canopy::map::CanopyMap>,
     canopy: Option<far_canopy::CanopyGpu>,
     /// Bytes of the texture array, mipmaps included.
@@ -155,7 +158,7 @@ impl BtfAssets {
             }
         }
         let t0 = std::time::Instant::now();
-        let canopy_map = canopy_map(world);
+        let canopy_map = far_canopy::map::CanopyMap::of_world(world);
         log::debug!(
             "btf: the far canopy's map in {:.0} ms",
             t0.elapsed().as_secs_f64() * 1e3
@@ -341,23 +344,16 @@ impl BtfAssets {
             .filter(|_| settings.gpu_far);
         if let Some(f) = far {
             let t0 = std::time::Instant::now();
-            // The far canopy, where the scene has a map and the knob asks for it.
-            if settings.far_canopy && self.canopy.is_none() {
-                self.canopy = self.canopy_map.as_ref().and_then(|m| {
-                    far_canopy::CanopyGpu::new(ctx, m)
-                        .map_err(|e| log::warn!("no far canopy: {e}"))
-                        .ok()
-                });
+            // The far canopy, on the GPU the first time the knob asks for it (once: the
+            // map is not kept on the CPU).
+            if settings.far_canopy
+                && let Some(m) = self.canopy_map.take()
+            {
+                self.canopy = far_canopy::CanopyGpu::new(ctx, &m, &self.sampler)
+                    .map_err(|e| log::warn!("no far canopy: {e}"))
+                    .ok();
             }
-            let canopy_frame = self
-                .canopy
-                .as_ref()
-                .filter(|c| settings.far_canopy && c.crown_width > 0.0 && settings.canopy_px > 0.0)
-                .map(|c| far::CanopyFrame {
-                    crown_width: c.crown_width,
-                    below_px: settings.canopy_px,
-                    lights,
-                });
+            let canopy_frame = self.canopy.as_ref().and_then(|c| c.frame(settings, lights));
             let (near, shade_ms) = f.prepare(
                 ctx,
                 &self.scene,
@@ -766,103 +762,4 @@ fn make_bind_group(
             },
         ],
     })
-}
-
-/// Texture layers holding `images` images.
-pub fn atlas_layers(images: u64) -> u64 {
-    images.div_ceil(u64::from(ATLAS_SIDE * ATLAS_SIDE))
-}
-
-/// Uploads image `index` and its mip chain (box-filtered in linear light) into its square
-/// of the atlas. Returns the bytes uploaded and the image's mean (its last level: linear
-/// colour, premultiplied as stored, and coverage).
-fn upload_image(
-    ctx: &GpuContext,
-    texture: &wgpu::Texture,
-    index: u32,
-    res: u32,
-    rgba: &[u8],
-    mips: u32,
-    lut: &[f32],
-) -> (u64, [f32; 4]) {
-    let per_layer = ATLAS_SIDE * ATLAS_SIDE;
-    let layer = index / per_layer;
-    let slot = index % per_layer;
-    let (cx, cy) = (slot % ATLAS_SIDE, slot / ATLAS_SIDE);
-    let Some(mut img) = image::RgbaImage::from_raw(res, res, rgba.to_vec()) else {
-        return (0, [0.0; 4]);
-    };
-    let mut bytes = 0u64;
-    for level in 0..mips {
-        let (w, h) = img.dimensions();
-        write_rgba8(
-            &ctx.queue,
-            texture,
-            level,
-            UVec3::new(cx * w, cy * h, layer),
-            img.as_raw(),
-            UVec3::new(w, h, 1),
-        );
-        bytes += u64::from(4 * w * h);
-        if w > 1 {
-            img = crate::render::target::downsample(&img, 2);
-        }
-    }
-    (bytes, image_mean(rgba, lut))
-}
-
-/// The mean of an sRGB-encoded RGBA8 image: linear colour (premultiplied as stored) and
-/// coverage.
-fn image_mean(rgba: &[u8], lut: &[f32]) -> [f32; 4] {
-    let mut sum = [0.0f64; 4];
-    for px in rgba.chunks_exact(4) {
-        for c in 0..3 {
-            sum[c] += f64::from(lut[usize::from(px[c])]);
-        }
-        sum[3] += f64::from(px[3]) / 255.0;
-    }
-    let n = (rgba.len() / 4).max(1) as f64;
-    sum.map(|v| (v / n) as f32)
-}
-
-/// The far canopy's map of `world`'s forest, from each prototype's full geometry.
-fn canopy_map(world: &World) -> Option<far_canopy::map::CanopyMap> {
-    if world.forest.instances.is_empty() {
-        return None;
-    }
-    let footprints: Vec<far_canopy::map::Footprint> = world
-        .species
-        .iter()
-        .map(|s| far_canopy::map::Footprint::of(&s.flatten()))
-        .collect();
-    let trees: Vec<(glam::Mat4, usize)> = world
-        .forest
-        .instances
-        .iter()
-        .map(|t| (t.transform(), t.species as usize))
-        .collect();
-    Some(far_canopy::map::CanopyMap::new(
-        &world.terrain,
-        &trees,
-        &footprints,
-    ))
-}
-
-#[cfg(test)]
-mod atlas_tests {
-    use super::*;
-
-    #[test]
-    fn three_species_of_three_variants_fit_the_usual_layer_limit() {
-        // 9 prototypes x 3 levels x 18 views x (6 lights + sky): 3,402 images, over the
-        // 2,048 layers most GPUs allow for one image per layer.
-        let images = 9 * 3 * 18 * 7;
-        assert_eq!(images, 3402);
-        assert_eq!(atlas_layers(images), 213);
-        // 8 variants of 3 species at the default sampling: 9,072 images.
-        assert_eq!(atlas_layers(24 * 3 * 18 * 7), 567);
-        assert_eq!(atlas_layers(0), 0);
-        assert_eq!(atlas_layers(16), 1);
-        assert_eq!(atlas_layers(17), 2);
-    }
 }

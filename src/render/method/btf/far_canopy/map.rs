@@ -17,8 +17,8 @@
 
 use glam::{Mat4, Vec2, Vec3};
 
-use crate::model::Terrain;
 use crate::model::mesh::Mesh;
+use crate::model::{Terrain, World};
 
 /// Side of a footprint sample (m, in the tree's frame).
 const FOOTPRINT_CELL: f32 = 0.1;
@@ -297,6 +297,25 @@ impl CanopyMap {
         }
     }
 
+    /// The map of `world`'s forest, from each prototype's full geometry; None without trees.
+    pub fn of_world(world: &World) -> Option<Self> {
+        if world.forest.instances.is_empty() {
+            return None;
+        }
+        let footprints: Vec<Footprint> = world
+            .species
+            .iter()
+            .map(|s| Footprint::of(&s.flatten()))
+            .collect();
+        let trees: Vec<(Mat4, usize)> = world
+            .forest
+            .instances
+            .iter()
+            .map(|t| (t.transform(), t.species as usize))
+            .collect();
+        Some(Self::new(&world.terrain, &trees, &footprints))
+    }
+
     /// Level 0's coverage (0..1) and tree (plus one) at world `(x, z)`; none outside.
     pub fn at(&self, x: f32, z: f32) -> Option<(f32, u32)> {
         let l = self.levels.first()?;
@@ -307,19 +326,6 @@ impl CanopyMap {
         }
         let k = j as usize * l.side as usize + i as usize;
         Some((f32::from(l.cover[k]) / 255.0, l.tree[k]))
-    }
-
-    /// Side of the square the map spans (m).
-    pub fn size(&self) -> f32 {
-        self.levels
-            .first()
-            .map_or(0.0, |l| l.side as f32 * self.texel)
-    }
-
-    /// Bytes of every level and the lid.
-    pub fn bytes(&self) -> u64 {
-        let levels: u64 = self.levels.iter().map(|l| 5 * l.cover.len() as u64).sum();
-        levels + 4 * self.lid.len() as u64
     }
 }
 

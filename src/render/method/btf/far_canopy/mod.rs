@@ -18,11 +18,29 @@ pub mod map;
 use glam::{Vec2, Vec3};
 
 use self::map::{CanopyMap, LID_TEXELS};
+use super::far::CanopyFrame;
+use super::settings::BtfSettings;
 use crate::Result;
 use crate::model::mesh::Aabb;
 use crate::render::GpuContext;
 use crate::render::camera::Frustum;
-use crate::render::pipelines::{FILTERABLE, sampler_entry, storage_buffer_of, write_growing};
+use crate::render::pipelines::{
+    FILTERABLE, buffer_entry, sampler_entry, storage_buffer_of, storage_entry, write_growing,
+};
+
+/// The mean of an sRGB-encoded RGBA8 image (`lut` decoding its bytes): linear colour
+/// (premultiplied as stored) and coverage. A far tree's colour is made of its images' means.
+pub fn image_mean(rgba: &[u8], lut: &[f32]) -> [f32; 4] {
+    let mut sum = [0.0f64; 4];
+    for px in rgba.chunks_exact(4) {
+        for c in 0..3 {
+            sum[c] += f64::from(lut[usize::from(px[c])]);
+        }
+        sum[3] += f64::from(px[3]) / 255.0;
+    }
+    let n = (rgba.len() / 4).max(1) as f64;
+    sum.map(|v| (v / n) as f32)
+}
 
 /// Lid cells per tile side: a tile of 16 x 16 cells of 4 m is 64 m across.
 pub const TILE_CELLS: u32 = 16;
@@ -46,7 +64,7 @@ pub struct CanopyGpuParams {
     pub _pad1: u32,
 }
 
-/// One tile of the lid: its first cell, whether any crown covers it, its box.
+/// One tile of the lid that crowns cover: its first cell and its box.
 #[derive(Clone, Copy, Debug)]
 struct Tile {
     cell: [u32; 2],
@@ -81,8 +99,9 @@ pub struct CanopyGpu {
 }
 
 impl CanopyGpu {
-    /// Uploads `map`.
-    pub fn new(ctx: &GpuContext, map: &CanopyMap) -> Result<Self> {
+    /// Uploads `map`; its coverage is read through `sampler` (linear, clamped, mipmapped:
+    /// the BTF images' own).
+    pub fn new(ctx: &GpuContext, map: &CanopyMap, sampler: &wgpu::Sampler) -> Result<Self> {
         let side = map.levels.first().map_or(1, |l| l.side);
         let max = ctx.device.limits().max_texture_dimension_2d;
         if side > max || map.lid_side > max {
@@ -137,15 +156,6 @@ impl CanopyGpu {
         );
         bytes += 4 * map.lid.len() as u64;
         let view = |t: &wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
-        let sampler = ctx.device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("canopy cover"),
-            address_mode_u: wgpu::AddressMode::ClampToEdge,
-            address_mode_v: wgpu::AddressMode::ClampToEdge,
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            mipmap_filter: wgpu::MipmapFilterMode::Linear,
-            ..Default::default()
-        });
         let params = CanopyGpuParams {
             origin: map.origin.to_array(),
             texel: map.texel,
@@ -176,7 +186,7 @@ impl CanopyGpu {
             _cover: cover,
             _tree: tree,
             _lid: lid,
-            sampler,
+            sampler: sampler.clone(),
             layout: layout(&ctx.device),
             tiles: tiles_of(map),
             tile_buffer: storage_buffer_of::<[u32; 2]>(&ctx.device, "canopy tiles", 64),
@@ -187,6 +197,18 @@ impl CanopyGpu {
             bytes,
             trees: map.trees,
         })
+    }
+
+    /// What the far trees' build pass needs for a frame with `settings` lit by `lights`
+    /// (sun, sky, ground); None when the knobs leave the canopy out.
+    pub fn frame(&self, settings: &BtfSettings, lights: [Vec3; 3]) -> Option<CanopyFrame> {
+        (settings.far_canopy && self.crown_width > 0.0 && settings.canopy_px > 0.0).then_some(
+            CanopyFrame {
+                crown_width: self.crown_width,
+                below_px: settings.canopy_px,
+                lights,
+            },
+        )
     }
 
     /// This frame's tiles: those holding crowns, in `frustum`, reaching past the band's
@@ -219,11 +241,6 @@ impl CanopyGpu {
         }
         self.drawn = drawn.len() as u32;
         self.drawn
-    }
-
-    /// Forgets the colours' bind group (the far trees' buffers were made again).
-    pub fn rebind(&mut self) {
-        self.bind_group = None;
     }
 
     fn make_bind_group(&self, ctx: &GpuContext, colours: &wgpu::Buffer) -> wgpu::BindGroup {
@@ -319,21 +336,10 @@ fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
         },
         count: None,
     };
-    let buffer = |binding, ty, visibility| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    };
-    let read_only = wgpu::BufferBindingType::Storage { read_only: true };
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("canopy"),
         entries: &[
-            buffer(0, wgpu::BufferBindingType::Uniform, both),
+            buffer_entry(0, both, wgpu::BufferBindingType::Uniform),
             texture(1, FILTERABLE, S::FRAGMENT),
             texture(2, wgpu::TextureSampleType::Uint, S::FRAGMENT),
             texture(
@@ -342,8 +348,8 @@ fn layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
                 S::VERTEX,
             ),
             sampler_entry(4, wgpu::SamplerBindingType::Filtering),
-            buffer(5, read_only, S::FRAGMENT),
-            buffer(6, read_only, S::VERTEX),
+            storage_entry(5, S::FRAGMENT),
+            storage_entry(6, S::VERTEX),
         ],
     })
 }
