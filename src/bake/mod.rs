@@ -379,6 +379,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         stage: Stage::Studio,
         btf: Default::default(),
         texel: Default::default(),
+        impostor: Default::default(),
         trees: true,
         ground_shadows: false,
         ground_sky: false,

@@ -145,6 +145,8 @@ pub struct FrameDesc {
     pub btf: BtfSettings,
     /// Knobs of the `texel` method.
     pub texel: TexelSettings,
+    /// The `impostor` method's knobs.
+    pub impostor: super::method::impostor::ImpostorSettings,
     /// Draw the trees (off: terrain and sky only, e.g. while a bake is running).
     pub trees: bool,
     /// Image-based methods: soft tree shadows on the ground from an alpha shadow map, and
@@ -208,6 +210,7 @@ impl FrameDesc {
             stage: Stage::World,
             btf: BtfSettings::from_scene(scene),
             texel: Default::default(),
+            impostor: Default::default(),
             trees: true,
             ground_shadows: true,
             ground_sky: true,
@@ -251,6 +254,8 @@ pub struct FrameStats {
     pub btf: Option<BtfStats>,
     /// What the `texel` method did (absent for other methods).
     pub texel: Option<TexelStats>,
+    /// What the `impostor` method did (absent for other methods).
+    pub impostor: Option<super::method::impostor::ImpostorStats>,
     /// Sun-dependent state was rebuilt this frame (the sun moved): the trees' VCM reads
     /// and the ground alpha shadow map.
     pub sun_update: bool,

@@ -643,8 +643,9 @@ impl GeometryPass {
 }
 
 /// A pipeline drawing procedural instances (no vertex buffers) over the frame, blended
-/// into one colour target and depth-tested, never depth-written: the image-based methods'
-/// billboards and texel boxes, into the view or into the ground alpha map.
+/// into one colour target and depth-tested (depth-written where `depth_write`): the
+/// image-based methods' billboards, impostors and texel boxes, into the view or into the
+/// ground alpha map.
 pub struct Blended<'a> {
     /// Label, and the name of the WGSL module.
     pub label: &'a str,
@@ -656,6 +657,8 @@ pub struct Blended<'a> {
     pub blend: wgpu::BlendComponent,
     pub cull: Option<wgpu::Face>,
     pub depth: (wgpu::TextureFormat, wgpu::CompareFunction),
+    /// Depth is written too (an alpha-tested, opaque draw).
+    pub depth_write: bool,
 }
 
 pub fn blended_pipeline(device: &wgpu::Device, p: Blended<'_>) -> wgpu::RenderPipeline {
@@ -680,7 +683,7 @@ pub fn blended_pipeline(device: &wgpu::Device, p: Blended<'_>) -> wgpu::RenderPi
         },
         depth_stencil: Some(wgpu::DepthStencilState {
             format: p.depth.0,
-            depth_write_enabled: Some(false),
+            depth_write_enabled: Some(p.depth_write),
             depth_compare: Some(p.depth.1),
             stencil: Default::default(),
             bias: Default::default(),

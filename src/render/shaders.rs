@@ -19,6 +19,7 @@ const GROUND_MAP: &str = include_str!("../../shaders/ground_map.wgsl");
 const TEXEL: &str = include_str!("../../shaders/texel.wgsl");
 const LIGHT_BLEND: &str = include_str!("../../shaders/light_blend.wgsl");
 const BLIT: &str = include_str!("../../shaders/blit.wgsl");
+const IMPOSTOR: &str = include_str!("../../shaders/impostor.wgsl");
 const OVERDRAW: &str = include_str!("../../shaders/overdraw.wgsl");
 
 /// A mesh pass's module: frame uniforms, instancing, then the pass's own file.
@@ -63,9 +64,15 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("light_blend", light_blend()),
         ("ground_map", ground_map()),
         ("texel", texel()),
+        ("impostor", impostor()),
         ("blit", blit()),
         ("overdraw", overdraw()),
     ]
+}
+
+/// The `impostor` method's pass: frame uniforms, then its file.
+pub fn impostor() -> String {
+    with_frame(IMPOSTOR)
 }
 
 pub fn geometry() -> String {

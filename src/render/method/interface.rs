@@ -10,6 +10,7 @@
 //! back what it counted ([`RenderMethod::finish`]).
 
 use super::btf::BtfAssets;
+use super::impostor::ImpostorAssets;
 use super::kind::Method;
 use super::texel::TexelAssets;
 use super::view::PrepareView;
@@ -35,6 +36,10 @@ pub struct Bake {
     pub texel: Option<TexelAssets>,
     /// Why the bake's texel volumes could not be loaded (the other methods still draw).
     pub texel_problem: Option<String>,
+    /// The octahedral impostors, when the bake has them and they could be loaded.
+    pub impostor: Option<ImpostorAssets>,
+    /// Why they could not be loaded (the other methods still draw).
+    pub impostor_problem: Option<String>,
 }
 
 impl Bake {
@@ -51,6 +56,15 @@ impl Bake {
                 Err(e) => {
                     log::warn!("the texel method is unavailable: {e}");
                     bake.texel_problem = Some(e.to_string());
+                }
+            }
+        }
+        if !baked.impostors.is_empty() {
+            match ImpostorAssets::new(ctx, baked, world) {
+                Ok(t) => bake.impostor = Some(t),
+                Err(e) => {
+                    log::warn!("the impostor method is unavailable: {e}");
+                    bake.impostor_problem = Some(e.to_string());
                 }
             }
         }

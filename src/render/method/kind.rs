@@ -19,6 +19,9 @@ pub enum Method {
     /// `btf`, with a tree drawn as geometry wherever even its twig level's texels project
     /// above the LOD bound (cross-faded): no more detail than the view needs, and no less.
     Hybrid,
+    /// One quad per tree showing its species' octahedral impostor: 3 baked frames blended
+    /// with depth parallax, lit per pixel (needs a bake with impostors).
+    Impostor,
 }
 
 impl Method {
@@ -28,6 +31,7 @@ impl Method {
         Method::Billboard,
         Method::Texel,
         Method::Hybrid,
+        Method::Impostor,
     ];
 
     pub fn name(self) -> &'static str {
@@ -37,6 +41,7 @@ impl Method {
             Method::Billboard => "billboard",
             Method::Texel => "texel",
             Method::Hybrid => "hybrid",
+            Method::Impostor => "impostor",
         }
     }
 
@@ -44,7 +49,7 @@ impl Method {
     pub fn needs_bake(self) -> bool {
         matches!(
             self,
-            Method::Btf | Method::Billboard | Method::Texel | Method::Hybrid
+            Method::Btf | Method::Billboard | Method::Texel | Method::Hybrid | Method::Impostor
         )
     }
 

@@ -16,6 +16,7 @@
 pub mod billboard;
 pub mod btf;
 pub mod geometry;
+pub mod impostor;
 pub mod interface;
 pub mod kind;
 pub mod texel;
@@ -87,6 +88,7 @@ pub fn registry() -> Vec<Box<dyn RenderMethod>> {
         Box::new(billboard::Billboard::default()),
         Box::new(texel::method::TexelMethod::default()),
         Box::new(btf::method::BtfMethod::new(true)),
+        Box::new(impostor::method::ImpostorMethod::default()),
     ]
 }
 

@@ -71,6 +71,7 @@ fn billboard_pipeline(
             blend,
             cull: None,
             depth,
+            depth_write: false,
         },
     )
 }

@@ -412,6 +412,7 @@ impl TexelAssets {
                     blend: transmit,
                     cull: None,
                     depth: (crate::render::SHADOW_FORMAT, wgpu::CompareFunction::Less),
+                    depth_write: false,
                 },
             )
         })

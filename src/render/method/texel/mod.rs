@@ -83,6 +83,7 @@ pub(crate) fn over_pipeline(
             },
             cull,
             depth: (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
+            depth_write: false,
         },
     )
 }

@@ -302,6 +302,7 @@ impl CanopyGpu {
                 blend: over,
                 cull: None,
                 depth: (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
+                depth_write: false,
             },
         );
         self.pipeline = Some((format, pipeline));

@@ -1,0 +1,40 @@
+//! The `impostor` method's knobs, as the command line, the panel, the bench's sweeps and
+//! `tune` see them. Its frames per side and frame size are bake settings
+//! (`[bake] impostor_frames`, `impostor_resolution`, `impostor_layout`).
+
+use crate::render::knob::Knob;
+
+pub static KNOBS: &[Knob] = &[
+    Knob::number(
+        "alpha_cutoff",
+        "alpha cut-off",
+        "coverage below which an impostor's pixel is dropped, dithered around it (0.5: each pixel drawn with the chance of its coverage)",
+        (0.05, 0.95),
+        |d| d.impostor.alpha_cutoff,
+        |d, v| d.impostor.alpha_cutoff = v,
+    )
+    .slider(0.05, 0.95, false)
+    .tuned(&["0.3", "0.5", "0.7"]),
+    Knob::toggle(
+        "parallax",
+        "depth parallax",
+        "move each frame's point along the eye's ray to the depth the frame stored",
+        |d| d.impostor.parallax,
+        |d, v| d.impostor.parallax = v,
+    )
+    .tuned(&["off", "on"]),
+    Knob::toggle(
+        "vcm",
+        "VCM shading (trees shade each other)",
+        "shade the trees by the visibility cube maps (when the bake has them)",
+        |d| d.impostor.vcm,
+        |d, v| d.impostor.vcm = v,
+    ),
+    Knob::toggle(
+        "show_lod",
+        "show LOD level",
+        "colour each impostor magenta",
+        |d| d.impostor.show_lod,
+        |d, v| d.impostor.show_lod = v,
+    ),
+];

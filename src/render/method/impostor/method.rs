@@ -1,0 +1,136 @@
+//! The `impostor` method through the renderer's one interface.
+
+use std::time::Instant;
+
+use super::assets::ImpostorAssets;
+use super::prepare::prepare;
+use super::settings::ImpostorStats;
+use crate::Result;
+use crate::render::GpuContext;
+use crate::render::frame::FrameStats;
+use crate::render::method::interface::{
+    Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork,
+};
+use crate::render::method::kind::Method;
+use crate::render::pipelines::Layouts;
+use crate::render::world_gpu::WorldGpu;
+
+/// `impostor`: the frame's record count and what it reports.
+#[derive(Default)]
+pub struct ImpostorMethod {
+    count: u32,
+    stats: ImpostorStats,
+}
+
+/// The impostor assets, or the error that says how to get them.
+fn need(bake: &Bake) -> Result<&ImpostorAssets> {
+    bake.need_btf(Method::Impostor)?;
+    bake.impostor.as_ref().ok_or_else(|| {
+        crate::Error::BadInput(bake.impostor_problem.clone().unwrap_or_else(|| {
+            "this bake has no octahedral impostors: set `[bake] impostor_frames` (e.g. 12) in the scene file and bake again".into()
+        }))
+    })
+}
+
+impl RenderMethod for ImpostorMethod {
+    fn method(&self) -> Method {
+        Method::Impostor
+    }
+
+    fn check(&self, bake: &Bake) -> Result<()> {
+        need(bake).map(|_| ())
+    }
+
+    fn shades_ground(&self) -> bool {
+        true
+    }
+
+    fn knobs(&self) -> &'static [crate::render::knob::Knob] {
+        super::knobs::KNOBS
+    }
+
+    fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
+        need(bake)?;
+        let settings = cx.frame.impostor;
+        let mut sun = SunWork::default();
+        let (Some(btf), Some(imp)) = (bake.btf.as_mut(), bake.impostor.as_mut()) else {
+            return Err(crate::Error::Gpu("the impostors are not loaded".into()));
+        };
+        if settings.vcm && cx.frame.trees {
+            let t0 = Instant::now();
+            if btf.update_sun(cx.view.to_sun) {
+                sun.moved = true;
+                sun.ms += t0.elapsed().as_secs_f64() * 1e3;
+            }
+        }
+        let scene = btf.scene();
+        let limit = cx.ctx.device.limits().max_storage_buffer_binding_size as usize;
+        let max = limit / std::mem::size_of::<super::prepare::ImpostorGpu>();
+        let (records, mut stats) = prepare(
+            &imp.species,
+            &cx.world.tree_data,
+            &cx.visible,
+            &cx.view,
+            &settings,
+            max,
+            &mut |t, sp, m| scene.tree_shade(t, sp, m),
+        );
+        imp.upload(cx.ctx, &records, &settings);
+        // No tree is geometry: the instance upload holds the terrain's alone.
+        cx.world
+            .upload_lists(cx.ctx, &[vec![Vec::new(); cx.world.species.len()]]);
+        (stats.frames, stats.frame_px) = imp.grid();
+        stats.atlas_bytes = imp.bytes;
+        self.count = records.len() as u32;
+        self.stats = stats;
+        Ok(Plan::without_cascades(sun))
+    }
+
+    fn ground_casters(
+        &mut self,
+        bake: &mut Bake,
+        ctx: &GpuContext,
+        layouts: &Layouts,
+        world: &WorldGpu,
+        to_sun: glam::Vec3,
+        excluded: &[u32],
+    ) -> Option<GroundCasters> {
+        // The same ground shadows as `btf`: the trees' tree-level images seen from the sun.
+        crate::render::method::btf::method::billboard_casters(
+            bake, ctx, layouts, world, to_sun, excluded,
+        )
+    }
+
+    fn ensure_pipelines(
+        &mut self,
+        bake: &mut Bake,
+        ctx: &GpuContext,
+        layouts: &Layouts,
+        format: wgpu::TextureFormat,
+    ) -> Result<()> {
+        if let Some(imp) = bake.impostor.as_mut() {
+            imp.ensure_pipeline(&ctx.device, layouts, format);
+        }
+        Ok(())
+    }
+
+    fn draw(
+        &self,
+        bake: &Bake,
+        pass: &mut wgpu::RenderPass<'_>,
+        cx: &DrawCx<'_>,
+        stats: &mut FrameStats,
+    ) {
+        let Some(imp) = &bake.impostor else {
+            return;
+        };
+        cx.spans.rename("impostors");
+        imp.draw(pass, self.count);
+        if self.count > 0 {
+            stats.draw_calls += 1;
+        }
+        stats.triangles += 2 * u64::from(self.count);
+        stats.trees_drawn = self.count;
+        stats.impostor = Some(self.stats);
+    }
+}

@@ -1,0 +1,41 @@
+//! The `impostor` method's knobs and what it reports of a frame.
+
+/// The `impostor` method's knobs.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct ImpostorSettings {
+    /// The alpha test's threshold; dithered over [c - s, c + s] with s = min(c, 1 - c), so
+    /// that at 0.5 a pixel is drawn with the chance of its coverage.
+    pub alpha_cutoff: f32,
+    /// Each frame's point is moved to the depth the frame stored.
+    pub parallax: bool,
+    /// Shade with the trees' visibility cube maps (when the bake has them).
+    pub vcm: bool,
+    /// Colour every impostor by the LOD overlay's colour.
+    pub show_lod: bool,
+}
+
+impl Default for ImpostorSettings {
+    fn default() -> Self {
+        Self {
+            alpha_cutoff: 0.5,
+            parallax: true,
+            vcm: true,
+            show_lod: false,
+        }
+    }
+}
+
+/// What the `impostor` method did in a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ImpostorStats {
+    /// Trees drawn as impostors.
+    pub impostors: u32,
+    /// Frames per side and pixels a frame side of the bake's impostors.
+    pub frames: u32,
+    pub frame_px: u32,
+    /// Bytes of the atlases on the GPU (both maps, every species, mips included).
+    pub atlas_bytes: u64,
+}
+
+/// The LOD overlay's colour of an impostor (magenta).
+pub const IMPOSTOR_COLOR: [f32; 3] = [0.85, 0.2, 0.85];
