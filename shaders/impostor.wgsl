@@ -49,8 +49,7 @@ struct ImpostorParams {
     alpha_cutoff: f32,
     // 1: each frame's point is moved to the depth the frame stored.
     parallax: u32,
-    _pad0: u32,
-    _pad1: u32,
+    _pad: vec2<u32>,
 }
 
 @group(1) @binding(0) var<storage, read> impostors: array<Impostor>;

@@ -384,3 +384,44 @@ fn far_tree_structs_match_btf_far_wgsl() {
         }),
     );
 }
+
+#[test]
+fn impostor_record_and_params_match_impostor_wgsl() {
+    use canopy::render::method::impostor::prepare::{ImpostorGpu, ImpostorParams};
+    let source = canopy::render::shaders::impostor();
+    check(
+        "Impostor",
+        wgsl_layout(&source, "Impostor"),
+        rust_layout!(ImpostorGpu {
+            center,
+            radius,
+            axis_x,
+            layer,
+            axis_y,
+            opacity,
+            axis_z,
+            mode,
+            tint,
+            parent_direct,
+            vcm_box_origin,
+            parent_sky,
+            vcm_box_scale,
+            _pad,
+            vcm_direct,
+            vcm_sky,
+        }),
+    );
+    check(
+        "ImpostorParams",
+        wgsl_layout(&source, "ImpostorParams"),
+        rust_layout!(ImpostorParams {
+            frames,
+            octa_layout,
+            resolution,
+            mips,
+            alpha_cutoff,
+            parallax,
+            _pad,
+        }),
+    );
+}

@@ -105,7 +105,7 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
     let scene = scene();
     let world = scene.build_world().unwrap();
     let mut r = renderer(&ctx, &world);
-    let expected: [(Method, &[&str]); 5] = [
+    let expected: [(Method, &[&str]); 6] = [
         (Method::Geometry, &["cascades", "sky", "terrain", "trees"]),
         (
             Method::Billboard,
@@ -136,6 +136,10 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
         (
             Method::Texel,
             &["cascades", "sky", "terrain", "texel tiles", "texels"],
+        ),
+        (
+            Method::Impostor,
+            &["cascades", "sky", "terrain", "impostors"],
         ),
     ];
     for (method, want) in expected {

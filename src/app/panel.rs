@@ -23,6 +23,8 @@ pub struct PanelStats {
     pub btf: Option<crate::render::btf::BtfStats>,
     /// What the `texel` method drew in the last frame.
     pub texel: Option<crate::render::method::texel::TexelStats>,
+    /// What the `impostor` method drew in the last frame.
+    pub impostor: Option<crate::render::method::impostor::ImpostorStats>,
     /// Bytes of BTF images on the GPU.
     pub btf_bytes: u64,
     /// Bytes of visibility cube maps in main memory.
@@ -201,6 +203,21 @@ pub fn controls(
     }
     if frame.method == Method::Texel {
         texel_stats(ui, stats);
+    }
+    if let (Method::Impostor, Some(s)) = (frame.method, &stats.impostor) {
+        egui::Grid::new("impostor stats")
+            .num_columns(2)
+            .show(ui, |ui| {
+                ui.label("impostors drawn");
+                ui.label(format_count(u64::from(s.impostors)));
+                ui.end_row();
+                ui.label("frames (px a frame)");
+                ui.label(format!("{0} x {0} ({1} px)", s.frames, s.frame_px));
+                ui.end_row();
+                ui.label("impostor atlases");
+                ui.label(format!("{:.1} MB", s.atlas_bytes as f64 / 1e6));
+                ui.end_row();
+            });
     }
     ui.separator();
 

@@ -102,6 +102,7 @@ impl App {
                 self.stats.draw_calls = s.draw_calls;
                 self.stats.btf = s.btf;
                 self.stats.texel = s.texel;
+                self.stats.impostor = s.impostor;
                 if s.sun_update_ms.is_some() {
                     self.stats.sun_update_ms = s.sun_update_ms;
                 }

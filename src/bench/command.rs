@@ -221,6 +221,23 @@ pub fn run_command(req: &BenchRequest) -> Result<BenchOutcome> {
         progress: req.progress,
         what: "bench",
     };
+    // A method the bake cannot draw (a scene baked without impostors or volumes) is left
+    // out with the reason, the others measured.
+    let configs: Vec<Config> = configs
+        .into_iter()
+        .filter(|c| match renderer.can_draw(c.method) {
+            Ok(()) => true,
+            Err(e) => {
+                eprintln!("bench: {} left out: {e}", c.label);
+                false
+            }
+        })
+        .collect();
+    if configs.is_empty() {
+        return Err(Error::BadInput(
+            "no method of --methods can draw this scene's bake".into(),
+        ));
+    }
     let results = measure(&m, &mut renderer, &configs)?;
     let run = RunInfo {
         scene: req

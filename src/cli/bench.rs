@@ -18,7 +18,7 @@ pub struct BenchArgs {
         long,
         value_enum,
         value_delimiter = ',',
-        default_value = "geometry,btf,billboard,texel,hybrid"
+        default_value = "geometry,btf,billboard,texel,hybrid,impostor"
     )]
     methods: Vec<Method>,
     /// Sweep a knob: KEY=V1,V2,... with KEY any knob of `render --help`'s "Method knobs"

@@ -147,7 +147,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     )?;
     let ctx = GpuContext::headless(adapter(args.cpu))?;
     let mut renderer = Renderer::new(&ctx, &world)?;
-    if frame.ground_sky && (method.is_btf() || method == Method::Texel) {
+    if frame.ground_sky && canopy_shades_ground(method) {
         let t0 = Instant::now();
         renderer.prepare_sky(&ctx, &world)?;
         log::info!(
@@ -167,7 +167,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.baked {
         if !method.needs_bake() {
             return Err(crate::Error::BadInput(format!(
-                "--baked is for the methods that draw baked images (btf, billboard, texel, hybrid), not {}",
+                "--baked is for the methods that draw baked images (btf, billboard, texel, hybrid, impostor), not {}",
                 method.name()
             ))
             .into());
@@ -227,4 +227,12 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The method's trees shade the ground through the ground maps and its ground sees the
+/// sky visibility (made once before the first frame).
+fn canopy_shades_ground(method: Method) -> bool {
+    crate::render::method::registry()
+        .iter()
+        .any(|m| m.method() == method && m.shades_ground())
 }

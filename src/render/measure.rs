@@ -144,8 +144,9 @@ pub fn measure_frame_with(
         stats = s;
         on_frame();
     }
-    // Only the btf methods have sun-dependent state.
-    let sun_update = if frame.method.is_btf() {
+    // The methods with sun-dependent state: the btf methods and the impostors (VCM reads,
+    // light blends, ground maps).
+    let sun_update = if frame.method.is_btf() || frame.method == super::Method::Impostor {
         Some(measure_sun_update(renderer, ctx, frame, width, height, ss)?)
     } else {
         None

@@ -322,6 +322,18 @@ impl Renderer {
         Ok(())
     }
 
+    /// Fails with what to do when method `m` cannot draw with what is attached (nothing
+    /// baked, no volumes or impostors in the bake).
+    pub fn can_draw(&self, m: Method) -> Result<()> {
+        match self.method(m) {
+            Some(x) => x.check(&self.bake),
+            None => Err(Error::BadInput(format!(
+                "no method {} is registered",
+                m.name()
+            ))),
+        }
+    }
+
     /// The registered method that draws `m`.
     fn method(&self, m: Method) -> Option<&dyn RenderMethod> {
         self.methods

@@ -33,7 +33,7 @@ pub static KNOBS: &[Knob] = &[
     Knob::toggle(
         "show_lod",
         "show LOD level",
-        "colour each impostor magenta",
+        "colour each impostor white",
         |d| d.impostor.show_lod,
         |d, v| d.impostor.show_lod = v,
     ),

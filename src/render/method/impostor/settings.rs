@@ -37,5 +37,5 @@ pub struct ImpostorStats {
     pub atlas_bytes: u64,
 }
 
-/// The LOD overlay's colour of an impostor (magenta).
-pub const IMPOSTOR_COLOR: [f32; 3] = [0.85, 0.2, 0.85];
+/// The LOD overlay's colour of an impostor (white; geometry is magenta).
+pub const IMPOSTOR_COLOR: [f32; 3] = [0.95, 0.95, 0.95];
