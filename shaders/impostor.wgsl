@@ -18,7 +18,9 @@ struct Impostor {
     // The species' layer in the atlases.
     layer: u32,
     axis_y: vec3<f32>,
-    // The cross-fade: the share of the pixels drawn (dithered).
+    // The cross-fade with the tree drawn as geometry: the share of the pixels drawn, those
+    // the geometry leaves (its dither is `fade_threshold`'s: it keeps the pixels under its
+    // opacity, 1 - this).
     opacity: f32,
     axis_z: vec3<f32>,
     // MODE_IMAGES, MODE_TINT (the LOD overlay) or MODE_SUN_FACTOR.
@@ -230,6 +232,11 @@ fn dither(pixel: vec2<f32>) -> f32 {
     return (bayer[p.y * 4u + p.x] + 0.5) / 16.0;
 }
 
+// The geometry's dither (geometry.wgsl's `dither_threshold`: interleaved gradient noise).
+fn fade_threshold(pixel: vec2<f32>) -> f32 {
+    return fract(52.9829189 * fract(dot(floor(pixel), vec2<f32>(0.06711056, 0.00583715))));
+}
+
 struct ImpostorFragment {
     @location(0) color: vec4<f32>,
     @builtin(frag_depth) depth: f32,
@@ -267,7 +274,7 @@ fn fs_impostor(in: ImpostorOut) -> ImpostorFragment {
     let spread = min(params.alpha_cutoff, 1.0 - params.alpha_cutoff);
     let d = dither(in.clip.xy);
     let threshold = params.alpha_cutoff + (2.0 * d - 1.0) * spread;
-    if alpha <= max(threshold, 1e-3) || d >= b.opacity {
+    if alpha <= max(threshold, 1e-3) || fade_threshold(in.clip.xy) < 1.0 - b.opacity {
         discard;
     }
     albedo /= alpha;

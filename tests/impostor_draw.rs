@@ -61,13 +61,19 @@ fn sphere(world: &World) -> (Vec3, f32, Mat3) {
     (center, imp.radius * tree.scale, rot)
 }
 
-/// The frame looking at the fir from world direction `dir` (unit, towards the camera).
-fn frame_from(world: &World, dir: Vec3) -> FrameDesc {
+/// The frame looking at the fir from world direction `dir` (unit, towards the camera),
+/// `radii` of its bounding sphere away; the impostor alone (no geometry however near).
+fn frame_at(world: &World, dir: Vec3, radii: f32) -> FrameDesc {
     let (center, radius, _) = sphere(world);
     let mut f = FrameDesc::from_scene(&lone_fir());
     f.fog_density = 0.0;
-    f.camera = Camera::look_at(center + dir * (3.2 * radius), center, 40.0);
+    f.camera = Camera::look_at(center + dir * (radii * radius), center, 40.0);
+    f.impostor.geometry_px = 0.0;
     f
+}
+
+fn frame_from(world: &World, dir: Vec3) -> FrameDesc {
+    frame_at(world, dir, 3.2)
 }
 
 fn draw(ctx: &GpuContext, r: &mut Renderer, frame: &FrameDesc, method: Method) -> image::RgbaImage {
@@ -231,6 +237,45 @@ fn sweeping_the_sun_relights_the_impostor_continuously() {
     assert!(
         span > 0.01,
         "the sun does not relight the impostor ({span})"
+    );
+    assert!(
+        worst <= 4.0 * median,
+        "worst step {worst} > 4 x median {median}"
+    );
+}
+
+/// Walking up to the fir through the band where its geometry fades in over the impostor
+/// (frame texels of 1.6 to 2 px): no step changes the picture more than 4 times the median
+/// step, far away it is an impostor alone and near it is geometry alone.
+#[test]
+fn walking_up_to_the_fir_through_the_geometry_band_does_not_pop() {
+    let ctx = gpu();
+    let (world, mut r) = setup(&ctx);
+    let dir = Vec3::new(0.3, 0.3, 0.9).normalize();
+    let mut geometry = Vec::new();
+    let images: Vec<image::RgbaImage> = (0..16)
+        .map(|k| {
+            let mut f = frame_at(&world, dir, 4.0 - 0.1 * k as f32);
+            f.impostor.geometry_px = 2.0;
+            f.method = Method::Impostor;
+            let (img, stats) = r.render_image(&ctx, &f, SIZE, SIZE, 1).unwrap();
+            let s = stats.impostor.unwrap();
+            geometry.push((s.impostors, s.geometry_trees));
+            img
+        })
+        .collect();
+    let mut steps: Vec<f32> = images.windows(2).map(|w| mean_flip(&w[0], &w[1])).collect();
+    let worst = steps.iter().copied().fold(0.0f32, f32::max);
+    steps.sort_by(f32::total_cmp);
+    let median = steps[steps.len() / 2];
+    eprintln!(
+        "approach: median step {median:.4}, worst {worst:.4}; (impostors, geometry) {geometry:?}"
+    );
+    assert_eq!(geometry[0], (1, 0), "far away: the impostor alone");
+    assert_eq!(geometry[15], (0, 1), "near: the geometry alone");
+    assert!(
+        geometry.iter().any(|&g| g == (1, 1)),
+        "a step inside the band draws both"
     );
     assert!(
         worst <= 4.0 * median,

@@ -95,7 +95,7 @@ pub(crate) fn plan_geometry(
 /// cascade the same, the first one used), so that its texels stay small, reaching down
 /// past them to the lowest ground their shadows can fall on; None when there are none,
 /// shadows are off or the sun is down.
-fn geometry_tree_cascades(
+pub(crate) fn geometry_tree_cascades(
     world: &WorldGpu,
     frame: &FrameDesc,
     trees: &[Vec<(u32, f32)>],

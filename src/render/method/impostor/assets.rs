@@ -185,6 +185,7 @@ impl ImpostorAssets {
                 layer: layer as u32,
                 center: Vec3::from(imp.center),
                 radius: imp.radius,
+                texel: 2.0 * imp.radius / imp.resolution.max(1) as f32,
             })
             .collect();
         Ok(Self {

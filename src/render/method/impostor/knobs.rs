@@ -23,6 +23,16 @@ pub static KNOBS: &[Knob] = &[
         |d, v| d.impostor.parallax = v,
     )
     .tuned(&["off", "on"]),
+    Knob::number(
+        "geometry_px",
+        "geometry above (px)",
+        "a tree whose impostor texels project above this many pixels is drawn as geometry, faded in over the last fifth before it (0: never)",
+        (0.0, 64.0),
+        |d| d.impostor.geometry_px,
+        |d, v| d.impostor.geometry_px = v,
+    )
+    .slider(0.0, 16.0, false)
+    .tuned(&["0", "1", "2", "4"]),
     Knob::toggle(
         "vcm",
         "VCM shading (trees shade each other)",

@@ -13,12 +13,20 @@ use crate::render::method::interface::{
 };
 use crate::render::method::kind::Method;
 use crate::render::pipelines::Layouts;
-use crate::render::world_gpu::WorldGpu;
 
-/// `impostor`: the frame's record count and what it reports.
+use crate::render::method::btf::method::geometry_tree_cascades;
+use crate::render::shadow::Cascades;
+use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
+
+/// `impostor`: the frame's record count, the trees drawn as geometry and their runs, what
+/// it reports.
 #[derive(Default)]
 pub struct ImpostorMethod {
     count: u32,
+    /// Trees drawn as geometry alone (no impostor).
+    whole: u32,
+    /// The geometry trees' runs: trunks and limbs, then twigs, all faded.
+    runs: Vec<Vec<TreeRun>>,
     stats: ImpostorStats,
 }
 
@@ -66,7 +74,7 @@ impl RenderMethod for ImpostorMethod {
         let scene = btf.scene();
         let limit = cx.ctx.device.limits().max_storage_buffer_binding_size as usize;
         let max = limit / std::mem::size_of::<super::prepare::ImpostorGpu>();
-        let (records, mut stats) = prepare(
+        let f = prepare(
             &imp.species,
             &cx.world.tree_data,
             &cx.visible,
@@ -75,15 +83,48 @@ impl RenderMethod for ImpostorMethod {
             max,
             &mut |t, sp, m| scene.tree_shade(t, sp, m),
         );
-        imp.upload(cx.ctx, &records, &settings);
-        // No tree is geometry: the instance upload holds the terrain's alone.
-        cx.world
-            .upload_lists(cx.ctx, &[vec![Vec::new(); cx.world.species.len()]]);
+        imp.upload(cx.ctx, &f.records, &settings);
+        let mut stats = f.stats;
         (stats.frames, stats.frame_px) = imp.grid();
         stats.atlas_bytes = imp.bytes;
-        self.count = records.len() as u32;
+        self.count = f.records.len() as u32;
         self.stats = stats;
-        Ok(Plan::without_cascades(sun))
+        self.whole = f
+            .geometry
+            .iter()
+            .flatten()
+            .filter(|(_, o)| *o >= 1.0)
+            .count() as u32;
+        // The trees drawn as geometry, as `hybrid` draws its own: in sun cascades of their
+        // own and out of the ground alpha map; but faded whole (trunk and limbs too), the
+        // impostor drawn in the pixels they leave.
+        let tint = settings
+            .show_lod
+            .then_some(crate::render::method::btf::settings::GEOMETRY_COLOR);
+        let runs = cx
+            .world
+            .upload_lists_faded(cx.ctx, &[], &[&f.geometry, &f.geometry], tint);
+        let cascades = geometry_tree_cascades(cx.world, cx.frame, &f.geometry);
+        let on = cascades.is_some();
+        let mut excluded: Vec<u32> = if on {
+            f.geometry.iter().flatten().map(|&(t, _)| t).collect()
+        } else {
+            Vec::new()
+        };
+        excluded.sort_unstable();
+        let plan = Plan {
+            cascades: cascades.unwrap_or_else(Cascades::none),
+            shadows_on: on,
+            casters: on.then(|| vec![runs[0].clone()]),
+            terrain_casts: false,
+            geometry_tree_cascades: on,
+            ground_excluded: excluded,
+            self_shadowed: None,
+            studio_casters: None,
+            sun,
+        };
+        self.runs = runs;
+        Ok(plan)
     }
 
     fn ground_casters(
@@ -125,12 +166,25 @@ impl RenderMethod for ImpostorMethod {
             return;
         };
         cx.spans.rename("impostors");
+        if self.stats.geometry_trees > 0 {
+            cx.spans.rename("near trees");
+            let faded = Some(cx.pipes.faded_meshes());
+            let mut draw = |list: usize, kinds: &[PartKind]| match self.runs.get(list) {
+                Some(r) => cx.world.draw(pass, r, faded, false, kinds),
+                None => (0, 0, 0),
+            };
+            let (ta, _, ca) = draw(0, &[PartKind::Trunk, PartKind::Limbs]);
+            let (tb, _, cb) = draw(1, &[PartKind::Twigs]);
+            stats.triangles += ta + tb;
+            stats.draw_calls += ca + cb;
+            cx.spans.mark(pass, "impostors");
+        }
         imp.draw(pass, self.count);
         if self.count > 0 {
             stats.draw_calls += 1;
         }
         stats.triangles += 2 * u64::from(self.count);
-        stats.trees_drawn = self.count;
+        stats.trees_drawn = self.count + self.whole;
         stats.impostor = Some(self.stats);
     }
 }

@@ -4,7 +4,7 @@
 
 use glam::{Mat3, Mat4, Vec3};
 
-use super::settings::{IMPOSTOR_COLOR, ImpostorSettings, ImpostorStats};
+use super::settings::{GEOMETRY_FADE, IMPOSTOR_COLOR, ImpostorSettings, ImpostorStats};
 use crate::model::mesh::Aabb;
 use crate::render::method::btf::shading::Shade;
 use crate::render::method::view::PrepareView;
@@ -49,16 +49,47 @@ pub struct ImpostorParams {
     pub _pad: [u32; 2],
 }
 
-/// One species' impostor as the prepare step needs it: its atlas layer and the bounding
-/// sphere its frames frame (object frame).
+/// One species' impostor as the prepare step needs it: its atlas layer, the bounding
+/// sphere its frames frame (object frame) and the side of a frame's texel there.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpeciesImpostor {
     pub layer: u32,
     pub center: Vec3,
     pub radius: f32,
+    pub texel: f32,
 }
 
-/// The records of the trees in view, front to back, at most `max` (the nearest kept).
+/// What the prepare step chose: the impostors' records and the trees drawn as geometry.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ImpostorFrame {
+    /// The records, front to back.
+    pub records: Vec<ImpostorGpu>,
+    /// Per species: the trees drawn as geometry, each with its opacity (1: whole; below 1
+    /// its impostor is drawn too, in the pixels the geometry leaves).
+    pub geometry: Vec<Vec<(u32, f32)>>,
+    pub stats: ImpostorStats,
+}
+
+/// How much of a tree of `species` is drawn as geometry (0 none, 1 all of it) at `z` from
+/// the eye: its frames' texels of `scale`, projected, against `geometry_px`, faded in over
+/// the last [`GEOMETRY_FADE`] before it.
+pub fn geometry_opacity(
+    species: &SpeciesImpostor,
+    scale: f32,
+    focal_px: f32,
+    z: f32,
+    geometry_px: f32,
+) -> f32 {
+    if !(geometry_px > 0.0) {
+        return 0.0;
+    }
+    let px = crate::lod::projected_px(species.texel * scale, focal_px, z);
+    let start = geometry_px * (1.0 - GEOMETRY_FADE);
+    ((px - start) / (geometry_px - start)).clamp(0.0, 1.0)
+}
+
+/// The records of the trees in view, front to back, at most `max` (the nearest kept), and
+/// the trees near enough to be drawn as geometry.
 /// `shade(t, species, model)` gives tree `t`'s tree-level VCM factors and the box they are
 /// taken over, in the object frame (None: unshaded).
 pub fn prepare(
@@ -69,10 +100,12 @@ pub fn prepare(
     settings: &ImpostorSettings,
     max: usize,
     shade: &mut dyn FnMut(usize, usize, &Mat4) -> Option<(Shade, Aabb)>,
-) -> (Vec<ImpostorGpu>, ImpostorStats) {
+) -> ImpostorFrame {
     let cam = view.camera.position;
     let forward = view.camera.forward();
     let mut sorted: Vec<(f32, ImpostorGpu)> = Vec::new();
+    let mut geometry: Vec<Vec<(u32, f32)>> = vec![Vec::new(); visible.len()];
+    let mut whole = 0u32;
     for (sp, list) in visible.iter().enumerate() {
         let Some(info) = species.get(sp) else {
             continue;
@@ -94,6 +127,15 @@ pub fn prepare(
             };
             if !view.frustum.intersects(&sphere) {
                 continue;
+            }
+            let z = (center - cam).length();
+            let fade = geometry_opacity(info, scale, view.focal_px, z, settings.geometry_px);
+            if fade > 0.0 {
+                geometry[sp].push((t, fade));
+                if fade >= 1.0 {
+                    whole += 1;
+                    continue;
+                }
             }
             let rot = Mat3::from_mat4(m) * (1.0 / scale);
             let unit = Aabb {
@@ -119,7 +161,7 @@ pub fn prepare(
                 axis_x: rot.x_axis.normalize_or(Vec3::X).to_array(),
                 layer: info.layer,
                 axis_y: rot.y_axis.normalize_or(Vec3::Y).to_array(),
-                opacity: 1.0,
+                opacity: 1.0 - fade,
                 axis_z: rot.z_axis.normalize_or(Vec3::Z).to_array(),
                 mode,
                 tint,
@@ -139,9 +181,15 @@ pub fn prepare(
     let records: Vec<ImpostorGpu> = sorted.into_iter().map(|(_, r)| r).collect();
     let stats = ImpostorStats {
         impostors: records.len() as u32,
+        geometry_trees: geometry.iter().map(|l| l.len() as u32).sum(),
         ..Default::default()
     };
-    (records, stats)
+    debug_assert!(stats.geometry_trees >= whole);
+    ImpostorFrame {
+        records,
+        geometry,
+        stats,
+    }
 }
 
 #[cfg(test)]
@@ -164,6 +212,7 @@ mod tests {
             layer: 3,
             center: Vec3::new(0.0, 5.0, 0.0),
             radius: 5.0,
+            texel: 10.0 / 64.0,
         }]
     }
 
@@ -171,7 +220,7 @@ mod tests {
         trees: &[TreeGpu],
         settings: &ImpostorSettings,
         max: usize,
-    ) -> (Vec<ImpostorGpu>, ImpostorStats, Vec<usize>) {
+    ) -> (ImpostorFrame, Vec<usize>) {
         let camera = Camera::look_at(Vec3::new(0.0, 5.0, 30.0), Vec3::new(0.0, 5.0, 0.0), 60.0);
         let frustum = camera.frustum(1.5);
         let view = PrepareView {
@@ -196,7 +245,7 @@ mod tests {
             };
             Some((shade, bounds))
         };
-        let (r, s) = prepare(
+        let f = prepare(
             &species(),
             trees,
             &visible,
@@ -205,7 +254,7 @@ mod tests {
             max,
             &mut shade,
         );
-        (r, s, asked)
+        (f, asked)
     }
 
     #[test]
@@ -215,7 +264,13 @@ mod tests {
             tree(2.0, 0.0, 1.2, 2.0),
             tree(0.0, 60.0, 0.0, 1.0),
         ];
-        let (r, stats, asked) = run(&trees, &ImpostorSettings::default(), usize::MAX);
+        let far = ImpostorSettings {
+            geometry_px: 0.0,
+            ..Default::default()
+        };
+        let (f, asked) = run(&trees, &far, usize::MAX);
+        let (r, stats) = (f.records, f.stats);
+        assert!(f.geometry[0].is_empty());
         assert_eq!(r.len(), 2, "the tree behind the camera is left out");
         assert_eq!(stats.impostors, 2);
         assert_eq!(asked, vec![0, 1]);
@@ -245,9 +300,11 @@ mod tests {
         let off = ImpostorSettings {
             vcm: false,
             show_lod: true,
+            geometry_px: 0.0,
             ..Default::default()
         };
-        let (r, _, asked) = run(&trees, &off, 1);
+        let (f, asked) = run(&trees, &off, 1);
+        let r = f.records;
         assert!(asked.is_empty(), "no VCM read with vcm off");
         assert_eq!(r.len(), 1);
         assert_eq!(r[0].center[2], 0.0, "the nearest stays");
@@ -257,6 +314,44 @@ mod tests {
             model: Mat4::ZERO.to_cols_array_2d(),
             tint: [1.0; 4],
         }];
-        assert!(run(&bad, &ImpostorSettings::default(), 8).0.is_empty());
+        assert!(
+            run(&bad, &ImpostorSettings::default(), 8)
+                .0
+                .records
+                .is_empty()
+        );
+    }
+
+    #[test]
+    fn near_trees_are_geometry_faded_in_below_the_bound_and_their_impostor_fades_out() {
+        let sp = species()[0];
+        // A frame texel of 10/64 m at 500 px focal length projects 2 px at 39 m.
+        let at = |px: f32| sp.texel * 500.0 / px;
+        assert_eq!(geometry_opacity(&sp, 1.0, 500.0, at(2.5), 2.0), 1.0);
+        assert_eq!(geometry_opacity(&sp, 1.0, 500.0, at(1.5), 2.0), 0.0);
+        let mid = geometry_opacity(&sp, 1.0, 500.0, at(1.8), 2.0);
+        assert!((mid - 0.5).abs() < 1e-4, "{mid}");
+        assert_eq!(
+            geometry_opacity(&sp, 1.0, 500.0, 1.0, 0.0),
+            0.0,
+            "0 is never"
+        );
+        // The camera 30 m from the first tree (whole geometry) and 30 + 14 m from the
+        // second (inside the band: both drawn, complementary).
+        let trees = [
+            tree(0.0, 0.0, 0.0, 1.0),
+            tree(0.0, -14.0, 0.0, 1.0),
+            tree(0.0, -200.0, 0.0, 1.0),
+        ];
+        let (f, _) = run(&trees, &ImpostorSettings::default(), usize::MAX);
+        let g = &f.geometry[0];
+        assert_eq!(g.len(), 2, "{g:?}");
+        assert_eq!(g[0], (0, 1.0));
+        let (t, o) = g[1];
+        assert!(t == 1 && o > 0.0 && o < 1.0, "{g:?}");
+        assert_eq!(f.records.len(), 2, "the fading tree and the far one");
+        assert!((f.records[0].opacity - (1.0 - o)).abs() < 1e-6);
+        assert_eq!(f.records[1].opacity, 1.0);
+        assert_eq!((f.stats.impostors, f.stats.geometry_trees), (2, 2));
     }
 }

@@ -12,7 +12,13 @@ pub struct ImpostorSettings {
     pub vcm: bool,
     /// Colour every impostor by the LOD overlay's colour.
     pub show_lod: bool,
+    /// A tree whose impostor texels project above this many pixels is drawn as geometry
+    /// (faded in over the last [`GEOMETRY_FADE`] of the bound); 0: never.
+    pub geometry_px: f32,
 }
+
+/// The fraction of `geometry_px` before it over which a tree's geometry fades in.
+pub const GEOMETRY_FADE: f32 = 0.2;
 
 impl Default for ImpostorSettings {
     fn default() -> Self {
@@ -21,6 +27,7 @@ impl Default for ImpostorSettings {
             parallax: true,
             vcm: true,
             show_lod: false,
+            geometry_px: 2.0,
         }
     }
 }
@@ -30,6 +37,9 @@ impl Default for ImpostorSettings {
 pub struct ImpostorStats {
     /// Trees drawn as impostors.
     pub impostors: u32,
+    /// Trees drawn as geometry (their impostor magnified past `geometry_px`), whole or
+    /// fading in.
+    pub geometry_trees: u32,
     /// Frames per side and pixels a frame side of the bake's impostors.
     pub frames: u32,
     pub frame_px: u32,
