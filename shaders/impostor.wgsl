@@ -51,7 +51,10 @@ struct ImpostorParams {
     alpha_cutoff: f32,
     // 1: each frame's point is moved to the depth the frame stored.
     parallax: u32,
-    _pad: vec2<u32>,
+    // Self-shadowing: the light's extinction per radius of crown between a point and the
+    // surface the frame nearest the sun (or the zenith, for the sky) sees first.
+    self_shadow: f32,
+    _pad: u32,
 }
 
 @group(1) @binding(0) var<storage, read> impostors: array<Impostor>;
@@ -74,6 +77,9 @@ struct ImpostorOut {
     // The 3 frames (row-major indices) and their weights.
     @location(3) @interpolate(flat) frames: vec3<u32>,
     @location(4) @interpolate(flat) weights: vec3<f32>,
+    // The frame nearest the sun's direction and the one nearest the zenith, in the
+    // object frame: the impostor's own shadow maps.
+    @location(5) @interpolate(flat) light_frames: vec2<u32>,
 }
 
 // -1 or 1, 0 counting as positive (src/sphere/octa.rs's `sign`).
@@ -135,6 +141,12 @@ fn view_axes(dir: vec3<f32>) -> array<vec3<f32>, 2> {
     return array<vec3<f32>, 2>(right, up);
 }
 
+// The frame whose direction is nearest to `dir` (object frame, unit).
+fn nearest_frame(dir: vec3<f32>) -> u32 {
+    let g = round(dir_to_uv(dir) * f32(params.frames - 1u));
+    return u32(g.y) * params.frames + u32(g.x);
+}
+
 @vertex
 fn vs_impostor(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance: u32) -> ImpostorOut {
     let b = impostors[instance];
@@ -162,6 +174,10 @@ fn vs_impostor(@builtin(vertex_index) vi: u32, @builtin(instance_index) instance
     // The 3 frames around the view direction and their barycentric weights
     // (`OctaGrid::blend_uv`).
     let last = params.frames - 1u;
+    out.light_frames = vec2<u32>(
+        nearest_frame(normalize(frame.sun_dir * rot)),
+        nearest_frame(normalize(vec3<f32>(0.0, 1.0, 0.0) * rot)),
+    );
     let g = dir_to_uv(normalize(out.eye)) * f32(last);
     let cell = clamp(floor(g), vec2<f32>(0.0), vec2<f32>(f32(last - 1u)));
     let f = clamp(g - cell, vec2<f32>(0.0), vec2<f32>(1.0));
@@ -225,6 +241,20 @@ fn sample_frame(index: u32, layer: i32, eye: vec3<f32>, ray: vec3<f32>, lod: f32
     return s;
 }
 
+// The share of the light from `index`'s direction that reaches the object-frame point
+// `p` through the crown: the frame's depth map is a shadow map of the tree from there. The
+// light crosses what lies between `p` and the first surface the frame sees (if `p` is
+// behind it), attenuated by `params.self_shadow` per radius, in the share of the texel
+// the frame found covered.
+fn self_visibility(index: u32, layer: i32, p: vec3<f32>, lod: f32) -> f32 {
+    let dir = frame_dir(index);
+    let uv = atlas_uv(index, frame_uv(view_axes(dir), p), lod);
+    let front = 1.0 - 2.0 * textureSampleLevel(normal_atlas, atlas_sampler, uv, layer, lod).a;
+    let covered = textureSampleLevel(albedo_atlas, atlas_sampler, uv, layer, lod).a;
+    let inside = max(front - dot(p, dir), 0.0);
+    return mix(1.0, exp(-params.self_shadow * inside), covered);
+}
+
 // A threshold in [0, 1) from a 4x4 ordered dither of the pixel.
 fn dither(pixel: vec2<f32>) -> f32 {
     var bayer = array<f32, 16>(0.0, 8.0, 2.0, 10.0, 12.0, 4.0, 14.0, 6.0, 3.0, 11.0, 1.0, 9.0, 15.0, 7.0, 13.0, 5.0);
@@ -267,7 +297,7 @@ fn fs_impostor(in: ImpostorOut) -> ImpostorFragment {
         point += wa * s.point;
         alpha += wa;
     }
-    let reads = select(6u, 12u, params.parallax != 0u);
+    let reads = select(6u, 12u, params.parallax != 0u) + select(0u, 4u, params.self_shadow > 0.0);
     count_fragment(in.clip, reads);
     // Dithered alpha test: at a cut-off of 0.5 the threshold spans [0, 1], so a pixel's
     // chance to be drawn is its coverage; nearer 0 or 1 the edge is sharper.
@@ -284,8 +314,14 @@ fn fs_impostor(in: ImpostorOut) -> ImpostorFragment {
     let n = rot * n_obj;
     // The tree-level VCM factors at the point (btf's `vcm_factors`).
     let u = b.vcm_box_origin + point * b.vcm_box_scale;
-    let sun_f = trilinear(b.vcm_direct[0], b.vcm_direct[1], u) * b.parent_direct;
-    let sky_f = trilinear(b.vcm_sky[0], b.vcm_sky[1], u) * b.parent_sky;
+    var sun_f = trilinear(b.vcm_direct[0], b.vcm_direct[1], u) * b.parent_direct;
+    var sky_f = trilinear(b.vcm_sky[0], b.vcm_sky[1], u) * b.parent_sky;
+    if params.self_shadow > 0.0 {
+        // Soft: a level coarser than the view's.
+        let l = min(lod + 1.0, f32(params.mips - 1u));
+        sun_f *= self_visibility(in.light_frames.x, layer, point, l);
+        sky_f *= self_visibility(in.light_frames.y, layer, point, l);
+    }
     // Lit as the geometry lights a leaf (geometry.wgsl's `lit_by`): some light through it
     // from behind, the hemisphere's sky and ground light by the normal's height.
     let ndl = dot(n, frame.sun_dir);

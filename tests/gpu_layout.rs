@@ -421,6 +421,7 @@ fn impostor_record_and_params_match_impostor_wgsl() {
             mips,
             alpha_cutoff,
             parallax,
+            self_shadow,
             _pad,
         }),
     );

@@ -158,7 +158,8 @@ impl ImpostorAssets {
             mips: first.mip_levels.max(1),
             alpha_cutoff: ImpostorSettings::default().alpha_cutoff,
             parallax: 1,
-            _pad: [0; 2],
+            self_shadow: ImpostorSettings::default().self_shadow,
+            _pad: 0,
         };
         let params_buffer = wgpu::util::DeviceExt::create_buffer_init(
             &ctx.device,
@@ -222,6 +223,7 @@ impl ImpostorAssets {
         let params = ImpostorParams {
             alpha_cutoff: s.alpha_cutoff.clamp(0.0, 1.0),
             parallax: u32::from(s.parallax),
+            self_shadow: s.self_shadow.max(0.0),
             ..self.params
         };
         if params != self.params {

@@ -24,6 +24,16 @@ pub static KNOBS: &[Knob] = &[
     )
     .tuned(&["off", "on"]),
     Knob::number(
+        "self_shadow",
+        "self-shadowing",
+        "light's extinction per radius of crown between a point and what the frame nearest the sun (or the zenith) sees first: the impostor's frames as its own shadow maps (0: none)",
+        (0.0, 256.0),
+        |d| d.impostor.self_shadow,
+        |d, v| d.impostor.self_shadow = v,
+    )
+    .slider(0.0, 64.0, false)
+    .tuned(&["0", "16", "64"]),
+    Knob::number(
         "geometry_px",
         "geometry above (px)",
         "a tree whose impostor texels project above this many pixels is drawn as geometry, faded in over the last fifth before it (0: never)",

@@ -46,7 +46,8 @@ pub struct ImpostorParams {
     pub mips: u32,
     pub alpha_cutoff: f32,
     pub parallax: u32,
-    pub _pad: [u32; 2],
+    pub self_shadow: f32,
+    pub _pad: u32,
 }
 
 /// One species' impostor as the prepare step needs it: its atlas layer, the bounding

@@ -8,6 +8,10 @@ pub struct ImpostorSettings {
     pub alpha_cutoff: f32,
     /// Each frame's point is moved to the depth the frame stored.
     pub parallax: bool,
+    /// Self-shadowing from the impostor's own frames: the light's extinction per radius of
+    /// crown between a point and the surface the frame nearest the sun (or the zenith) sees
+    /// first; 0: none.
+    pub self_shadow: f32,
     /// Shade with the trees' visibility cube maps (when the bake has them).
     pub vcm: bool,
     /// Colour every impostor by the LOD overlay's colour.
@@ -25,6 +29,7 @@ impl Default for ImpostorSettings {
         Self {
             alpha_cutoff: 0.5,
             parallax: true,
+            self_shadow: 64.0,
             vcm: true,
             show_lod: false,
             geometry_px: 2.0,
