@@ -14,7 +14,7 @@ use canopy::scene::Scene;
 #[test]
 fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
     let dir = common::scratch_dir("tune-test");
-    // This test binary holds one test: nothing else reads the environment meanwhile.
+    // The other test of this binary fails before it could read the environment.
     unsafe { std::env::set_var("CANOPY_CACHE_DIR", dir.join("cache")) };
     let scene_path = dir.join("stand.toml");
     std::fs::copy(common::data("btf.toml"), &scene_path).unwrap();
@@ -32,6 +32,7 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
         progress: false,
         write: true,
         bake: false,
+        method: canopy::render::Method::Btf,
     };
     let o = run_tune(&req).unwrap();
     let i = o.chosen.expect("a loose target is met");
@@ -125,4 +126,33 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
             want.planes
         )
     );
+}
+
+#[test]
+fn tune_searches_btf_or_impostor_and_writes_btf_only() {
+    let req = |method, write| TuneRequest {
+        scene: Some(common::data("btf.toml")),
+        flight: "orbit".into(),
+        target: TuneTarget::new(0.3, 2.0).unwrap(),
+        width: 96,
+        height: 64,
+        frames: 3,
+        truth_supersample: 1,
+        repeats: 1,
+        adapter: AdapterPreference::Cpu,
+        progress: false,
+        write,
+        bake: false,
+        method,
+    };
+    let e = run_tune(&req(canopy::render::Method::Texel, false))
+        .err()
+        .expect("texel is not tuned")
+        .to_string();
+    assert!(e.contains("btf or impostor"), "{e}");
+    let e = run_tune(&req(canopy::render::Method::Impostor, true))
+        .err()
+        .expect("--write is btf's")
+        .to_string();
+    assert!(e.contains("--write"), "{e}");
 }

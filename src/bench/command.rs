@@ -10,7 +10,7 @@ use super::report::{self, RunInfo};
 use super::run::{self, BenchOptions, BenchResults, BenchStep, Config, Sweep};
 use super::truth_key::scene_content;
 use super::tune::{
-    BakeChoice, TuneTarget, bake_candidates, bake_knob_candidates, candidates, choose,
+    BakeChoice, TuneTarget, bake_candidates, bake_knob_candidates, candidates_for, choose,
     with_render_table, with_table_keys,
 };
 use crate::model::World;
@@ -281,6 +281,8 @@ pub struct TuneRequest {
     pub write: bool,
     /// Search the bake's views, lights and resolution too (each bake cached).
     pub bake: bool,
+    /// The method whose knobs are searched (`btf` or `impostor`).
+    pub method: Method,
 }
 
 /// What `canopy tune` found.
@@ -305,6 +307,18 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
         return Err(Error::BadInput(
             "--write needs a scene file: the embedded default forest cannot be changed; save it to a file first".into(),
         ));
+    }
+    if !super::tune::TUNED_METHODS.contains(&req.method) {
+        return Err(Error::BadInput(format!(
+            "--method {}: tune searches the knobs of btf or impostor",
+            req.method.name()
+        )));
+    }
+    if req.method != Method::Btf && (req.write || req.bake) {
+        return Err(Error::BadInput(format!(
+            "--write and --bake search and write btf's knobs and bake; with --method {} tune only measures and reports",
+            req.method.name()
+        )));
     }
     if !(2..=MAX_BENCH_FRAMES).contains(&req.frames) {
         return Err(Error::BadInput(format!(
@@ -390,7 +404,8 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
         let all = all.ok_or_else(|| Error::BadInput("no bake to try".into()))?;
         (all, bakes)
     } else {
-        let configs = candidates(&base);
+        let configs = candidates_for(req.method, &base);
+        renderer.can_draw(req.method)?;
         let r = measure(&m, &mut renderer, &configs)?;
         let bakes = vec![None; r.configs.len()];
         (r, bakes)

@@ -153,12 +153,32 @@ impl TuneTarget {
     }
 }
 
-/// Every configuration of the grid: each combination of the values the `btf` knobs offer
-/// `tune` ([`crate::render::knob::Knob::tune`]; the first knob varies fastest), the other
-/// knobs as `base` has them.
+/// The methods `tune` searches: their own knobs offer it values.
+pub const TUNED_METHODS: [Method; 2] = [Method::Btf, Method::Impostor];
+
+/// Every configuration of `btf`'s grid ([`candidates_for`]).
 pub fn candidates(base: &FrameDesc) -> Vec<Config> {
+    candidates_for(Method::Btf, base)
+}
+
+/// Every configuration of `method`'s grid: each combination of the values its knobs offer
+/// `tune` ([`crate::render::knob::Knob::tune`]; the first knob varies fastest), the other
+/// knobs as `base` has them. Empty for a method `tune` does not search.
+pub fn candidates_for(method: Method, base: &FrameDesc) -> Vec<Config> {
+    let knobs: &[crate::render::knob::Knob] = match method {
+        Method::Btf => KNOBS,
+        Method::Impostor => crate::render::method::impostor::knobs::KNOBS,
+        _ => return Vec::new(),
+    };
+    let label = |d: &FrameDesc| {
+        let mut s = String::from(method.name());
+        for k in knobs.iter().filter(|k| !k.tune.is_empty()) {
+            s.push_str(&format!(" {}={}", k.name, k.text(d)));
+        }
+        s
+    };
     let mut frames = vec![*base];
-    for k in KNOBS.iter().rev().filter(|k| !k.tune.is_empty()) {
+    for k in knobs.iter().rev().filter(|k| !k.tune.is_empty()) {
         frames = frames
             .iter()
             .flat_map(|d| {
@@ -173,7 +193,14 @@ pub fn candidates(base: &FrameDesc) -> Vec<Config> {
     }
     frames
         .iter()
-        .map(|d| Config::from_frame(tuned_label(d), Method::Btf, d))
+        .map(|d| {
+            let name = if method == Method::Btf {
+                tuned_label(d)
+            } else {
+                label(d)
+            };
+            Config::from_frame(name, method, d)
+        })
         .collect()
 }
 
@@ -299,6 +326,26 @@ mod tests {
         ] {
             assert!(TuneTarget::new(e, r).is_err(), "{e} {r}");
         }
+    }
+
+    #[test]
+    fn the_impostor_grid_is_its_own_knobs_and_other_methods_have_none() {
+        let base = FrameDesc::from_scene(&crate::scene::Scene::default_scene());
+        let c = candidates_for(Method::Impostor, &base);
+        assert_eq!(c.len(), 3 * 2 * 3 * 4);
+        assert!(c.iter().all(|c| c.method == Method::Impostor));
+        assert_eq!(
+            c[1].label,
+            "impostor alpha_cutoff=0.5 parallax=off self_shadow=0 geometry_px=0"
+        );
+        let mut d = base;
+        c[c.len() - 1].knobs.apply_to(&mut d);
+        assert_eq!((d.impostor.alpha_cutoff, d.impostor.parallax), (0.7, true));
+        assert_eq!(
+            (d.impostor.self_shadow, d.impostor.geometry_px),
+            (64.0, 4.0)
+        );
+        assert!(candidates_for(Method::Texel, &base).is_empty());
     }
 
     #[test]

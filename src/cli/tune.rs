@@ -38,6 +38,10 @@ pub struct TuneArgs {
     /// cached), each with LOD scale 0.5–4 x weight threshold 0/0.2.
     #[arg(long)]
     bake: bool,
+    /// The method whose knobs are searched: btf, or impostor (measured and reported only:
+    /// the scene file has no table for its knobs).
+    #[arg(long, value_enum, default_value_t = crate::render::Method::Btf)]
+    method: crate::render::Method,
     /// Print the result as JSON on stdout.
     #[arg(long)]
     json: bool,
@@ -61,6 +65,7 @@ pub fn tune(args: TuneArgs) -> anyhow::Result<()> {
         progress: true,
         write: args.write,
         bake: args.bake,
+        method: args.method,
     };
     let o = crate::bench::command::run_tune(&req)?;
     if args.json {
