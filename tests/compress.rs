@@ -216,10 +216,11 @@ fn the_stand_drawn_from_bc7_is_close_to_rgba8_and_the_decoded_fallback_matches()
     for distance in [60.0, 150.0] {
         let f = frame(&scene, distance);
         let rgba8 = draw(raw, &f);
-        let bc7 = draw(&packed, &f);
-        canopy::render::btf::FORCE_BC_DECODE.store(true, Ordering::SeqCst);
+        // lavapipe is a CPU adapter: BC7 images are decoded on load unless asked.
         let decoded = draw(&packed, &f);
-        canopy::render::btf::FORCE_BC_DECODE.store(false, Ordering::SeqCst);
+        canopy::render::btf::BC7_ON_CPU_ADAPTERS.store(true, Ordering::SeqCst);
+        let bc7 = draw(&packed, &f);
+        canopy::render::btf::BC7_ON_CPU_ADAPTERS.store(false, Ordering::SeqCst);
         let mut bare_frame = f;
         bare_frame.trees = false;
         let bare = draw(raw, &bare_frame);
@@ -250,4 +251,71 @@ fn the_stand_drawn_from_bc7_is_close_to_rgba8_and_the_decoded_fallback_matches()
         // And compression changes the picture at all (the test can fail).
         assert_ne!(rgba8.as_raw(), bc7.as_raw());
     }
+}
+
+/// Prints the bytes of a baked file by part, as stored and as they would be uncompressed,
+/// with the GPU bytes of its BTF images either way: `CANOPY_MEASURE_FILE=path cargo test
+/// --test compress measure -- --ignored --nocapture` (docs/RESULTS.md, "Bake").
+#[test]
+#[ignore]
+fn measure() {
+    let Some(path) = std::env::var_os("CANOPY_MEASURE_FILE") else {
+        return;
+    };
+    let t0 = std::time::Instant::now();
+    let baked = canopy::format::read(&path).unwrap();
+    let read_s = t0.elapsed().as_secs_f64();
+    let file = std::fs::metadata(&path).unwrap().len();
+    let s = baked.settings;
+    let raw_btf: u64 = baked
+        .btf
+        .iter()
+        .map(|b| canopy::format::btf_record_bytes(b.views, b.lights, b.resolution, false))
+        .sum();
+    let bc_btf: u64 = baked
+        .btf
+        .iter()
+        .map(|b| canopy::format::btf_record_bytes(b.views, b.lights, b.resolution, true))
+        .sum();
+    let raw_vcm: u64 = baked
+        .vcm
+        .iter()
+        .map(|v| canopy::format::vcm_record_bytes(v.resolution, false))
+        .sum();
+    let bc_vcm: u64 = baked
+        .vcm
+        .iter()
+        .map(|v| canopy::format::vcm_record_bytes(v.resolution, true))
+        .sum();
+    let images: u64 = baked
+        .btf
+        .iter()
+        .map(|b| u64::from(b.views * (b.lights + 2)))
+        .sum();
+    let res = s.resolution;
+    let full_chain: u64 = (0..=res.ilog2())
+        .map(|m| 4 * u64::from(res >> m).pow(2))
+        .sum();
+    let t1 = std::time::Instant::now();
+    let decoded: usize = baked
+        .vcm
+        .iter()
+        .map(|v| v.opacity_r8().unwrap().len())
+        .sum();
+    let vcm_decode_s = t1.elapsed().as_secs_f64();
+    println!(
+        "file {file} bytes (read in {read_s:.2} s), compress = {}\n\
+         BTF records: {bc_btf} bytes BC7, {raw_btf} RGBA8 ({images} images of {res}²)\n\
+         BTF GPU: {} bytes BC7 ({} mips), {} RGBA8 ({} mips)\n\
+         VCM records: {bc_vcm} bytes BC4, {raw_vcm} R8 ({} sets); decoded {decoded} bytes in {vcm_decode_s:.2} s\n\
+         texels {} bytes, impostors {} bytes (uncompressed)",
+        s.compress,
+        images * bc::bc7_chain_bytes(res),
+        bc::bc_mip_levels(res),
+        images * full_chain,
+        res.ilog2() + 1,
+        baked.vcm.len(),
+        baked.texel_bytes(),
+        baked.impostor_bytes(),
+    );
 }

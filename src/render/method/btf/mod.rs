@@ -23,7 +23,7 @@ use glam::Vec3;
 
 pub use crate::render::consts::ATLAS_SIDE;
 use atlas::{AtlasFormat, upload_image};
-pub use atlas::{FORCE_BC_DECODE, atlas_layers};
+pub use atlas::{BC7_ON_CPU_ADAPTERS, atlas_layers};
 pub use billboard::{BillboardGpu, BillboardMode, NO_LIGHT_BLEND};
 pub use prepare::{
     BtfFrame, BtfScene, LevelChoice, NearDrawGpu, PrepareView, SortedBillboards, choose_level,
@@ -101,11 +101,7 @@ impl BtfAssets {
         // Each image has its own mip chain inside its square: down to one texel, or to 4
         // texels for BC7 images (`AtlasFormat::choose`).
         let encodings: Vec<_> = scene.image_sets(baked).map(|(_, s)| s.encoding).collect();
-        let bc_textures = ctx
-            .device
-            .features()
-            .contains(wgpu::Features::TEXTURE_COMPRESSION_BC);
-        let format = AtlasFormat::choose(res, &encodings, bc_textures);
+        let format = AtlasFormat::choose(res, &encodings, atlas::bc7_textures(ctx));
         let mips = format.mips;
         // The tree level's light blends take layers after the baked images, where the GPU
         // allows them and the array can be drawn into (a BC7 array cannot).
