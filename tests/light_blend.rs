@@ -33,9 +33,6 @@ const SIZE: (u32, u32) = (192, 192);
 fn setup(ctx: &GpuContext, random_yaw: bool) -> (Scene, World, Renderer) {
     let mut scene = Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses");
     scene.forest.random_yaw = random_yaw;
-    // The blends are drawn into the BTF texture array, which a BC7 array cannot be: they
-    // are tested on an RGBA8 bake.
-    scene.bake.compress = false;
     let world = scene.build_world().unwrap();
     let cache = std::env::temp_dir()
         .join(format!("canopy-light-blend-test-{}", std::process::id()))
