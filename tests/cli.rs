@@ -485,20 +485,57 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     // One byte changed inside the texel volumes' section (kind 3): refused, naming it.
     let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
     let sections = u32_at(12) as usize;
-    // The format's header: 72 fixed bytes, the section table, the header checksum.
-    let mut at = 76 + 16 * sections;
+    // The format's header: 76 fixed bytes, the section table, the header checksum.
+    let mut at = 80 + 16 * sections;
     let mut texel_section = None;
     let mut impostor_section = None;
+    let mut btf_section = None;
+    let mut vcm_section = None;
     for i in 0..sections {
-        let entry = 72 + 16 * i;
+        let entry = 76 + 16 * i;
         let len = u64::from_le_bytes(bytes[entry + 8..entry + 16].try_into().unwrap()) as usize;
         match u32_at(entry) {
+            1 => btf_section = Some((at, len)),
+            2 => vcm_section = Some((at, len)),
             3 => texel_section = Some((at, len)),
             4 => impostor_section = Some((at, len)),
             _ => {}
         }
         at += len;
     }
+    // The bake is block-compressed by default: BC7 images (encoding byte 1 after the
+    // first record's level), BC4 cube maps. A byte changed in their blocks: refused with
+    // the section's checksum.
+    let compressed = u32_at(72);
+    assert_eq!(compressed, 1, "[bake] compress is on by default");
+    for (section, name) in [(btf_section, "btf image sets"), (vcm_section, "vcm sets")] {
+        let (start, len) = section.expect("the bake has BTF and VCM sections");
+        let record = start + 4;
+        let encoding = if name == "vcm sets" {
+            record + 9
+        } else {
+            record + 5
+        };
+        assert_eq!(bytes[encoding], 1, "{name}: stored compressed");
+        let mut flipped = bytes.clone();
+        flipped[start + len / 2] ^= 0x10;
+        let bad = tmp("bad-blocks.canopy");
+        std::fs::write(&bad, &flipped).unwrap();
+        refused(
+            render(&lone, &bad, "btf"),
+            &format!("({name}) does not match its bytes"),
+        );
+    }
+    // A file of format version 6 (before block compression): refused with the re-bake
+    // hint.
+    let mut old = bytes.clone();
+    old[8..12].copy_from_slice(&6u32.to_le_bytes());
+    let bad = tmp("v6.canopy");
+    std::fs::write(&bad, &old).unwrap();
+    refused(
+        render(&lone, &bad, "btf"),
+        "format version 6, but this canopy reads version 7; re-bake with `canopy bake`",
+    );
     let (start, len) = texel_section.expect("the bake has a texel section");
     let mut flipped = bytes.clone();
     flipped[start + len / 2] ^= 0x40;

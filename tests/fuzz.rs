@@ -169,11 +169,11 @@ fn fix_checksums(b: &mut [u8]) {
     let Some(n) = u32_at(b, 12).map(|n| n as usize).filter(|&n| n <= 64) else {
         return;
     };
-    // The format's header: 72 fixed bytes, then the section table.
-    let table_end = 72 + 16 * n;
+    // The format's header: 76 fixed bytes, then the section table.
+    let table_end = 76 + 16 * n;
     let mut at = table_end + 4;
     for i in 0..n {
-        let entry = 72 + 16 * i;
+        let entry = 76 + 16 * i;
         let Some(len) = b
             .get(entry + 8..entry + 16)
             .map(|s| u64::from_le_bytes(s.try_into().unwrap_or([0; 8])) as usize)
@@ -198,8 +198,8 @@ fn noise(seed: u32, len: usize) -> Vec<u8> {
     (0..len).map(|_| r.next() as u8).collect()
 }
 
-/// Small valid baked files: VCM sets, texel volumes and an impostor, and the same with a
-/// BTF set.
+/// Small valid baked files: VCM sets, texel volumes and an impostor; the same with a BTF
+/// set; and that block-compressed.
 fn baked_seeds() -> Vec<Vec<u8>> {
     let settings = BakeSettings {
         views: 6,
@@ -212,6 +212,7 @@ fn baked_seeds() -> Vec<Vec<u8>> {
         impostor_frames: 4,
         impostor_resolution: 16,
         impostor_layout: OctaLayout::Hemi,
+        compress: false,
     };
     // 4 x 4 frames of 16², 2 levels: (64² + 32²) x 4 bytes an atlas.
     let atlas = (64 * 64 + 32 * 32) * 4;
@@ -230,6 +231,7 @@ fn baked_seeds() -> Vec<Vec<u8>> {
         species: 0,
         owner,
         level,
+        encoding: format::MapEncoding::R8,
         resolution: 8,
         opacity: noise(owner + 3, 48 * 64),
         mean_opacity: [0.5; 8],
@@ -255,6 +257,7 @@ fn baked_seeds() -> Vec<Vec<u8>> {
         btf: vec![BtfImageSet {
             species: 0,
             level: Level::Branch,
+            encoding: format::ImageEncoding::Rgba8,
             views: 6,
             lights: 6,
             resolution: 32,
@@ -266,7 +269,13 @@ fn baked_seeds() -> Vec<Vec<u8>> {
         }],
         ..small.clone()
     };
-    let seeds: Vec<Vec<u8>> = [small, with_btf].iter().map(format::to_bytes).collect();
+    // The same block-compressed: BC7 images, BC4 cube maps.
+    let mut compressed = with_btf.clone();
+    canopy::bake::compress::compress(&mut compressed);
+    let seeds: Vec<Vec<u8>> = [small, with_btf, compressed]
+        .iter()
+        .map(format::to_bytes)
+        .collect();
     for s in &seeds {
         format::from_bytes(s).expect("the seeds are valid baked files");
     }
@@ -328,9 +337,15 @@ fn fuzz_baked(count: u64) -> Outcome {
     let mut o = Outcome::default();
     let t0 = Instant::now();
     for i in 0..count {
-        // Mostly the small seed; one input in 16 from the one with images (150 KB).
-        let k = usize::from(i % 16 == 15);
-        let mut input = mutate(&seeds[k], &seeds[1 - k], &mut rng);
+        // Mostly the small seed; one input in 16 from the one with images (150 KB), one
+        // in 16 from the one with BC7 images and BC4 cube maps.
+        let k = match i % 16 {
+            15 => 1,
+            7 => 2,
+            _ => 0,
+        };
+        let other = if k == 0 { 1 } else { 0 };
+        let mut input = mutate(&seeds[k], &seeds[other], &mut rng);
         if rng.below(2) == 0 {
             fix_checksums(&mut input);
         }

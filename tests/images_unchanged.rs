@@ -35,7 +35,12 @@ const VIEWS: [(&str, [f32; 3], [f32; 3]); 3] = [
 #[test]
 fn every_method_matches_its_references_at_three_distances() {
     let ctx = gpu();
-    let (scene, world) = built(btf_stand());
+    // The references were drawn from an RGBA8 bake. Block compression changes the images
+    // on purpose (btf near: 0.0077 against them); tests/compress.rs bounds that change,
+    // this test keeps guarding the render core against refactors.
+    let mut stand = btf_stand();
+    stand.bake.compress = false;
+    let (scene, world) = built(stand);
     let cache = std::env::temp_dir()
         .join(format!("canopy-images-test-{}", std::process::id()))
         .join("stand.canopy");

@@ -44,10 +44,11 @@ impl PrototypeInfo {
                     settings.views_of(l),
                     settings.lights,
                     settings.resolution,
+                    settings.compress,
                 )
             })
             .sum();
-        let vcm = crate::format::vcm_record_bytes(settings.vcm_resolution);
+        let vcm = crate::format::vcm_record_bytes(settings.vcm_resolution, settings.compress);
         world
             .species
             .par_iter()

@@ -23,6 +23,7 @@ pub fn settings_of(scene: &Scene) -> BakeSettings {
         impostor_frames: scene.bake.impostor_frames,
         impostor_resolution: scene.bake.impostor_resolution,
         impostor_layout: scene.bake.impostor_layout,
+        compress: scene.bake.compress,
     }
 }
 

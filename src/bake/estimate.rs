@@ -91,6 +91,12 @@ fn tree_vcm_seconds(world: &World, objects: u64) -> f64 {
     }
 }
 
+/// Seconds of BC7 encoding per byte of BC7 images (one byte a texel, mips included):
+/// the default forest's 8.9 MB in 0.7 s on these 2 cores (2026-11-27, intel_tex_2's
+/// "alpha ultra fast" profile, with the mips' box filter). The BC4 cube maps take a few
+/// hundredths of a second and are left out.
+const SECONDS_PER_BC7_BYTE: f64 = 8e-8;
+
 /// Trees sampled by [`mean_neighbours`].
 const NEIGHBOUR_SAMPLES: usize = 256;
 
@@ -142,16 +148,19 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
                 settings.views_of(level),
                 settings.lights,
                 settings.resolution,
+                settings.compress,
             )
         })
         .collect();
     let mut vcm = vec![
-        format::vcm_record_bytes(settings.vcm_resolution);
+        format::vcm_record_bytes(settings.vcm_resolution, settings.compress);
         vcm::species_object_count(world) as usize
     ];
     let tree_objects = vcm::tree_object_count(world);
-    let tree_record =
-        format::vcm_record_bytes(vcm::tree_resolution(world, settings.vcm_resolution));
+    let tree_record = format::vcm_record_bytes(
+        vcm::tree_resolution(world, settings.vcm_resolution),
+        settings.compress,
+    );
     vcm.extend(std::iter::repeat_n(tree_record, tree_objects as usize));
     let texels: Vec<u64> = world
         .species
@@ -181,14 +190,16 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
         (btf.iter().sum(), vcm.iter().sum(), texels.iter().sum());
     let impostor_bytes: u64 = impostors.iter().sum();
     // In memory: the bake itself, the BTF texture array and the texel 3D texture with their
-    // mipmaps (4/3 and 8/7), and the VCM shading's own copy.
+    // mipmaps (4/3 and 8/7; BC7 images hold their mips already), and the VCM shading's own
+    // copy (a byte a texel: twice the BC4 bytes).
     // The impostors' mips are in their bytes already.
-    let memory_bytes = VIEWER_BASE_BYTES
-        + file_bytes
-        + btf_bytes * 4 / 3
-        + texel_bytes * 8 / 7
-        + vcm_bytes
-        + impostor_bytes;
+    let (btf_gpu, vcm_copy) = if settings.compress {
+        (btf_bytes, vcm_bytes * 2)
+    } else {
+        (btf_bytes * 4 / 3, vcm_bytes)
+    };
+    let memory_bytes =
+        VIEWER_BASE_BYTES + file_bytes + btf_gpu + texel_bytes * 8 / 7 + vcm_copy + impostor_bytes;
     let pixels = (f64::from(settings.resolution) * f64::from(settings.supersample) / 256.0).powi(2);
     let texel_passes = texel::step_count(world, settings.texel_resolution, settings.lights) as f64;
     let texel_scale = (f64::from(settings.texel_resolution) / 64.0).powi(2);
@@ -227,7 +238,12 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
         + image_seconds * pixels.max(0.1)
         + tree_vcm_seconds(world, tree_objects)
         + vcm::species_object_count(world) as f64 * SECONDS_PER_VCM_OBJECT
-        + texel_passes * SECONDS_PER_TEXEL_PASS * texel_scale;
+        + texel_passes * SECONDS_PER_TEXEL_PASS * texel_scale
+        + if settings.compress {
+            btf_bytes as f64 * SECONDS_PER_BC7_BYTE
+        } else {
+            0.0
+        };
     Ok(Estimate {
         file_bytes,
         btf_bytes,
@@ -329,16 +345,32 @@ mod tests {
         // The records, their section's record count and its table entry.
         assert_eq!(n.file_bytes, e.file_bytes - e.impostor_bytes - 4 - 16);
         assert!((e.seconds - n.seconds - e.impostor_seconds).abs() < 1e-9);
-        // Forest cells: 8 corners x 6 faces x 16² each, one cell for a tree or a few.
+        // Forest cells: 8 corners x 6 faces x 16² each in BC4 (half a byte a texel), one
+        // cell for a tree or a few.
         assert!(e.tree_vcm_objects > 0 && e.tree_vcm_objects <= 1000);
-        assert_eq!(e.tree_vcm_bytes, e.tree_vcm_objects * (56 + 12_288));
+        assert_eq!(e.tree_vcm_bytes, e.tree_vcm_objects * (56 + 6_144));
+        // Uncompressed: a byte a texel, BTF images RGBA8 without mips.
+        let raw = estimate(
+            &BakeSettings {
+                compress: false,
+                ..settings()
+            },
+            &w,
+        )
+        .unwrap();
+        assert_eq!(raw.tree_vcm_bytes, e.tree_vcm_objects * (56 + 12_288));
+        // BC7 with its mips (64² down to 4²): 5,456 bytes an image against 16,384; each of
+        // the 6 records (2 species x 3 levels) has 56 bytes of fields.
+        let images = (raw.btf_bytes - 6 * 56) / (64 * 64 * 4);
+        assert_eq!(raw.btf_bytes, images * 64 * 64 * 4 + 6 * 56);
+        assert_eq!(e.btf_bytes, images * 5_456 + 6 * 56);
         assert!(e.vcm_bytes > e.tree_vcm_bytes);
         // One set per tree: 8 corners x 6 faces x 32² each.
         let mut per_tree = w.clone();
         per_tree.tree_vcm = crate::model::TreeVcm::PerTree;
         let p = estimate(&settings(), &per_tree).unwrap();
         assert_eq!(p.tree_vcm_objects, 1000);
-        assert!(p.tree_vcm_bytes >= 1000 * 49_152);
+        assert!(p.tree_vcm_bytes >= 1000 * 24_576);
         assert!(e.memory_bytes > VIEWER_BASE_BYTES + e.file_bytes);
         // Measured: 65 s without impostors (lavapipe, 2 cores); the impostors' 2 x 144
         // frames estimated at 42 s (measured: 29 % of a bake, docs/RESULTS.md).

@@ -10,6 +10,7 @@
 
 pub mod atlas;
 pub mod cache;
+pub mod compress;
 pub mod estimate;
 pub mod impostor;
 pub mod report;
@@ -97,6 +98,8 @@ pub struct BakeTimes {
     pub vcm_seconds: f64,
     pub texel_seconds: f64,
     pub impostor_seconds: f64,
+    /// The block compression of the images and cube maps (0 when `[bake] compress` is off).
+    pub compress: compress::CompressTimes,
     /// Seconds per stage, named as the progress names them (`fir 1 tree`, `fir 1 VCMs`,
     /// `tree VCMs`, `fir 1 texel volume`, `fir 1 impostor`), in the order they ran.
     pub stages: Vec<(String, f64)>,
@@ -205,12 +208,19 @@ pub fn bake(
             what: what.to_owned(),
         })
     })?;
+    let impostor_seconds = t3.elapsed().as_secs_f64();
+    let compress = if settings.compress {
+        compress::compress(&mut baked)
+    } else {
+        compress::CompressTimes::default()
+    };
     let times = BakeTimes {
         seconds: t0.elapsed().as_secs_f64(),
         btf_seconds,
         vcm_seconds,
         texel_seconds,
-        impostor_seconds: t3.elapsed().as_secs_f64(),
+        impostor_seconds,
+        compress,
         stages: clock.stages,
     };
     Ok((baked, times))
@@ -311,6 +321,7 @@ pub fn bake_btf(
             // Each view's sky-lit image, then each view's ground-lit image.
             ambient.extend_from_slice(&ground);
             btf.push(BtfImageSet {
+                encoding: crate::format::ImageEncoding::Rgba8,
                 species: s as u32,
                 level,
                 views: views.len() as u32,

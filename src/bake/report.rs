@@ -55,6 +55,11 @@ pub struct BakeReport {
     pub lights: u32,
     pub resolution: u32,
     pub supersample: u32,
+    /// Whether the images are block-compressed (BTF BC7, cube maps BC4), and the seconds
+    /// that took for each.
+    pub compressed: bool,
+    pub compress_btf_seconds: f64,
+    pub compress_vcm_seconds: f64,
     /// One per BTF image set.
     pub sets: Vec<SetReport>,
 }
@@ -195,6 +200,9 @@ impl BakeReport {
             lights: settings.lights,
             resolution: settings.resolution,
             supersample: settings.supersample,
+            compressed: settings.compress,
+            compress_btf_seconds: times.compress.btf_seconds,
+            compress_vcm_seconds: times.compress.vcm_seconds,
             sets,
         }
     }

@@ -206,6 +206,7 @@ pub fn bake_vcm(
                         let (opacity, mean_opacity) =
                             bake_corners(raster, bounds, *m, &occluders, None);
                         VcmSet {
+                            encoding: crate::format::MapEncoding::R8,
                             species: s as u32,
                             owner: first_owner + i as u32,
                             level,
@@ -342,6 +343,7 @@ fn bake_trees(
                         Some(&world.terrain),
                     );
                     Ok(VcmSet {
+                        encoding: crate::format::MapEncoding::R8,
                         species: inst.species,
                         owner: i as u32,
                         level: Level::Tree,
@@ -408,6 +410,7 @@ fn bake_cells(
                         Some(&world.terrain),
                     );
                     VcmSet {
+                        encoding: crate::format::MapEncoding::R8,
                         species: VCM_CELL_SPECIES,
                         owner: c as u32,
                         level: Level::Tree,

@@ -129,6 +129,14 @@ pub fn bake(args: BakeArgs) -> anyhow::Result<()> {
                 i.species, i.bytes, i.radius_m, i.seconds
             );
         }
+        if r.compressed {
+            println!(
+                "  block-compressed: BTF images in BC7 (with their mips) {:.1} s, cube maps in BC4 {:.1} s",
+                r.compress_btf_seconds, r.compress_vcm_seconds
+            );
+        } else {
+            println!("  not block-compressed ([bake] compress = false)");
+        }
         println!("wrote {} ({} bytes)", r.out, r.file_bytes);
     }
     Ok(())

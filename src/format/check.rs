@@ -100,20 +100,24 @@ impl BtfImageSet {
         let expected = self.expected_direct_len();
         if expected != Some(direct_len) {
             return Some(format!(
-                "direct holds {direct_len} bytes, expected {} ({} views x {} lights x {}² x 4)",
+                "direct holds {direct_len} bytes, expected {} ({} views x {} lights x {} bytes \
+                 an image of {}² in {:?})",
                 show_len(expected),
                 self.views,
                 self.lights,
-                self.resolution
+                show_len(self.image_bytes()),
+                self.resolution,
+                self.encoding
             ));
         }
         let expected = self.expected_ambient_len();
         if expected != Some(ambient_len) {
             return Some(format!(
-                "ambient holds {ambient_len} bytes, expected {} ({AMBIENT_IMAGES_PER_VIEW} x {} views x {}² x 4)",
+                "ambient holds {ambient_len} bytes, expected {} ({AMBIENT_IMAGES_PER_VIEW} x {} views \
+                 x {} bytes an image)",
                 show_len(expected),
                 self.views,
-                self.resolution
+                show_len(self.image_bytes()),
             ));
         }
         None
@@ -142,9 +146,12 @@ impl VcmSet {
         let expected = self.expected_opacity_len();
         if expected != Some(opacity_len) {
             return Some(format!(
-                "opacity holds {opacity_len} bytes, expected {} (8 corners x 6 faces x {}²)",
+                "opacity holds {opacity_len} bytes, expected {} (8 corners x 6 faces x {} bytes \
+                 a face of {}² in {:?})",
                 show_len(expected),
-                self.resolution
+                show_len(self.face_bytes()),
+                self.resolution,
+                self.encoding
             ));
         }
         None

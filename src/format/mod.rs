@@ -2,17 +2,17 @@
 //! texel volumes, octahedral impostors),
 //! in one versioned, checksummed file that the viewer caches and validates on load.
 //!
-//! # Byte layout (format version 6)
+//! # Byte layout (format version 7)
 //!
 //! All integers are little-endian, `f32` is IEEE 754 binary32 (little-endian bits). Offsets
 //! are in bytes. There is no padding anywhere.
 //!
 //! ```text
-//! HEADER (76 + 16*N bytes)
+//! HEADER (80 + 16*N bytes)
 //!   off  size  field
 //!    0     8   magic           "CANOPY\r\n" (43 41 4E 4F 50 59 0D 0A); the CR LF pair catches
 //!                              a file whose line endings were converted in transfer
-//!    8     4   version         u32, 6
+//!    8     4   version         u32, 7
 //!   12     4   section_count   u32 N, at most MAX_SECTIONS (4096)
 //!   16     8   file_size       u64, total length of the file in bytes, header included
 //!   24     8   scene_hash      u64, hash of the scene text + bake settings (from the caller)
@@ -31,17 +31,20 @@
 //!                              octahedral impostor                  |
 //!   64     4   impostor_resolution u32, one of 16, 32, 64, 128, 256 |
 //!                              (pixels a frame side)                |
-//!   68     4   impostor_layout u32, 0 = full sphere, 1 = upper     /
+//!   68     4   impostor_layout u32, 0 = full sphere, 1 = upper     |
 //!                              hemisphere (`crate::sphere::OctaLayout`)
-//!   72  16*N   section table, one 16-byte entry per section, in file order:
+//!   72     4   compress        u32, 0 or 1: the bake stores its     /
+//!                              BTF images in BC7 and its cube maps in BC4 (each record
+//!                              says how it is stored: the reader goes by the records)
+//!   76  16*N   section table, one 16-byte entry per section, in file order:
 //!                +0  u32 kind      1 = BTF image sets, 2 = VCM sets, 3 = texel volumes,
 //!                                  4 = impostors (0 and others invalid)
 //!                +4  u32 crc32     CRC-32 (IEEE, as crc32fast) of the section's payload
 //!                +8  u64 length    payload length in bytes, 4..=MAX_SECTION_BYTES (1 GiB)
-//!   72+16N  4  header_crc      u32, CRC-32 of header bytes [0, 72+16N)
+//!   76+16N  4  header_crc      u32, CRC-32 of header bytes [0, 76+16N)
 //!
 //! PAYLOADS: the N section payloads, back to back in table order, starting right after
-//! header_crc; their lengths sum to exactly file_size - (76 + 16N) and the file ends there.
+//! header_crc; their lengths sum to exactly file_size - (80 + 16N) and the file ends there.
 //!
 //! SECTION PAYLOAD (any kind)
 //!    0     4   record_count    u32 R
@@ -50,19 +53,28 @@
 //! BTF IMAGE SET RECORD (kind 1; 56 bytes + image data)
 //!    0     4   species         u32
 //!    4     1   level           u8, 0 = twig, 1 = branch, 2 = tree
-//!    5     3   reserved        must be 0
+//!    5     1   encoding        u8, 0 = RGBA8 (level 0 only), 1 = BC7 (each image its mip
+//!                              chain, see below)
+//!    6     2   reserved        must be 0
 //!    8     4   views           u32, one of 6, 18, 66, 258
 //!   12     4   lights          u32, one of 6, 18, 66, 258
 //!   16     4   resolution      u32, one of 32, 64, 128
 //!   20    12   center          3 x f32, finite (bounding-sphere centre, object frame)
 //!   32     4   radius          f32, finite, > 0
 //!   36     4   texel_size      f32, finite, > 0
-//!   40     8   direct_len      u64, must equal views*lights*resolution²*4
-//!   48     D   direct          RGBA8 premultiplied, view-major: image (v, l) at
-//!                              (v*lights + l) * resolution² * 4
-//!   48+D   8   ambient_len     u64, must equal 2*views*resolution²*4
-//!   56+D   A   ambient         RGBA8 premultiplied: the sky-lit image of each view, then
+//!   40     8   direct_len      u64, must equal views*lights*I, I the bytes of one image:
+//!                              resolution²*4 (RGBA8), or its BC7 chain (below)
+//!   48     D   direct          premultiplied images, view-major: image (v, l) at
+//!                              (v*lights + l) * I
+//!   48+D   8   ambient_len     u64, must equal 2*views*I
+//!   56+D   A   ambient         premultiplied: the sky-lit image of each view, then
 //!                              the ground-lit image of each view (v at v, and at views + v)
+//!
+//!   A BC7 image is its mip chain, level 0 first, down to the level of 4 texels a side
+//!   (`bc::bc_mip_levels`: resolution 64 has 64, 32, 16, 8, 4); level m is
+//!   (resolution >> m)² / 16 blocks of 16 bytes, row by row, each made from the RGBA8
+//!   level m (level 0 the baked image, each next one its 2x2 box filter in linear light,
+//!   as the viewer makes the mips of an RGBA8 set), so I = sum of (resolution >> m)² bytes.
 //!
 //! VCM SET RECORD (kind 2; 56 bytes + opacity data)
 //!    0     4   species         u32; 0xFFFFFFFF (VCM_CELL_SPECIES, level tree) marks the cube
@@ -72,12 +84,16 @@
 //!                              twig of its reference main branch, numbered on past them
 //!                              through the trunk's twigs
 //!    8     1   level           u8, 0 = twig, 1 = branch, 2 = tree
-//!    9     3   reserved        must be 0
+//!    9     1   encoding        u8, 0 = R8, 1 = BC4
+//!   10     2   reserved        must be 0
 //!   12     4   resolution      u32, 8..=128
 //!   16    32   mean_opacity    8 x f32, finite, in [0, 1], one per corner
-//!   48     8   opacity_len     u64, must equal 8*6*resolution²
-//!   56     O   opacity         u8 per texel: 8 corners x 6 cube faces x resolution², each
-//!                              face res rows of res texels (see `crate::vcm` for the layout)
+//!   48     8   opacity_len     u64, must equal 8*6*F, F the bytes of one face:
+//!                              resolution² (R8) or ceil(resolution/4)² * 8 (BC4)
+//!   56     O   opacity         8 corners x 6 cube faces, each face res rows of res texels
+//!                              (see `crate::vcm` for the layout): a byte per texel (R8), or
+//!                              the face's BC4 blocks row by row, a face whose side is not a
+//!                              multiple of 4 padded with its last row and column
 //!
 //! TEXEL VOLUME RECORD (kind 3; 44 bytes + voxel data)
 //!    0     4   species         u32
@@ -161,6 +177,7 @@ use std::path::PathBuf;
 use crate::model::Level;
 use crate::sphere::OctaLayout;
 
+pub mod bc;
 mod check;
 mod plan;
 mod read;
@@ -180,7 +197,7 @@ pub const MAGIC: [u8; 8] = *b"CANOPY\r\n";
 /// cell's index in `crate::vcm::cells::ForestCells`), not one tree's.
 pub const VCM_CELL_SPECIES: u32 = u32::MAX;
 /// The format version this code writes and the only one it reads.
-pub const VERSION: u32 = 6;
+pub const VERSION: u32 = 7;
 /// Ambient images per view in a BTF image set: lit by the sky alone, then by the light the
 /// ground sends up alone (the two halves of the renderer's hemispherical ambient).
 pub const AMBIENT_IMAGES_PER_VIEW: u32 = 2;
@@ -212,9 +229,9 @@ pub const IMPOSTOR_RESOLUTIONS: [u32; 5] = [16, 32, 64, 128, 256];
 pub const IMPOSTOR_MIN_MIP_SIDE: u32 = 4;
 
 /// Bytes of the header before the section table.
-const FIXED_HEADER_BYTES: usize = 72;
+const FIXED_HEADER_BYTES: usize = 76;
 /// Words of the settings in the header (from offset 32).
-const SETTINGS_WORDS: usize = 10;
+const SETTINGS_WORDS: usize = 11;
 /// Bytes of one section-table entry.
 const SECTION_ENTRY_BYTES: usize = 16;
 /// Bytes of a section payload before its records (the record count).
@@ -236,6 +253,7 @@ const SETTINGS_TEXEL_RESOLUTION: &str = "0 (none) or 16 to 256";
 const SETTINGS_IMPOSTOR_FRAMES: &str = "0 (none) or 4 to 32";
 const SETTINGS_IMPOSTOR_RESOLUTION: &str = "16, 32, 64, 128 or 256";
 const SETTINGS_IMPOSTOR_LAYOUT: &str = "0 (full) or 1 (hemi)";
+const SETTINGS_COMPRESS: &str = "0 (no) or 1 (yes)";
 
 /// Everything that can go wrong reading or writing a `.canopy` file. Every variant but
 /// [`FormatError::Io`] means the file (or the data given to write) is unusable and the
@@ -387,6 +405,8 @@ pub struct BakeSettings {
     pub impostor_resolution: u32,
     /// The directions the impostor frames cover.
     pub impostor_layout: OctaLayout,
+    /// Whether the bake block-compresses its BTF images (BC7) and cube maps (BC4).
+    pub compress: bool,
 }
 
 /// The billboard images of one species at one level.
@@ -405,13 +425,73 @@ pub struct BtfImageSet {
     /// Largest world size of one texel of this level's images (G_max in the thesis' LOD
     /// criterion).
     pub texel_size: f32,
-    /// RGBA8 premultiplied, views*lights images of resolution², view-major: image (v, l)
-    /// starts at ((v*lights + l) * res*res*4).
+    /// How `direct` and `ambient` hold their images.
+    pub encoding: ImageEncoding,
+    /// Premultiplied, views*lights images of resolution², view-major: image (v, l) starts
+    /// at (v*lights + l) * [`Self::image_bytes`].
     pub direct: Vec<u8>,
-    /// RGBA8 premultiplied, [`AMBIENT_IMAGES_PER_VIEW`] x views images of resolution²:
-    /// each view's image under the sky light only, then each view's under the ground's
-    /// light only.
+    /// Premultiplied, [`AMBIENT_IMAGES_PER_VIEW`] x views images of resolution²: each
+    /// view's image under the sky light only, then each view's under the ground's light
+    /// only.
     pub ambient: Vec<u8>,
+}
+
+/// How a BTF set stores each image.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ImageEncoding {
+    /// RGBA8 sRGB, level 0 alone (the viewer makes the mips).
+    #[default]
+    Rgba8,
+    /// BC7, the mip chain down to 4 texels a side ([`bc::bc7_chain_bytes`]).
+    Bc7,
+}
+
+impl ImageEncoding {
+    /// The byte that stores it in a record.
+    pub fn tag(self) -> u8 {
+        match self {
+            ImageEncoding::Rgba8 => 0,
+            ImageEncoding::Bc7 => 1,
+        }
+    }
+
+    /// The encoding stored as `tag`, if any.
+    pub fn from_tag(tag: u8) -> Option<Self> {
+        match tag {
+            0 => Some(ImageEncoding::Rgba8),
+            1 => Some(ImageEncoding::Bc7),
+            _ => None,
+        }
+    }
+}
+
+/// How a VCM set stores its opacity.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MapEncoding {
+    /// A byte per texel.
+    #[default]
+    R8,
+    /// BC4, each face on its own ([`bc::bc4_bytes`]).
+    Bc4,
+}
+
+impl MapEncoding {
+    /// The byte that stores it in a record.
+    pub fn tag(self) -> u8 {
+        match self {
+            MapEncoding::R8 => 0,
+            MapEncoding::Bc4 => 1,
+        }
+    }
+
+    /// The encoding stored as `tag`, if any.
+    pub fn from_tag(tag: u8) -> Option<Self> {
+        match tag {
+            0 => Some(MapEncoding::R8),
+            1 => Some(MapEncoding::Bc4),
+            _ => None,
+        }
+    }
 }
 
 /// The visibility cube maps at the 8 bounding-box corners of one object.
@@ -422,7 +502,10 @@ pub struct VcmSet {
     pub owner: u32,
     pub level: Level,
     pub resolution: u32,
-    /// 8 corners x 6 faces x resolution² opacity bytes, corner-major then face-major.
+    /// How `opacity` holds its faces.
+    pub encoding: MapEncoding,
+    /// 8 corners x 6 faces of resolution² opacity texels, corner-major then face-major:
+    /// a byte each ([`MapEncoding::R8`]), or each face's BC4 blocks.
     pub opacity: Vec<u8>,
     /// Mean opacity of each corner's cube map, in [0, 1].
     pub mean_opacity: [f32; 8],
@@ -537,6 +620,7 @@ impl BakeSettings {
             self.impostor_frames,
             self.impostor_resolution,
             self.impostor_layout.tag(),
+            u32::from(self.compress),
         ]
     }
 
@@ -550,6 +634,17 @@ impl BakeSettings {
                 allowed: SETTINGS_IMPOSTOR_LAYOUT,
             });
         };
+        let compress = match w[10] {
+            0 => false,
+            1 => true,
+            value => {
+                return Err(FormatError::InvalidSettings {
+                    field: "compress",
+                    value,
+                    allowed: SETTINGS_COMPRESS,
+                });
+            }
+        };
         Ok(Self {
             views: w[0],
             lights: w[1],
@@ -561,6 +656,7 @@ impl BakeSettings {
             impostor_frames: w[7],
             impostor_resolution: w[8],
             impostor_layout,
+            compress,
         })
     }
 
@@ -574,18 +670,74 @@ impl BakeSettings {
 }
 
 impl BtfImageSet {
-    /// The length `direct` must have: views*lights*resolution²*4, or None on overflow.
+    /// Bytes of one image as the set stores it: resolution²*4 (RGBA8) or its BC7 mip
+    /// chain; None on overflow or a resolution the format does not allow.
+    pub fn image_bytes(&self) -> Option<u64> {
+        match self.encoding {
+            ImageEncoding::Rgba8 => image_bytes(self.resolution),
+            ImageEncoding::Bc7 => BTF_RESOLUTIONS
+                .contains(&self.resolution)
+                .then(|| bc::bc7_chain_bytes(self.resolution)),
+        }
+    }
+
+    /// The length `direct` must have: views*lights*[`Self::image_bytes`], or None on
+    /// overflow.
     pub fn expected_direct_len(&self) -> Option<u64> {
-        image_bytes(self.resolution)?
+        self.image_bytes()?
             .checked_mul(u64::from(self.views))?
             .checked_mul(u64::from(self.lights))
     }
 
-    /// The length `ambient` must have: 2*views*resolution²*4, or None on overflow.
+    /// The length `ambient` must have: 2*views*[`Self::image_bytes`], or None on overflow.
     pub fn expected_ambient_len(&self) -> Option<u64> {
-        image_bytes(self.resolution)?
+        self.image_bytes()?
             .checked_mul(u64::from(self.views))?
             .checked_mul(u64::from(AMBIENT_IMAGES_PER_VIEW))
+    }
+
+    /// Every image as stored, direct images first, then the ambient ones (the order the
+    /// viewer numbers them in).
+    pub fn images(&self) -> impl Iterator<Item = &[u8]> {
+        let n = self.image_bytes().unwrap_or(0).max(1) as usize;
+        self.direct
+            .chunks_exact(n)
+            .chain(self.ambient.chunks_exact(n))
+    }
+
+    /// The RGBA8 level 0 of one stored image (from [`Self::images`]): itself, or its BC7
+    /// level 0 decoded; None when it has not the size of one image.
+    pub fn rgba(&self, image: &[u8]) -> Option<std::borrow::Cow<'_, [u8]>> {
+        let res = self.resolution;
+        match self.encoding {
+            ImageEncoding::Rgba8 => (Some(image.len() as u64) == image_bytes(res))
+                .then(|| std::borrow::Cow::Owned(image.to_vec())),
+            ImageEncoding::Bc7 => {
+                let levels = bc::bc7_levels(image, res)?;
+                bc::decode_bc7(levels.first()?.1, res, res).map(std::borrow::Cow::Owned)
+            }
+        }
+    }
+
+    /// The ambient images as RGBA8 level 0 (decoded when BC7), None when they do not hold
+    /// what the set's fields say.
+    pub fn ambient_rgba(&self) -> Option<std::borrow::Cow<'_, [u8]>> {
+        if self.expected_ambient_len() != Some(self.ambient.len() as u64) {
+            return None;
+        }
+        match self.encoding {
+            ImageEncoding::Rgba8 => Some(std::borrow::Cow::Borrowed(&self.ambient)),
+            ImageEncoding::Bc7 => {
+                let n = self.image_bytes()? as usize;
+                let mut out = Vec::with_capacity(
+                    self.ambient.len() / n.max(1) * image_bytes(self.resolution)? as usize,
+                );
+                for image in self.ambient.chunks_exact(n) {
+                    out.extend_from_slice(&self.rgba(image)?);
+                }
+                Some(std::borrow::Cow::Owned(out))
+            }
+        }
     }
 }
 
@@ -595,20 +747,19 @@ impl crate::vcm::billboard::AlphaSet {
     /// checking that its ambient images hold what its fields say. Defined here rather than
     /// in `vcm`, which sits below this file format.
     pub fn new(set: &BtfImageSet) -> crate::Result<Self> {
-        let expected = set.expected_ambient_len();
-        if expected != Some(set.ambient.len() as u64) {
+        let Some(ambient) = set.ambient_rgba() else {
             return Err(crate::Error::BadInput(format!(
                 "BTF set of species {} level {:?}: ambient images hold {} bytes, expected {:?}",
                 set.species,
                 set.level,
                 set.ambient.len(),
-                expected
+                set.expected_ambient_len()
             )));
-        }
+        };
         Self::from_sky_lit(
             set.views,
             set.resolution,
-            &set.ambient,
+            &ambient,
             glam::Vec3::from(set.center),
             set.radius,
         )
@@ -617,11 +768,44 @@ impl crate::vcm::billboard::AlphaSet {
 }
 
 impl VcmSet {
-    /// The length `opacity` must have: 8*6*resolution², or None on overflow.
+    /// Bytes of one face as stored: resolution² (R8) or its BC4 blocks; None on overflow.
+    pub fn face_bytes(&self) -> Option<u64> {
+        match self.encoding {
+            MapEncoding::R8 => u64::from(self.resolution).checked_mul(u64::from(self.resolution)),
+            MapEncoding::Bc4 => {
+                let blocks = u64::from(bc::blocks_along(self.resolution));
+                blocks
+                    .checked_mul(blocks)?
+                    .checked_mul(bc::BC4_BLOCK_BYTES as u64)
+            }
+        }
+    }
+
+    /// The length `opacity` must have: 8*6*[`Self::face_bytes`], or None on overflow.
     pub fn expected_opacity_len(&self) -> Option<u64> {
-        u64::from(self.resolution)
-            .checked_mul(u64::from(self.resolution))?
+        self.face_bytes()?
             .checked_mul((VCM_CORNERS * CUBE_FACES) as u64)
+    }
+
+    /// The opacity a byte per texel (decoded when BC4), None when `opacity` does not hold
+    /// what the set's fields say.
+    pub fn opacity_r8(&self) -> Option<std::borrow::Cow<'_, [u8]>> {
+        if self.expected_opacity_len() != Some(self.opacity.len() as u64) {
+            return None;
+        }
+        match self.encoding {
+            MapEncoding::R8 => Some(std::borrow::Cow::Borrowed(&self.opacity)),
+            MapEncoding::Bc4 => {
+                let res = self.resolution;
+                let face = self.face_bytes()? as usize;
+                let mut out =
+                    Vec::with_capacity(VCM_CORNERS * CUBE_FACES * res as usize * res as usize);
+                for blocks in self.opacity.chunks_exact(face.max(1)) {
+                    out.extend_from_slice(&bc::decode_bc4(blocks, res, res)?);
+                }
+                Some(std::borrow::Cow::Owned(out))
+            }
+        }
     }
 }
 

@@ -37,16 +37,27 @@ pub fn impostor_record_bytes(frames: u32, resolution: u32, mip_levels: u32) -> u
         .map_or(u64::MAX, |a| a.saturating_add(IMPOSTOR_RECORD_FIXED_BYTES))
 }
 
-/// Bytes of a BTF image-set record of these sizes.
-pub fn btf_record_bytes(views: u32, lights: u32, resolution: u32) -> u64 {
-    let image = u64::from(resolution).pow(2) * 4;
+/// Bytes of a BTF image-set record of these sizes, its images in RGBA8 or (`compress`)
+/// as BC7 mip chains.
+pub fn btf_record_bytes(views: u32, lights: u32, resolution: u32, compress: bool) -> u64 {
+    let image = if compress {
+        bc::bc7_chain_bytes(resolution)
+    } else {
+        u64::from(resolution).pow(2) * 4
+    };
     let per_view = u64::from(lights) + u64::from(AMBIENT_IMAGES_PER_VIEW);
     BTF_RECORD_FIXED_BYTES + u64::from(views) * per_view * image
 }
 
-/// Bytes of a VCM set record (8 corners x 6 faces) of this face resolution.
-pub fn vcm_record_bytes(resolution: u32) -> u64 {
-    VCM_RECORD_FIXED_BYTES + 8 * 6 * u64::from(resolution).pow(2)
+/// Bytes of a VCM set record (8 corners x 6 faces) of this face resolution, a byte a
+/// texel or (`compress`) in BC4.
+pub fn vcm_record_bytes(resolution: u32, compress: bool) -> u64 {
+    let face = if compress {
+        bc::bc4_bytes(resolution, resolution)
+    } else {
+        u64::from(resolution).pow(2)
+    };
+    VCM_RECORD_FIXED_BYTES + 8 * 6 * face
 }
 
 /// Bytes of a texel volume record with `lights` light volumes (and the sky's) of `dims`.
@@ -152,16 +163,21 @@ mod tests {
 
     #[test]
     fn the_file_size_is_known_from_the_record_sizes_alone() {
-        for b in [sample(), small()] {
+        let mut compressed = sample();
+        crate::bake::compress::compress(&mut compressed);
+        for b in [sample(), small(), compressed] {
             let btf: Vec<u64> = b
                 .btf
                 .iter()
-                .map(|s| btf_record_bytes(s.views, s.lights, s.resolution))
+                .map(|s| {
+                    let bc7 = s.encoding == ImageEncoding::Bc7;
+                    btf_record_bytes(s.views, s.lights, s.resolution, bc7)
+                })
                 .collect();
             let vcm: Vec<u64> = b
                 .vcm
                 .iter()
-                .map(|s| vcm_record_bytes(s.resolution))
+                .map(|s| vcm_record_bytes(s.resolution, s.encoding == MapEncoding::Bc4))
                 .collect();
             let texel: Vec<u64> = b
                 .texels
@@ -179,7 +195,7 @@ mod tests {
             );
         }
         // 258 views x 258 lights at 128² is one 4.4 GB record: no section holds it.
-        let huge = btf_record_bytes(258, 258, 128);
+        let huge = btf_record_bytes(258, 258, 128, false);
         assert_eq!(file_bytes_for(&[huge], &[], &[], &[]), Err(huge));
         // The largest impostor (32 x 32 frames of 256², every level) fits a section.
         let most = impostor_record_bytes(32, 256, impostor_mip_levels(256));

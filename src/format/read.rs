@@ -338,20 +338,22 @@ impl<R: Read> Section<'_, '_, R> {
         self.array(what).map(f32::from_le_bytes)
     }
 
-    /// The level byte and the 3 reserved bytes after it.
-    fn level(&mut self) -> Result<Level, FormatError> {
-        let [tag, r0, r1, r2] = self.array("a level")?;
-        if [r0, r1, r2] != [0; 3] {
+    /// The level byte, the encoding byte and the 2 reserved bytes after them: the level
+    /// and the encoding's tag.
+    fn level(&mut self) -> Result<(Level, u8), FormatError> {
+        let [tag, encoding, r0, r1] = self.array("a level")?;
+        if [r0, r1] != [0; 2] {
             return Err(self.malformed(format!(
                 "the reserved bytes after a level are {:?}, not zero",
-                [r0, r1, r2]
+                [r0, r1]
             )));
         }
-        level_from_tag(tag).ok_or_else(|| {
+        let level = level_from_tag(tag).ok_or_else(|| {
             self.malformed(format!(
                 "level {tag} is not 0 (twig), 1 (branch) or 2 (tree)"
             ))
-        })
+        })?;
+        Ok((level, encoding))
     }
 
     /// A byte vector of `len` bytes, checked against the section before allocating.
@@ -397,9 +399,17 @@ fn decode_btf<R: Read>(
 ) -> Result<(), FormatError> {
     let count = s.record_count(BTF_RECORD_FIXED_BYTES)?;
     for index in 0..count {
+        let species = s.u32("species")?;
+        let (level, tag) = s.level()?;
+        let Some(encoding) = ImageEncoding::from_tag(tag) else {
+            return Err(s.malformed(format!(
+                "btf record {index} (species {species}): encoding {tag} is not 0 (RGBA8) or 1 (BC7)"
+            )));
+        };
         let mut set = BtfImageSet {
-            species: s.u32("species")?,
-            level: s.level()?,
+            species,
+            level,
+            encoding,
             views: s.u32("views")?,
             lights: s.u32("lights")?,
             resolution: s.u32("resolution")?,
@@ -443,10 +453,19 @@ fn decode_vcm<R: Read>(
 ) -> Result<(), FormatError> {
     let count = s.record_count(VCM_RECORD_FIXED_BYTES)?;
     for index in 0..count {
+        let species = s.u32("species")?;
+        let owner = s.u32("owner")?;
+        let (level, tag) = s.level()?;
+        let Some(encoding) = MapEncoding::from_tag(tag) else {
+            return Err(s.malformed(format!(
+                "vcm record {index} (owner {owner}): encoding {tag} is not 0 (R8) or 1 (BC4)"
+            )));
+        };
         let mut set = VcmSet {
-            species: s.u32("species")?,
-            owner: s.u32("owner")?,
-            level: s.level()?,
+            species,
+            owner,
+            level,
+            encoding,
             resolution: s.u32("resolution")?,
             opacity: Vec::new(),
             mean_opacity: [0.0; 8],

@@ -107,6 +107,7 @@ pub(crate) fn settings() -> BakeSettings {
         impostor_frames: 4,
         impostor_resolution: 16,
         impostor_layout: OctaLayout::Full,
+        compress: false,
     }
 }
 
@@ -144,6 +145,7 @@ pub(crate) fn btf_set(species: u32, level: Level) -> BtfImageSet {
     BtfImageSet {
         species,
         level,
+        encoding: ImageEncoding::Rgba8,
         views,
         lights,
         resolution: res,
@@ -163,6 +165,7 @@ pub(crate) fn vcm_set(owner: u32, level: Level, resolution: u32) -> VcmSet {
         species: 0,
         owner,
         level,
+        encoding: MapEncoding::R8,
         resolution,
         opacity: noise(owner + 100, 48 * (resolution * resolution) as usize),
         mean_opacity: [0.0, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 1.0],

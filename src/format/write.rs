@@ -34,7 +34,7 @@ fn write_section_payload<W: Write + ?Sized>(
         SectionKind::Btf => {
             for s in &baked.btf[range] {
                 w.write_all(&s.species.to_le_bytes())?;
-                w.write_all(&[level_tag(s.level), 0, 0, 0])?;
+                w.write_all(&[level_tag(s.level), s.encoding.tag(), 0, 0])?;
                 w.write_all(&s.views.to_le_bytes())?;
                 w.write_all(&s.lights.to_le_bytes())?;
                 w.write_all(&s.resolution.to_le_bytes())?;
@@ -53,7 +53,7 @@ fn write_section_payload<W: Write + ?Sized>(
             for s in &baked.vcm[range] {
                 w.write_all(&s.species.to_le_bytes())?;
                 w.write_all(&s.owner.to_le_bytes())?;
-                w.write_all(&[level_tag(s.level), 0, 0, 0])?;
+                w.write_all(&[level_tag(s.level), s.encoding.tag(), 0, 0])?;
                 w.write_all(&s.resolution.to_le_bytes())?;
                 for m in s.mean_opacity {
                     w.write_all(&m.to_le_bytes())?;
@@ -214,7 +214,7 @@ mod tests {
         assert_eq!(u64_at(&bytes, 16), bytes.len() as u64);
         assert_eq!(
             bytes.len() as u64,
-            76 + 4 * 16
+            80 + 4 * 16
                 + 4 * 4
                 + 2 * 56
                 + 2 * 56
@@ -246,7 +246,7 @@ mod tests {
             impostors: Vec::new(),
         };
         let bytes = to_bytes(&baked);
-        assert_eq!(bytes.len(), 76);
+        assert_eq!(bytes.len(), 80);
         assert_eq!(from_bytes(&bytes).unwrap(), baked);
     }
 

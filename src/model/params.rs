@@ -47,6 +47,10 @@ pub struct BakeParams {
     /// The directions the impostor frames cover: `full` (default, the whole sphere: from
     /// the ground every crown is seen from below its centre) or `hemi` (the upper half).
     pub impostor_layout: crate::sphere::OctaLayout,
+    /// Block-compress what the bake stores (default true): the BTF images in BC7 (each mip
+    /// level encoded at bake time) and the visibility cube maps in BC4, a quarter and a
+    /// half of their uncompressed bytes. `false` keeps them RGBA8 and R8.
+    pub compress: bool,
 }
 
 /// The layout of the tree-level visibility cube maps (see `crate::vcm::cells`).
@@ -74,6 +78,7 @@ impl Default for BakeParams {
             impostor_frames: 12,
             impostor_resolution: 64,
             impostor_layout: crate::sphere::OctaLayout::Full,
+            compress: true,
         }
     }
 }

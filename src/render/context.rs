@@ -77,6 +77,12 @@ impl GpuContext {
         if timestamps_inside_passes {
             required_features |= inside;
         }
+        // Block-compressed textures (the BTF images in BC7) where the adapter has them;
+        // without, the images are decoded on load (`btf::atlas`).
+        let bc = wgpu::Features::TEXTURE_COMPRESSION_BC;
+        if adapter.features().contains(bc) {
+            required_features |= bc;
+        }
         // Ask for what the adapter offers, within the WebGPU defaults' spirit: large
         // textures for supersampled reference frames, storage buffers in vertex shaders.
         let supported = adapter.limits();
@@ -118,12 +124,13 @@ impl GpuContext {
             }
         }));
         log::info!(
-            "GPU: {} ({:?}, {:?}), timestamps: {} (inside passes: {})",
+            "GPU: {} ({:?}, {:?}), timestamps: {} (inside passes: {}), BC textures: {}",
             info.name,
             info.backend,
             info.device_type,
             timestamps,
-            timestamps_inside_passes
+            timestamps_inside_passes,
+            required_features.contains(bc)
         );
         Ok(Self {
             instance,

@@ -158,8 +158,9 @@ fn wrong_magic_is_not_a_canopy_file() {
 
 #[test]
 fn wrong_version_is_unsupported() {
-    // Version 5 is the last one before impostors: its files are refused, with the hint.
-    for version in [0u32, 1, 2, 3, 4, 5, 7, u32::MAX] {
+    // Version 6 is the last one before block compression, 5 the last before impostors:
+    // their files are refused, with the hint.
+    for version in [0u32, 1, 2, 3, 4, 5, 6, 8, u32::MAX] {
         let mut bytes = to_bytes(&small());
         bytes[8..12].copy_from_slice(&version.to_le_bytes());
         reseal_header(&mut bytes);
@@ -464,6 +465,77 @@ fn corrupt_impostor_records_are_malformed_without_allocating() {
         from_bytes(&bytes),
         Err(FormatError::InvalidSettings {
             field: "impostor_layout",
+            value: 2,
+            ..
+        })
+    ));
+}
+
+/// A compressed bake (BC7 images, BC4 cube maps): a flipped byte in its blocks is its
+/// section's checksum; an encoding byte naming none, or one that does not fit the lengths
+/// that follow, is malformed before anything is allocated; the header's compress word must
+/// be 0 or 1.
+#[test]
+fn corrupt_compressed_records_are_refused_without_allocating() {
+    let mut baked = sample();
+    crate::bake::compress::compress(&mut baked);
+    let clean = to_bytes(&baked);
+    assert_eq!(from_bytes(&clean).unwrap(), baked);
+    let btf = payload_start(&clean, 0) + 4;
+    let vcm = payload_start(&clean, 1) + 4;
+    assert_eq!(clean[btf + 5], ImageEncoding::Bc7.tag());
+    assert_eq!(clean[vcm + 9], MapEncoding::Bc4.tag());
+    // Flipped block bytes: the checksums.
+    for (at, section) in [(btf + 48 + 700, "section 0"), (vcm + 56 + 30, "section 1")] {
+        let mut bytes = clean.clone();
+        bytes[at] ^= 0x20;
+        match from_bytes(&bytes) {
+            Err(FormatError::ChecksumMismatch { section: s, .. }) => {
+                assert!(s.starts_with(section), "{s}")
+            }
+            other => panic!("byte {at}: expected a checksum mismatch, got {other:?}"),
+        }
+    }
+    // (offset, encoding byte, what the reason names), the checksums made right again.
+    let cases = [
+        (btf + 5, 2, "encoding 2"),
+        (btf + 5, ImageEncoding::Rgba8.tag(), "direct holds"),
+        (vcm + 9, 7, "encoding 7"),
+        (vcm + 9, MapEncoding::R8.tag(), "opacity holds"),
+    ];
+    for (at, tag, want) in cases {
+        let mut bytes = clean.clone();
+        bytes[at] = tag;
+        reseal(&mut bytes);
+        let (result, peak) = peak_during(|| from_bytes(&bytes));
+        match result {
+            Err(FormatError::MalformedContent { reason, .. }) => {
+                assert!(reason.contains(want), "{want:?} in {reason}")
+            }
+            other => panic!("{at}={tag}: expected malformed content, got {other:?}"),
+        }
+        assert!(peak <= bytes.len() + SMALL_OVERHEAD, "held {peak}");
+    }
+    // A BC7 record claiming a huge image count: refused before allocating.
+    let mut bytes = clean.clone();
+    bytes[btf + 8..btf + 12].copy_from_slice(&258u32.to_le_bytes());
+    bytes[btf + 12..btf + 16].copy_from_slice(&258u32.to_le_bytes());
+    bytes[btf + 40..btf + 48].copy_from_slice(&(258u64 * 258 * 5456).to_le_bytes());
+    reseal(&mut bytes);
+    let (result, peak) = peak_during(|| from_bytes(&bytes));
+    assert!(
+        matches!(&result, Err(FormatError::MalformedContent { .. })),
+        "{result:?}"
+    );
+    assert!(peak <= bytes.len() + SMALL_OVERHEAD, "held {peak}");
+    // The header's compress word.
+    let mut bytes = clean.clone();
+    bytes[72..76].copy_from_slice(&2u32.to_le_bytes());
+    reseal_header(&mut bytes);
+    assert!(matches!(
+        from_bytes(&bytes),
+        Err(FormatError::InvalidSettings {
+            field: "compress",
             value: 2,
             ..
         })

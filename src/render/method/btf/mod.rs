@@ -22,8 +22,8 @@ use std::collections::HashMap;
 use glam::Vec3;
 
 pub use crate::render::consts::ATLAS_SIDE;
-pub use atlas::atlas_layers;
-use atlas::upload_image;
+use atlas::{AtlasFormat, upload_image};
+pub use atlas::{BC7_ON_CPU_ADAPTERS, atlas_layers};
 pub use billboard::{BillboardGpu, BillboardMode, NO_LIGHT_BLEND};
 pub use prepare::{
     BtfFrame, BtfScene, LevelChoice, NearDrawGpu, PrepareView, SortedBillboards, choose_level,
@@ -98,11 +98,21 @@ impl BtfAssets {
                 ctx.device.limits().max_texture_dimension_2d
             )));
         }
-        // Each image has its own mip chain down to one texel, inside its square.
-        let mips = res.max(1).ilog2() + 1;
+        // Each image has its own mip chain inside its square: down to one texel, or to 4
+        // texels for BC7 images (`AtlasFormat::choose`).
+        let encodings: Vec<_> = scene.image_sets(baked).map(|(_, s)| s.encoding).collect();
+        let format = AtlasFormat::choose(res, &encodings, atlas::bc7_textures(ctx));
+        let mips = format.mips;
         // The tree level's light blends take layers after the baked images, where the GPU
-        // allows them.
-        let blends = scene.light_blend_count(light_blend::LIGHT_BINS);
+        // allows them and the array can be drawn into (a BC7 array cannot).
+        let blends = if format.bc7 {
+            log::info!(
+                "tree-level billboards blend their lights themselves: the BTF images are BC7, which cannot be drawn into"
+            );
+            0
+        } else {
+            scene.light_blend_count(light_blend::LIGHT_BINS)
+        };
         let blend_layers = atlas_layers(blends);
         let allocate = |blend_layers: u64| {
             let mut usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
@@ -120,7 +130,7 @@ impl BtfAssets {
                     mip_level_count: mips,
                     sample_count: 1,
                     dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                    format: format.texture_format(),
                     usage,
                     view_formats: &[],
                 })
@@ -140,17 +150,13 @@ impl BtfAssets {
                 (allocate(0)?, 0)
             }
         };
-        let image_bytes = (res * res * 4) as usize;
         let mut bytes = 0u64;
         let mut means = vec![[0.0f32; 4]; images as usize];
         let lut = crate::color::srgb_lut();
         for (base, set) in scene.image_sets(baked) {
-            let images = set
-                .direct
-                .chunks_exact(image_bytes)
-                .chain(set.ambient.chunks_exact(image_bytes));
-            for (i, img) in images.enumerate() {
-                let (b, mean) = upload_image(ctx, &texture, base + i as u32, res, img, mips, &lut);
+            for (i, img) in set.images().enumerate() {
+                let (b, mean) =
+                    upload_image(ctx, &texture, base + i as u32, set, img, format, &lut);
                 bytes += b;
                 if let Some(m) = means.get_mut((base + i as u32) as usize) {
                     *m = mean;

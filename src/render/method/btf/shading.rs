@@ -297,6 +297,19 @@ impl VcmShading {
             .collect();
         let mut cell_res = None;
         let mut bytes = 0u64;
+        // The shading reads a byte a texel: BC4 sets are decoded here, once.
+        let r8 = |set: &crate::format::VcmSet| {
+            set.opacity_r8().map(|o| o.into_owned()).ok_or_else(|| {
+                bad(format!(
+                    "the cube maps of {} {} hold {} bytes, not what resolution {} in {:?} has",
+                    set.level.name(),
+                    set.owner,
+                    set.opacity.len(),
+                    set.resolution,
+                    set.encoding
+                ))
+            })
+        };
         for set in &baked.vcm {
             if set.species == VCM_CELL_SPECIES && set.level == Level::Tree {
                 if *cell_res.get_or_insert(set.resolution) != set.resolution {
@@ -316,9 +329,10 @@ impl VcmShading {
                 if slot.is_some() {
                     return Err(bad(format!("forest cell {o} has two sets")));
                 }
-                bytes += set.opacity.len() as u64;
+                let opacity = r8(set)?;
+                bytes += opacity.len() as u64;
                 *slot = Some(ObjectVcm {
-                    opacity: set.opacity.clone(),
+                    opacity,
                     sky: set.mean_opacity.map(|m| 1.0 - m),
                 });
                 continue;
@@ -350,9 +364,10 @@ impl VcmShading {
                     set.level.name()
                 )));
             }
-            bytes += set.opacity.len() as u64;
+            let opacity = r8(set)?;
+            bytes += opacity.len() as u64;
             *slot = Some(ObjectVcm {
-                opacity: set.opacity.clone(),
+                opacity,
                 sky: set.mean_opacity.map(|m| 1.0 - m),
             });
         }
@@ -706,6 +721,7 @@ mod tests {
             species,
             owner,
             level,
+            encoding: crate::format::MapEncoding::R8,
             resolution: 8,
             opacity: vec![0; CORNERS * FACES * 64],
             mean_opacity: [0.0; CORNERS],
@@ -726,6 +742,7 @@ mod tests {
                 impostor_frames: 0,
                 impostor_resolution: 64,
                 impostor_layout: Default::default(),
+                compress: false,
             },
             btf: Vec::new(),
             vcm,
@@ -859,6 +876,7 @@ mod tests {
             bake.btf.push(crate::format::BtfImageSet {
                 species: s as u32,
                 level: Level::Tree,
+                encoding: crate::format::ImageEncoding::Rgba8,
                 views: 6,
                 lights: 6,
                 resolution: 32,

@@ -268,6 +268,7 @@ mod tests {
                 impostor_frames: 0,
                 impostor_resolution: 64,
                 impostor_layout: Default::default(),
+                compress: false,
             },
             btf: Vec::new(),
             vcm: Vec::new(),
