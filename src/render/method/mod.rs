@@ -132,7 +132,7 @@ mod tests {
         for want in ["lod_scale", "vcm", "texel_mode", "ground_sky"] {
             assert!(names.contains(&want), "{want} missing from {names:?}");
         }
-        assert_eq!(knobs_named("vcm").len(), 2, "btf's and texel's");
+        assert_eq!(knobs_named("vcm").len(), 3, "btf's, texel's and impostor's");
         assert!(knobs_of(Method::Geometry).is_empty());
         assert!(
             knobs_of(Method::Hybrid)
