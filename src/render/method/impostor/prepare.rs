@@ -60,6 +60,10 @@ pub struct SpeciesImpostor {
     pub texel: f32,
 }
 
+/// A tree's tree-level VCM factors and the box they are taken over (object frame), from
+/// its index, species and model matrix; None: unshaded.
+pub type TreeShade<'a> = dyn FnMut(usize, usize, &Mat4) -> Option<(Shade, Aabb)> + 'a;
+
 /// What the prepare step chose: the impostors' records and the trees drawn as geometry.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ImpostorFrame {
@@ -81,7 +85,7 @@ pub fn geometry_opacity(
     z: f32,
     geometry_px: f32,
 ) -> f32 {
-    if !(geometry_px > 0.0) {
+    if geometry_px.is_nan() || geometry_px <= 0.0 {
         return 0.0;
     }
     let px = crate::lod::projected_px(species.texel * scale, focal_px, z);
@@ -100,7 +104,7 @@ pub fn prepare(
     view: &PrepareView,
     settings: &ImpostorSettings,
     max: usize,
-    shade: &mut dyn FnMut(usize, usize, &Mat4) -> Option<(Shade, Aabb)>,
+    shade: &mut TreeShade<'_>,
 ) -> ImpostorFrame {
     let cam = view.camera.position;
     let forward = view.camera.forward();
