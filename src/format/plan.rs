@@ -164,7 +164,7 @@ mod tests {
     #[test]
     fn the_file_size_is_known_from_the_record_sizes_alone() {
         let mut compressed = sample();
-        crate::bake::compress::compress(&mut compressed);
+        crate::format::test_support::compress_for_tests(&mut compressed);
         for b in [sample(), small(), compressed] {
             let btf: Vec<u64> = b
                 .btf

@@ -256,3 +256,60 @@ pub(crate) fn the_allocation_tracker_sees_allocations() {
     let ((), peak) = peak_during(|| ());
     assert_eq!(peak, 0);
 }
+
+/// `baked` with its RGBA8 BTF sets turned into BC7 mip chains and its R8 cube maps into
+/// BC4 blocks, laid out as the bake's compression stores them (each level here a plain
+/// 2x2 average of the one above: the format reads only the encodings and lengths).
+pub fn compress_for_tests(baked: &mut Baked) {
+    for set in &mut baked.btf {
+        if set.encoding != ImageEncoding::Rgba8 {
+            continue;
+        }
+        let res = set.resolution;
+        let n = (res * res * 4) as usize;
+        let chain = |img: &[u8]| -> Vec<u8> {
+            let mut out = Vec::new();
+            let mut level = img.to_vec();
+            let mut side = res;
+            for m in 0..bc::bc_mip_levels(res) {
+                if m > 0 {
+                    let half = side / 2;
+                    let mut next = vec![0u8; (half * half * 4) as usize];
+                    for y in 0..half as usize {
+                        for x in 0..half as usize {
+                            for c in 0..4 {
+                                let at = |dx: usize, dy: usize| {
+                                    u32::from(
+                                        level[((2 * y + dy) * side as usize + 2 * x + dx) * 4 + c],
+                                    )
+                                };
+                                let sum = at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1);
+                                next[(y * half as usize + x) * 4 + c] = (sum / 4) as u8;
+                            }
+                        }
+                    }
+                    level = next;
+                    side = half;
+                }
+                out.extend_from_slice(&bc::encode_bc7(&level, side, side));
+            }
+            out
+        };
+        set.direct = set.direct.chunks_exact(n).flat_map(chain).collect();
+        set.ambient = set.ambient.chunks_exact(n).flat_map(chain).collect();
+        set.encoding = ImageEncoding::Bc7;
+    }
+    for set in &mut baked.vcm {
+        if set.encoding != MapEncoding::R8 {
+            continue;
+        }
+        let res = set.resolution;
+        let n = (res * res) as usize;
+        set.opacity = set
+            .opacity
+            .chunks_exact(n.max(1))
+            .flat_map(|face| bc::encode_bc4(face, res, res))
+            .collect();
+        set.encoding = MapEncoding::Bc4;
+    }
+}

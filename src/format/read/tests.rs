@@ -478,7 +478,7 @@ fn corrupt_impostor_records_are_malformed_without_allocating() {
 #[test]
 fn corrupt_compressed_records_are_refused_without_allocating() {
     let mut baked = sample();
-    crate::bake::compress::compress(&mut baked);
+    crate::format::test_support::compress_for_tests(&mut baked);
     let clean = to_bytes(&baked);
     assert_eq!(from_bytes(&clean).unwrap(), baked);
     let btf = payload_start(&clean, 0) + 4;
