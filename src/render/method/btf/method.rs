@@ -62,40 +62,53 @@ pub(crate) fn plan_geometry(
         &[&whole, &bf.twigs],
         frame.btf.show_lod.then_some(GEOMETRY_COLOR),
     );
-    let cascades = geometry_tree_cascades(world, frame, &bf.twigs);
     log::debug!(
         "btf prepare: the trunks' and limbs' lists ({} and {} trees) in {:.2} ms",
         bf.trunk_only.iter().map(Vec::len).sum::<usize>(),
         bf.trunk_and_limbs.iter().map(Vec::len).sum::<usize>(),
         t0.elapsed().as_secs_f64() * 1e3
     );
+    let plan = geometry_tree_plan(world, frame, &bf.twigs, &runs[2], sun);
+    (runs, plan)
+}
+
+/// The plan of a frame whose trees drawn as geometry (`trees`, per species, with their
+/// opacities; uploaded as `whole`) shade themselves and the rest through one sun shadow
+/// map of their own ([`geometry_tree_cascades`]) and leave the ground alpha map.
+pub(crate) fn geometry_tree_plan(
+    world: &WorldGpu,
+    frame: &FrameDesc,
+    trees: &[Vec<(u32, f32)>],
+    whole: &[TreeRun],
+    sun: SunWork,
+) -> Plan {
+    let cascades = geometry_tree_cascades(world, frame, trees);
     let on = cascades.is_some();
     let mut excluded: Vec<u32> = if on {
-        bf.twigs.iter().flatten().map(|&(t, _)| t).collect()
+        trees.iter().flatten().map(|&(t, _)| t).collect()
     } else {
         Vec::new()
     };
     excluded.sort_unstable();
-    let plan = Plan {
+    Plan {
         cascades: cascades.unwrap_or_else(Cascades::none),
         shadows_on: on,
         // One map: the geometry trees, whole (the terrain has its own map).
-        casters: on.then(|| vec![runs[2].clone()]),
+        casters: on.then(|| vec![whole.to_vec()]),
         terrain_casts: false,
         geometry_tree_cascades: on,
         ground_excluded: excluded,
         self_shadowed: None,
         studio_casters: None,
         sun,
-    };
-    (runs, plan)
+    }
 }
 
 /// One sun shadow map around the trees drawn as geometry (`trees`, per species; every
 /// cascade the same, the first one used), so that its texels stay small, reaching down
 /// past them to the lowest ground their shadows can fall on; None when there are none,
 /// shadows are off or the sun is down.
-pub(crate) fn geometry_tree_cascades(
+fn geometry_tree_cascades(
     world: &WorldGpu,
     frame: &FrameDesc,
     trees: &[Vec<(u32, f32)>],

@@ -14,8 +14,7 @@ use crate::render::method::interface::{
 use crate::render::method::kind::Method;
 use crate::render::pipelines::Layouts;
 
-use crate::render::method::btf::method::geometry_tree_cascades;
-use crate::render::shadow::Cascades;
+use crate::render::method::btf::method::geometry_tree_plan;
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
 
 /// `impostor`: the frame's record count, the trees drawn as geometry and their runs, what
@@ -104,25 +103,7 @@ impl RenderMethod for ImpostorMethod {
         let runs = cx
             .world
             .upload_lists_faded(cx.ctx, &[], &[&f.geometry, &f.geometry], tint);
-        let cascades = geometry_tree_cascades(cx.world, cx.frame, &f.geometry);
-        let on = cascades.is_some();
-        let mut excluded: Vec<u32> = if on {
-            f.geometry.iter().flatten().map(|&(t, _)| t).collect()
-        } else {
-            Vec::new()
-        };
-        excluded.sort_unstable();
-        let plan = Plan {
-            cascades: cascades.unwrap_or_else(Cascades::none),
-            shadows_on: on,
-            casters: on.then(|| vec![runs[0].clone()]),
-            terrain_casts: false,
-            geometry_tree_cascades: on,
-            ground_excluded: excluded,
-            self_shadowed: None,
-            studio_casters: None,
-            sun,
-        };
+        let plan = geometry_tree_plan(cx.world, cx.frame, &f.geometry, &runs[0], sun);
         self.runs = runs;
         Ok(plan)
     }
