@@ -1,5 +1,7 @@
 //! The `canopy` binary end to end: `render` writes a PNG and prints its stats as JSON,
 //! `compare` reports FLIP, and bad input exits with 2 and a message saying what is wrong.
+//! Over 800 lines: each bad input the binary refuses (one per baked section and version,
+//! scene typos, paths) is its own case here, sharing one baked file and its helpers.
 
 mod common;
 

@@ -2,6 +2,9 @@
 //! texel volumes, octahedral impostors),
 //! in one versioned, checksummed file that the viewer caches and validates on load.
 //!
+//! Over 800 lines: 171 of them are this byte layout, kept beside the types it describes;
+//! reading, writing, planning, checking and BC coding are modules of their own.
+//!
 //! # Byte layout (format version 7)
 //!
 //! All integers are little-endian, `f32` is IEEE 754 binary32 (little-endian bits). Offsets
