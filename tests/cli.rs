@@ -58,6 +58,27 @@ fn render_then_compare_end_to_end() {
     assert!(json.get("sky_volume_bytes").is_none());
     let img = image::open(&out).unwrap();
     assert_eq!((img.width(), img.height()), (96, 64));
+    // Where the memory is: the GPU's allocations by part add up to their total, and the
+    // sun's cascades (3 layers of 2048² 4-byte depth at the default --shadow-map) are
+    // one of them, at their size.
+    let memory = &json["memory"];
+    let allocated = memory["gpu_allocated_bytes"]
+        .as_u64()
+        .expect("lavapipe reports");
+    let parts = memory["gpu_parts"].as_array().unwrap();
+    let sum: u64 = parts.iter().map(|p| p["bytes"].as_u64().unwrap()).sum();
+    assert_eq!(sum, allocated, "{memory}");
+    let cascades = parts
+        .iter()
+        .find(|p| p["name"] == "shadow cascades")
+        .and_then(|p| p["bytes"].as_u64())
+        .expect("the cascades are a part");
+    let expected = 3 * 2048 * 2048 * 4;
+    assert!(
+        cascades >= expected && cascades < expected + expected / 10,
+        "{cascades} bytes of cascades"
+    );
+    assert!(memory["resident_peak_bytes"].as_u64().unwrap() >= allocated / 2);
 
     // The reference says so, with its sky visibility's directions, cell and bytes.
     let o = canopy()

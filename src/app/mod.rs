@@ -143,6 +143,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         sky_job: None,
         soak: script.map(SoakRun::new),
         scale_chosen: false,
+        memory_at: None,
         lose_device_at: std::env::var("CANOPY_TEST_LOSE_DEVICE_AT_FRAME")
             .ok()
             .and_then(|v| v.parse().ok()),
@@ -198,6 +199,8 @@ struct App {
     soak: Option<SoakRun>,
     /// The render scale's start was set (from the adapter or `--render-scale`).
     scale_chosen: bool,
+    /// When the panel's memory report was last made.
+    memory_at: Option<Instant>,
     /// For tests: destroy the device at this frame (`CANOPY_TEST_LOSE_DEVICE_AT_FRAME`), to
     /// check that the viewer recovers.
     lose_device_at: Option<u64>,

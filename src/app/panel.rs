@@ -44,6 +44,8 @@ pub struct PanelStats {
     pub paused_for_bake: bool,
     /// The last frames' CPU and GPU times, for the plot.
     pub history: super::history::FrameTimeHistory,
+    /// Where the memory is (refreshed every few seconds).
+    pub memory: Option<crate::render::memory::MemoryReport>,
 }
 
 /// What the user asked for this frame.
@@ -109,6 +111,9 @@ pub fn controls(
         );
     }
     ui.small(&stats.adapter);
+    if let Some(m) = &stats.memory {
+        memory(ui, m);
+    }
     ui.separator();
 
     ui.label("Method");
@@ -424,6 +429,31 @@ fn texel_stats(ui: &mut egui::Ui, stats: &PanelStats) {
                 ui.end_row();
             });
     }
+}
+
+/// The memory section: resident memory, and the largest GPU and CPU parts.
+fn memory(ui: &mut egui::Ui, m: &crate::render::memory::MemoryReport) {
+    let mb = |b: u64| format!("{:.0} MB", b as f64 / 1e6);
+    egui::CollapsingHeader::new(format!("memory: {} resident", mb(m.resident_bytes)))
+        .id_salt("memory")
+        .show(ui, |ui| {
+            egui::Grid::new("memory parts")
+                .num_columns(2)
+                .show(ui, |ui| {
+                    if let Some(a) = m.gpu_allocated_bytes {
+                        ui.label("GPU allocations");
+                        ui.label(mb(a));
+                        ui.end_row();
+                    }
+                    let parts = m.gpu_parts.iter().map(|p| ("GPU", p));
+                    let cpu = m.cpu_parts.iter().map(|p| ("CPU", p));
+                    for (kind, p) in parts.take(8).chain(cpu) {
+                        ui.label(format!("{kind}: {}", p.name));
+                        ui.label(mb(p.bytes));
+                        ui.end_row();
+                    }
+                });
+        });
 }
 
 #[cfg(test)]

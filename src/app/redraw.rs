@@ -4,6 +4,9 @@
 
 use std::time::Instant;
 
+/// How often the panel's memory report is made again.
+const MEMORY_REFRESH: std::time::Duration = std::time::Duration::from_secs(2);
+
 use winit::event_loop::ActiveEventLoop;
 
 use super::App;
@@ -105,6 +108,11 @@ impl App {
                 self.stats.impostor = s.impostor;
                 if s.sun_update_ms.is_some() {
                     self.stats.sun_update_ms = s.sun_update_ms;
+                }
+                let stale = self.memory_at.is_none_or(|t| t.elapsed() >= MEMORY_REFRESH);
+                if stale {
+                    self.stats.memory = Some(r.renderer.memory_report(&r.ctx));
+                    self.memory_at = Some(std::time::Instant::now());
                 }
             }
             Err(e) => {

@@ -257,13 +257,7 @@ impl Range {
     }
 }
 
-/// Resident memory of this process (Linux /proc; 0 where it cannot be read).
-pub fn resident_bytes() -> u64 {
-    std::fs::read_to_string("/proc/self/statm")
-        .ok()
-        .and_then(|s| s.split_whitespace().nth(1)?.parse::<u64>().ok())
-        .map_or(0, |pages| pages * 4096)
-}
+pub use crate::render::memory::resident_bytes;
 
 /// The samples as CSV.
 pub fn csv(samples: &[Sample]) -> String {

@@ -146,7 +146,9 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
         None,
     )?;
     let ctx = GpuContext::headless(adapter(args.cpu))?;
+    log_memory("the GPU context is made");
     let mut renderer = Renderer::new(&ctx, &world)?;
+    log_memory("the renderer is made");
     if frame.ground_sky && canopy_shades_ground(method) {
         let t0 = Instant::now();
         renderer.prepare_sky(&ctx, &world)?;
@@ -180,6 +182,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
             crate::bake::load_or_bake(&ctx, &scene, &world, &mut |p| progress::show_bake(&bar, p));
         bar.finish_and_clear();
         renderer.attach_btf(&ctx, &baked?.0, &world)?;
+        log_memory("the bake is attached");
     }
 
     let opts = MeasureOptions {
@@ -196,10 +199,12 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
         measure::measure_frame_with(&mut renderer, &ctx, &frame, w, h, &opts, &mut || bar.inc(1));
     bar.finish_and_clear();
     let m = m?;
+    log_memory("the frames are drawn");
     crate::imageio::save_png(&args.out, &m.image)?;
     if args.json {
         let mut report = FrameReport::new(&m, &frame, &opts, &renderer, &ctx);
         report.out = Some(args.out.display().to_string());
+        report.memory = Some(renderer.memory_report(&ctx));
         println!(
             "{}",
             serde_json::to_string(&report).context("encoding JSON")?
@@ -225,8 +230,20 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
                 .collect();
             println!("passes (GPU ms): {}", passes.join(", "));
         }
+        println!("memory:");
+        for line in renderer.memory_report(&ctx).lines(1_000_000) {
+            println!("  {line}");
+        }
     }
     Ok(())
+}
+
+/// Says in the log (debug) how much memory is resident once `stage`.
+fn log_memory(stage: &str) {
+    log::debug!(
+        "{:.1} MB resident once {stage}",
+        crate::render::memory::resident_bytes() as f64 / 1e6
+    );
 }
 
 /// The method's trees shade the ground through the ground maps and its ground sees the

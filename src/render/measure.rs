@@ -225,6 +225,9 @@ pub struct FrameReport {
     /// Where the image was written, if it was.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub out: Option<String>,
+    /// Where the memory is after the frame (`render` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memory: Option<super::memory::MemoryReport>,
     /// What the `btf` method did (absent for other methods).
     #[serde(flatten)]
     pub btf: Option<BtfReport>,
@@ -322,6 +325,7 @@ impl FrameReport {
             stats: m.stats,
             adapter: ctx.adapter_name(),
             out: None,
+            memory: None,
             btf,
             texel: m.stats.texel,
             knobs: KnobValues::read(knobs_of(frame.method), frame).to_map(),

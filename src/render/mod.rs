@@ -17,6 +17,7 @@ mod frame_bindings;
 pub mod ground;
 pub mod knob;
 pub mod measure;
+pub mod memory;
 mod meshes;
 pub mod method;
 pub mod overdraw;
@@ -194,6 +195,16 @@ impl Renderer {
     /// Texel sizes of a species' three levels, from the attached bake.
     pub fn btf_texels(&self, species: usize) -> Option<crate::lod::LevelTexels> {
         self.bake.btf.as_ref().and_then(|b| b.texel_sizes(species))
+    }
+
+    /// The memory now: the process's, the GPU's allocations by part (from the
+    /// allocator's report) and what this renderer keeps on the CPU besides.
+    pub fn memory_report(&self, ctx: &GpuContext) -> memory::MemoryReport {
+        let mut cpu = Vec::new();
+        if let Some(b) = &self.bake.btf {
+            b.cpu_parts(&mut cpu);
+        }
+        memory::MemoryReport::new(&ctx.device, cpu)
     }
 
     /// Bytes of BTF images on the GPU (0 without a bake).

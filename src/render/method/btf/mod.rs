@@ -79,6 +79,27 @@ pub struct BtfAssets {
 }
 
 impl BtfAssets {
+    /// What it keeps on the CPU: the visibility cube maps (read there, as in the
+    /// thesis), every image's mean and the far canopy's map until it is uploaded.
+    pub fn cpu_parts(&self, out: &mut Vec<crate::render::memory::MemoryPart>) {
+        use crate::render::memory::{MemoryPart, vec_bytes};
+        let mut push = |name: &str, bytes: u64| {
+            if bytes > 0 {
+                out.push(MemoryPart {
+                    name: name.into(),
+                    bytes,
+                    count: 1,
+                });
+            }
+        };
+        push("visibility cube maps (CPU)", self.scene.vcm_bytes());
+        push("BTF image means (CPU)", vec_bytes(&self.means));
+        push(
+            "far canopy map (CPU)",
+            self.canopy_map.as_ref().map_or(0, |m| m.bytes()),
+        );
+    }
+
     pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
         let mut scene = BtfScene::new(baked, world)?;
         let res = scene.resolution();

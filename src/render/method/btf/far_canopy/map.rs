@@ -195,6 +195,17 @@ pub struct CanopyMap {
 }
 
 impl CanopyMap {
+    /// Bytes it holds on the CPU.
+    pub fn bytes(&self) -> u64 {
+        use crate::render::memory::vec_bytes;
+        let levels: u64 = self
+            .levels
+            .iter()
+            .map(|l| vec_bytes(&l.cover) + vec_bytes(&l.tree))
+            .sum();
+        levels + vec_bytes(&self.lid)
+    }
+
     /// The map of `trees` (each a world transform and its prototype's index into
     /// `footprints`) over `terrain`'s square.
     pub fn new(terrain: &Terrain, trees: &[(Mat4, usize)], footprints: &[Footprint]) -> Self {
