@@ -146,9 +146,9 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
         None,
     )?;
     let ctx = GpuContext::headless(adapter(args.cpu))?;
-    log_memory("the GPU context is made");
+    log_memory(&ctx, "the GPU context is made");
     let mut renderer = Renderer::new(&ctx, &world)?;
-    log_memory("the renderer is made");
+    log_memory(&ctx, "the renderer is made");
     if frame.ground_sky && canopy_shades_ground(method) {
         let t0 = Instant::now();
         renderer.prepare_sky(&ctx, &world)?;
@@ -182,7 +182,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
             crate::bake::load_or_bake(&ctx, &scene, &world, &mut |p| progress::show_bake(&bar, p));
         bar.finish_and_clear();
         renderer.attach_btf(&ctx, &baked?.0, &world)?;
-        log_memory("the bake is attached");
+        log_memory(&ctx, "the bake is attached");
     }
 
     let opts = MeasureOptions {
@@ -199,7 +199,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
         measure::measure_frame_with(&mut renderer, &ctx, &frame, w, h, &opts, &mut || bar.inc(1));
     bar.finish_and_clear();
     let m = m?;
-    log_memory("the frames are drawn");
+    log_memory(&ctx, "the frames are drawn");
     crate::imageio::save_png(&args.out, &m.image)?;
     if args.json {
         let mut report = FrameReport::new(&m, &frame, &opts, &renderer, &ctx);
@@ -238,12 +238,18 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Says in the log (debug) how much memory is resident once `stage`.
-fn log_memory(stage: &str) {
-    log::debug!(
-        "{:.1} MB resident once {stage}",
-        crate::render::memory::resident_bytes() as f64 / 1e6
-    );
+/// Says in the log (debug) how much memory is resident, and how much the GPU has
+/// allocated, once `stage`.
+fn log_memory(ctx: &GpuContext, stage: &str) {
+    if log::log_enabled!(log::Level::Debug) {
+        let gpu = ctx.device.generate_allocator_report();
+        log::debug!(
+            "{:.1} MB resident once {stage}; GPU allocations {:.1} MB in {:.1} MB of blocks",
+            crate::render::memory::resident_bytes() as f64 / 1e6,
+            gpu.as_ref().map_or(0, |r| r.total_allocated_bytes) as f64 / 1e6,
+            gpu.as_ref().map_or(0, |r| r.total_reserved_bytes) as f64 / 1e6,
+        );
+    }
 }
 
 /// The method's trees shade the ground through the ground maps and its ground sees the

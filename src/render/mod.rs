@@ -204,6 +204,9 @@ impl Renderer {
         if let Some(b) = &self.bake.btf {
             b.cpu_parts(&mut cpu);
         }
+        if let Some(t) = &self.bake.texel {
+            t.cpu_parts(&mut cpu);
+        }
         memory::MemoryReport::new(&ctx.device, cpu)
     }
 

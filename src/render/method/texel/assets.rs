@@ -67,6 +67,25 @@ pub struct TexelPipelines {
 pub const MAX_TEXELS: usize = 1 << 17;
 
 impl TexelAssets {
+    /// What it keeps on the CPU: the baked volumes (for the stack atlas, built the first
+    /// time the stacks mode draws) and the terrain (for the forest-cover tiles).
+    pub fn cpu_parts(&self, out: &mut Vec<crate::render::memory::MemoryPart>) {
+        use crate::render::memory::{MemoryPart, vec_bytes};
+        let volumes: u64 = self.volumes.iter().map(|v| vec_bytes(&v.voxels)).sum();
+        for (name, bytes) in [
+            ("texel volumes as baked (CPU)", volumes),
+            ("terrain heights for the texel tiles (CPU)", vec_bytes(&self.terrain.heights)),
+        ] {
+            if bytes > 0 {
+                out.push(MemoryPart {
+                    name: name.into(),
+                    bytes,
+                    count: 1,
+                });
+            }
+        }
+    }
+
     pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
         let max_dim = ctx.device.limits().max_texture_dimension_3d;
         let scene = TexelScene::new(baked, world, max_dim)?;
