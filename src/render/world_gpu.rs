@@ -29,9 +29,19 @@ pub struct TreeGpu {
 pub struct PartSetGpu {
     /// Parts per tree: instance `i` of a draw is part `i % count` of tree `i / count`.
     pub count: u32,
-    pub _pad0: u32,
+    /// Fragments whose texture alpha is below this are discarded (0: none are).
+    pub alpha_cutoff: f32,
     pub _pad1: u32,
     pub _pad2: u32,
+}
+
+/// How a part set's fragments are coloured: its vertex colours times `texture` (the 1x1
+/// white one for untextured parts), and discarded below `alpha_cutoff`.
+#[derive(Clone, Copy)]
+pub struct PartLook<'a> {
+    pub texture: &'a wgpu::TextureView,
+    pub sampler: &'a wgpu::Sampler,
+    pub alpha_cutoff: f32,
 }
 
 pub struct GpuMesh {
@@ -106,6 +116,7 @@ impl PartSet {
         mesh: &Mesh,
         parts: &[Mat4],
         foliage: bool,
+        look: PartLook<'_>,
     ) -> Option<Self> {
         let mesh = GpuMesh::new(ctx, label, mesh)?;
         if parts.is_empty() {
@@ -125,6 +136,7 @@ impl PartSet {
                 label: Some(&format!("{label} part set")),
                 contents: bytemuck::bytes_of(&PartSetGpu {
                     count: parts.len() as u32,
+                    alpha_cutoff: look.alpha_cutoff,
                     ..bytemuck::Zeroable::zeroed()
                 }),
                 usage: wgpu::BufferUsages::UNIFORM,
@@ -140,6 +152,14 @@ impl PartSet {
                 wgpu::BindGroupEntry {
                     binding: 1,
                     resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(look.texture),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::Sampler(look.sampler),
                 },
             ],
         });
@@ -208,6 +228,13 @@ impl WorldGpu {
                 "the forest has {n} trees; canopy draws at most {MAX_TREES}"
             )));
         }
+        let white = super::material::white(ctx);
+        let sampler = super::material::sampler(ctx);
+        let plain = PartLook {
+            texture: &white,
+            sampler: &sampler,
+            alpha_cutoff: 0.0,
+        };
         let terrain_mesh = world.terrain.mesh();
         let terrain = PartSet::new(
             ctx,
@@ -217,6 +244,7 @@ impl WorldGpu {
             &terrain_mesh,
             &[Mat4::IDENTITY],
             false,
+            plain,
         )
         .ok_or_else(|| Error::BadInput("the terrain has no triangles".into()))?;
         let mut mesh_bytes = terrain.mesh.bytes();
@@ -224,8 +252,35 @@ impl WorldGpu {
         for tree in &world.species {
             let twigs = tree.twigs_in_tree_frame();
             let limbs = &tree.tree_branches;
-            let sets = [
-                PartSet::new(
+            // An imported tree's trunk is drawn once per material, with its texture.
+            let surfaces = tree.surfaces.as_deref().map(|surf| {
+                let (meshes, textures) = split_surfaces(ctx, &tree.trunk, surf);
+                surf.ranges
+                    .iter()
+                    .zip(meshes)
+                    .zip(textures)
+                    .filter_map(|((range, mesh), texture)| {
+                        let m = surf.materials.get(range.material as usize)?;
+                        PartSet::new(
+                            ctx,
+                            parts_layout,
+                            PartKind::Trunk,
+                            &format!("{} {}", tree.name, m.name),
+                            &mesh,
+                            &[Mat4::IDENTITY],
+                            m.double_sided,
+                            PartLook {
+                                texture: texture.as_ref().unwrap_or(&white),
+                                sampler: &sampler,
+                                alpha_cutoff: m.alpha_cutoff,
+                            },
+                        )
+                    })
+                    .collect::<Vec<_>>()
+            });
+            let trunk = match surfaces {
+                Some(_) => None,
+                None => PartSet::new(
                     ctx,
                     parts_layout,
                     PartKind::Trunk,
@@ -233,7 +288,11 @@ impl WorldGpu {
                     &tree.trunk,
                     &[Mat4::IDENTITY],
                     false,
+                    plain,
                 ),
+            };
+            let sets = [
+                trunk,
                 PartSet::new(
                     ctx,
                     parts_layout,
@@ -242,6 +301,7 @@ impl WorldGpu {
                     &tree.branch_limb,
                     limbs,
                     false,
+                    plain,
                 ),
                 PartSet::new(
                     ctx,
@@ -251,9 +311,11 @@ impl WorldGpu {
                     &tree.twig,
                     &twigs,
                     true,
+                    plain,
                 ),
             ];
-            let parts: Vec<PartSet> = sets.into_iter().flatten().collect();
+            let mut parts: Vec<PartSet> = sets.into_iter().flatten().collect();
+            parts.extend(surfaces.into_iter().flatten());
             mesh_bytes += parts
                 .iter()
                 .map(|p| p.mesh.bytes() + 64 * u64::from(p.count))
@@ -430,6 +492,52 @@ impl WorldGpu {
             .write_buffer(&self.trees_buffer, 0, bytemuck::cast_slice(&data));
         runs
     }
+}
+
+/// The trunk of an imported tree cut into one mesh per surface range (each with only the
+/// vertices it uses), and each range's material texture uploaded (each image once).
+fn split_surfaces(
+    ctx: &GpuContext,
+    trunk: &Mesh,
+    surfaces: &crate::model::tree::Surfaces,
+) -> (Vec<Mesh>, Vec<Option<wgpu::TextureView>>) {
+    let mut meshes = Vec::with_capacity(surfaces.ranges.len());
+    let mut textures = Vec::with_capacity(surfaces.ranges.len());
+    let mut uploaded: Vec<(*const crate::model::gltf::Rgba8Image, wgpu::TextureView)> =
+        Vec::new();
+    for r in &surfaces.ranges {
+        let first = r.first as usize;
+        let indices = trunk
+            .indices
+            .get(first..first + r.count as usize)
+            .unwrap_or(&[]);
+        let mut remap = std::collections::HashMap::new();
+        let mut mesh = Mesh::default();
+        for &i in indices {
+            let Some(v) = trunk.vertices.get(i as usize) else {
+                continue;
+            };
+            let j = *remap.entry(i).or_insert_with(|| mesh.push_vertex(*v));
+            mesh.indices.push(j);
+        }
+        meshes.push(mesh);
+        let image = surfaces
+            .materials
+            .get(r.material as usize)
+            .and_then(|m| m.texture.as_ref());
+        textures.push(image.map(|img| {
+            let key = std::sync::Arc::as_ptr(img);
+            match uploaded.iter().find(|(k, _)| *k == key) {
+                Some((_, view)) => view.clone(),
+                None => {
+                    let view = super::material::upload(ctx, "material", img);
+                    uploaded.push((key, view.clone()));
+                    view
+                }
+            }
+        }));
+    }
+    (meshes, textures)
 }
 
 /// Appends one list's instance records to `data`, species by species, each species' run
