@@ -104,6 +104,32 @@ fn pine5_imports_with_its_triangles_and_materials() {
 }
 
 #[test]
+fn khr_texture_transform_moves_the_texture_coordinates() {
+    let plain = gltf::import(&pine_path(), ImportOptions::default()).unwrap();
+    let mut j = pine_json();
+    j["extensionsUsed"] = json!(["KHR_texture_transform"]);
+    j["materials"][1]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] =
+        json!({"KHR_texture_transform": {"offset": [0.5, 0.25], "scale": [2.0, 1.0]}});
+    let moved = gltf::import(&broken("transform", &j), ImportOptions::default()).unwrap();
+    assert!(moved.warnings.is_empty(), "{:?}", moved.warnings);
+    let mut checked = 0;
+    for (t, &m) in plain.triangle_materials.iter().enumerate() {
+        for k in 0..3 {
+            let a = plain.mesh.vertices[plain.mesh.indices[3 * t + k] as usize].uv;
+            let b = moved.mesh.vertices[moved.mesh.indices[3 * t + k] as usize].uv;
+            let want = if m == 1 {
+                [2.0 * a[0] + 0.5, a[1] + 0.25]
+            } else {
+                a
+            };
+            assert!((b[0] - want[0]).abs() < 1e-5 && (b[1] - want[1]).abs() < 1e-5);
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 3 * 1646);
+}
+
+#[test]
 fn what_is_not_drawn_is_named_once_each() {
     let mut j = pine_json();
     j["animations"] = json!([{"channels": [], "samplers": []}]);
@@ -131,7 +157,10 @@ fn a_missing_file_buffer_or_image_is_refused_by_name() {
     let mut j = pine_json();
     j["buffers"][0]["uri"] = json!("gone.bin");
     let msg = refusal(&broken("no-buffer", &j));
-    assert!(msg.contains("buffer 0") && msg.contains("gone.bin"), "{msg}");
+    assert!(
+        msg.contains("buffer 0") && msg.contains("gone.bin"),
+        "{msg}"
+    );
 
     let mut j = pine_json();
     j["images"][2]["uri"] = json!("gone.png");
@@ -343,12 +372,18 @@ fn scene_errors_about_gltf_species_name_the_key_and_line() {
     assert!(e.starts_with("s.toml:9:") && e.contains("gltff"), "{e}");
     // `gltf` and `preset` together.
     let e = err(&text.replace("gltf = ", "preset = \"fir\"\ngltf = "));
-    assert!(e.contains("species[0].gltf") && e.contains("not several"), "{e}");
+    assert!(
+        e.contains("species[0].gltf") && e.contains("not several"),
+        "{e}"
+    );
     // `scale` out of range, and `up` not an axis.
     let e = err(&text.replace("seed = 11\n", "seed = 11\nscale = -2.0\n"));
     assert!(e.contains("species[0].scale"), "{e}");
     let e = err(&text.replace("seed = 11\n", "seed = 11\nup = \"x\"\n"));
-    assert!(e.contains("species[0].up") && e.contains("s.toml:11:"), "{e}");
+    assert!(
+        e.contains("species[0].up") && e.contains("s.toml:11:"),
+        "{e}"
+    );
     // `scale` on a preset.
     let e = err(&text.replace("seed = 3\n", "seed = 3\nscale = 2.0\n"));
     assert!(e.contains("species[1].scale") && e.contains("gltf"), "{e}");
@@ -361,7 +396,9 @@ fn coverage(img: &image::RgbaImage, empty: &image::RgbaImage, rows: u32) -> f32 
     for y in 0..rows {
         for x in 0..img.width() {
             let (p, q) = (img.get_pixel(x, y).0, empty.get_pixel(x, y).0);
-            let d: i32 = (0..3).map(|k| (i32::from(p[k]) - i32::from(q[k])).abs()).sum();
+            let d: i32 = (0..3)
+                .map(|k| (i32::from(p[k]) - i32::from(q[k])).abs())
+                .sum();
             if d > 24 {
                 hit += 1;
             }

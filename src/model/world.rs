@@ -7,10 +7,10 @@ use rayon::prelude::*;
 
 use super::ModelError;
 use super::far_cover::FarCover;
-use super::gltf::{ImportOptions, import};
-use super::species::SpeciesParams;
 use super::forest::Forest;
+use super::gltf::{ImportOptions, import};
 use super::params::{ForestParams, SpeciesEntry, TerrainParams, TreeVcm};
+use super::species::SpeciesParams;
 use super::terrain::Terrain;
 use super::tree::TreeModel;
 
@@ -83,25 +83,23 @@ impl World {
                         let (params, seed) = match source {
                             Source::Grown(params, seed) => (params, *seed),
                             Source::Gltf(path, options) => {
-                                let tree = import(path, *options).map_err(|error| {
-                                    ModelError::Import {
+                                let tree =
+                                    import(path, *options).map_err(|error| ModelError::Import {
                                         name: (*entry).to_owned(),
                                         error,
-                                    }
-                                })?;
+                                    })?;
                                 for w in &tree.warnings {
                                     log::warn!("species `{entry}` ({}): {w}", path.display());
                                 }
                                 return Ok(TreeModel::from_imported(name, tree));
                             }
                         };
-                        let mut model =
-                            TreeModel::generate(params, seed).map_err(|e| match e {
-                                ModelError::InvalidParameter { error, .. } => {
-                                    ModelError::invalid(format!("species `{entry}`"), error)
-                                }
-                                other => other,
-                            })?;
+                        let mut model = TreeModel::generate(params, seed).map_err(|e| match e {
+                            ModelError::InvalidParameter { error, .. } => {
+                                ModelError::invalid(format!("species `{entry}`"), error)
+                            }
+                            other => other,
+                        })?;
                         model.name = name.clone();
                         Ok(model)
                     })

@@ -118,7 +118,11 @@ mod tests {
         let mut pixels = Vec::new();
         for _y in 0..2 {
             for x in 0..4 {
-                pixels.extend(if x < 2 { [255, 0, 0, 255] } else { [0, 0, 255, 0] });
+                pixels.extend(if x < 2 {
+                    [255, 0, 0, 255]
+                } else {
+                    [0, 0, 255, 0]
+                });
             }
         }
         let chain = mip_chain(&Rgba8Image {

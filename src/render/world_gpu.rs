@@ -503,8 +503,7 @@ fn split_surfaces(
 ) -> (Vec<Mesh>, Vec<Option<wgpu::TextureView>>) {
     let mut meshes = Vec::with_capacity(surfaces.ranges.len());
     let mut textures = Vec::with_capacity(surfaces.ranges.len());
-    let mut uploaded: Vec<(*const crate::model::gltf::Rgba8Image, wgpu::TextureView)> =
-        Vec::new();
+    let mut uploaded: Vec<(*const crate::model::gltf::Rgba8Image, wgpu::TextureView)> = Vec::new();
     for r in &surfaces.ranges {
         let first = r.first as usize;
         let indices = trunk
