@@ -431,7 +431,7 @@ fn gltf_seeds() -> (Vec<Vec<u8>>, std::path::PathBuf) {
     let mut bin = std::fs::read(pine.join("Pine_5.bin")).unwrap();
     let view = serde_json::json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": png.len()});
     bin.extend_from_slice(&png);
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let views = j["bufferViews"].as_array_mut().unwrap();
@@ -442,7 +442,7 @@ fn gltf_seeds() -> (Vec<Vec<u8>>, std::path::PathBuf) {
     }
     j["buffers"] = serde_json::json!([{"byteLength": bin.len()}]);
     let mut json = serde_json::to_vec(&j).unwrap();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let mut glb = Vec::new();

@@ -431,7 +431,7 @@ fn geometry_draws_pine5_textured_with_its_needles_alpha_tested() {
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     let (img, stats) = renderer.render_image(&ctx, &frame, 192, 192, 1).unwrap();
     assert!(stats.triangles >= 1646, "{}", stats.triangles);
-    let mut bare = frame.clone();
+    let mut bare = frame;
     bare.trees = false;
     let (empty, _) = renderer.render_image(&ctx, &bare, 192, 192, 1).unwrap();
     let _ = canopy::imageio::save_png(&path.with_file_name("pine5.png"), &img);

@@ -299,7 +299,7 @@ mod tests {
     fn vertex_layout_is_48_bytes() {
         assert_eq!(std::mem::size_of::<Vertex>(), 48);
         let v = Vertex::new(Vec3::ONE, Vec3::Y, Vec3::ZERO, 1.0);
-        assert_eq!(bytemuck::bytes_of(&v).len(), 40);
+        assert_eq!(bytemuck::bytes_of(&v).len(), 48);
     }
 
     #[test]

@@ -35,10 +35,12 @@ pub struct PartSetGpu {
     pub _pad2: u32,
 }
 
-/// How a part set's fragments are coloured: its vertex colours times `texture` (the 1x1
-/// white one for untextured parts), and discarded below `alpha_cutoff`.
+/// How a part set is drawn: two-sided (leaves, needles, double-sided materials: no
+/// culling) or not, its vertex colours times `texture` (the 1x1 white one for untextured
+/// parts), and discarded below `alpha_cutoff`.
 #[derive(Clone, Copy)]
 pub struct PartLook<'a> {
+    pub two_sided: bool,
     pub texture: &'a wgpu::TextureView,
     pub sampler: &'a wgpu::Sampler,
     pub alpha_cutoff: f32,
@@ -103,7 +105,7 @@ pub struct PartSet {
     pub mesh: GpuMesh,
     pub count: u32,
     pub bind_group: wgpu::BindGroup,
-    /// Leaves and needles: drawn two-sided.
+    /// Leaves, needles and double-sided imported materials: drawn two-sided, after the rest.
     pub foliage: bool,
 }
 
@@ -115,7 +117,6 @@ impl PartSet {
         label: &str,
         mesh: &Mesh,
         parts: &[Mat4],
-        foliage: bool,
         look: PartLook<'_>,
     ) -> Option<Self> {
         let mesh = GpuMesh::new(ctx, label, mesh)?;
@@ -168,7 +169,7 @@ impl PartSet {
             mesh,
             count: parts.len() as u32,
             bind_group,
-            foliage,
+            foliage: look.two_sided,
         })
     }
 
@@ -231,6 +232,7 @@ impl WorldGpu {
         let white = super::material::white(ctx);
         let sampler = super::material::sampler(ctx);
         let plain = PartLook {
+            two_sided: false,
             texture: &white,
             sampler: &sampler,
             alpha_cutoff: 0.0,
@@ -243,7 +245,6 @@ impl WorldGpu {
             "terrain",
             &terrain_mesh,
             &[Mat4::IDENTITY],
-            false,
             plain,
         )
         .ok_or_else(|| Error::BadInput("the terrain has no triangles".into()))?;
@@ -268,8 +269,8 @@ impl WorldGpu {
                             &format!("{} {}", tree.name, m.name),
                             &mesh,
                             &[Mat4::IDENTITY],
-                            m.double_sided,
                             PartLook {
+                                two_sided: m.double_sided,
                                 texture: texture.as_ref().unwrap_or(&white),
                                 sampler: &sampler,
                                 alpha_cutoff: m.alpha_cutoff,
@@ -287,7 +288,6 @@ impl WorldGpu {
                     &format!("{} trunk", tree.name),
                     &tree.trunk,
                     &[Mat4::IDENTITY],
-                    false,
                     plain,
                 ),
             };
@@ -300,7 +300,6 @@ impl WorldGpu {
                     &format!("{} limbs", tree.name),
                     &tree.branch_limb,
                     limbs,
-                    false,
                     plain,
                 ),
                 PartSet::new(
@@ -310,8 +309,10 @@ impl WorldGpu {
                     &format!("{} twigs", tree.name),
                     &tree.twig,
                     &twigs,
-                    true,
-                    plain,
+                    PartLook {
+                        two_sided: true,
+                        ..plain
+                    },
                 ),
             ];
             let mut parts: Vec<PartSet> = sets.into_iter().flatten().collect();
