@@ -168,7 +168,15 @@ pub fn import(path: &Path, options: ImportOptions) -> Result<ImportedTree, GltfE
         file: path.to_path_buf(),
         message,
     };
-    let bytes = read_file(path).map_err(fail)?;
+    let size = std::fs::metadata(path)
+        .map_err(|e| fail(format!("cannot read it: {e}")))?
+        .len();
+    if size > MAX_FILE_BYTES {
+        return Err(fail(format!(
+            "it is {size} bytes; canopy reads files up to {MAX_FILE_BYTES} bytes"
+        )));
+    }
+    let bytes = std::fs::read(path).map_err(|e| fail(format!("cannot read it: {e}")))?;
     let dir = path.parent().unwrap_or(Path::new("."));
     import_slice(&bytes, dir, options).map_err(fail)
 }
