@@ -35,6 +35,15 @@ struct VertexOut {
     // sun map of the tree, and the cascade texels it leaves out.
     @location(6) @interpolate(flat) slot: u32,
     @location(7) @interpolate(flat) key: u32,
+    @location(8) uv: vec2<f32>,
+}
+
+// The fragment as its material colours it: the vertex colour times the part set's texture
+// (1 for untextured parts), cut away below its alpha cut-off. First in every entry point.
+fn textured(in: VertexOut) -> VertexOut {
+    var out = in;
+    out.color = in.color * part_texel(in.uv).rgb;
+    return out;
 }
 
 @vertex
@@ -51,6 +60,7 @@ fn vs_main(v: VertexIn, @builtin(instance_index) instance: u32) -> VertexOut {
     out.tree = select(1.0, 0.0, instance / max(part_set.count, 1u) == 0u);
     out.slot = instance_slot(instance);
     out.key = tree_key(out.slot);
+    out.uv = v.uv;
     return out;
 }
 
@@ -244,7 +254,8 @@ fn lit_by(in: VertexOut, n: vec3<f32>, vis: f32) -> vec3<f32> {
 }
 
 @fragment
-fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+fn fs_main(in_raw: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    let in = textured(in_raw);
     count_fragment(in.clip, 0u);
     if frame.studio_output != 0u {
         return studio_map(in, front);
@@ -295,7 +306,8 @@ fn lit_and_fogged(in: VertexOut, front: bool, own_cascades: bool) -> vec4<f32> {
 // `fs_main` for `hybrid`'s trees drawn as geometry: shadowed by their own cascades, and
 // only the pixels under their opacity while they fade in.
 @fragment
-fn fs_faded(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+fn fs_faded(in_raw: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    let in = textured(in_raw);
     count_fragment(in.clip, 0u);
     if dither_threshold(in.clip.xy) >= in.opacity {
         discard;
@@ -324,7 +336,8 @@ struct VoxelGrid {
 @group(3) @binding(1) var<storage, read_write> voxel_sums: array<atomic<u32>>;
 
 @fragment
-fn fs_voxel(in: VertexOut, @builtin(front_facing) front: bool) {
+fn fs_voxel(in_raw: VertexOut, @builtin(front_facing) front: bool) {
+    let in = textured(in_raw);
     let cell = vec3<i32>(floor((in.world - voxel_grid.box_min) / voxel_grid.voxel));
     if any(cell < vec3<i32>(0)) || any(cell >= vec3<i32>(voxel_grid.dims)) {
         return;
@@ -356,7 +369,8 @@ fn fs_voxel(in: VertexOut, @builtin(front_facing) front: bool) {
 @group(3) @binding(4) var cascade_keys: texture_2d_array<u32>;
 
 @fragment
-fn fs_reference(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+fn fs_reference(in_raw: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    let in = textured(in_raw);
     count_fragment(in.clip, 0u);
     if frame.studio_output != 0u {
         return studio_map(in, front);

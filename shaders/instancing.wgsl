@@ -9,9 +9,11 @@ struct TreeInstance {
 
 // A set of parts drawn with one mesh: the trunk (1 part), the main branches' limbs (one per
 // branch) or every twig of the tree (one per twig), each with its transform in the tree frame.
+// An imported tree's parts are drawn one set per material: `alpha_cutoff` is its alpha test
+// (0 for every other part: nothing discarded).
 struct PartSet {
     count: u32,
-    _pad0: u32,
+    alpha_cutoff: f32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -19,12 +21,26 @@ struct PartSet {
 @group(1) @binding(0) var<storage, read> trees: array<TreeInstance>;
 @group(2) @binding(0) var<storage, read> parts: array<mat4x4<f32>>;
 @group(2) @binding(1) var<uniform> part_set: PartSet;
+// The part set's base-colour texture: an imported material's, or 1x1 white.
+@group(2) @binding(2) var part_texture: texture_2d<f32>;
+@group(2) @binding(3) var part_sampler: sampler;
 
 struct VertexIn {
     @location(0) position: vec3<f32>,
     @location(1) normal: vec3<f32>,
     @location(2) color: vec3<f32>,
     @location(3) foliage: f32,
+    @location(4) uv: vec2<f32>,
+}
+
+// The part set's texture at `uv`, or nothing (the fragment discarded) where its alpha is
+// below the set's cut-off. Call it first, in uniform control flow.
+fn part_texel(uv: vec2<f32>) -> vec4<f32> {
+    let t = textureSample(part_texture, part_sampler, uv);
+    if t.a < part_set.alpha_cutoff {
+        discard;
+    }
+    return t;
 }
 
 // Instance `i` of a draw is part `i % count` of tree `i / count`: the hierarchy is drawn

@@ -1,7 +1,8 @@
-//! Mutation fuzzing of the two parsers that read what users hand canopy: the baked-file
-//! decoder (`format::from_bytes`) and the scene parser (`Scene::parse`), seeded with real
-//! inputs (baked files built here through the public types, the embedded default scene,
-//! the species presets and the test scenes).
+//! Mutation fuzzing of the parsers that read what users hand canopy: the baked-file
+//! decoder (`format::from_bytes`), the scene parser (`Scene::parse`) and the glTF reader
+//! (`model::gltf::import_slice`), seeded with real inputs (baked files built here through
+//! the public types, the embedded default scene, the species presets and the test scenes,
+//! Pine_5 as `.gltf` and as `.glb`).
 //!
 //! Each input must end in `Ok` or a clean `Err`: no panic, no single allocation larger than
 //! the input allows (a length read from the file never sizes a buffer unchecked), no input
@@ -404,6 +405,116 @@ fn fuzz_scenes(count: u64) -> Outcome {
     }
     o.seconds = t0.elapsed().as_secs_f64();
     o
+}
+
+/// The glTF seeds: Pine_5's JSON (its buffer and two small stand-in textures beside it in
+/// the returned folder) and Pine_5 as one GLB with those textures in buffer views, so that
+/// mutations reach the binary chunk, the accessors' bytes and the images too.
+fn gltf_seeds() -> (Vec<Vec<u8>>, std::path::PathBuf) {
+    let pine = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/trees/pine5");
+    let dir = std::env::temp_dir().join(format!("canopy-fuzz-gltf-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(pine.join("Pine_5.bin"), dir.join("Pine_5.bin")).unwrap();
+    // 8x8, alternately opaque and cut away, so that both alpha paths run.
+    let tiny = image::RgbaImage::from_fn(8, 8, |x, y| {
+        image::Rgba([40, 90, 20, if (x + y) % 2 == 0 { 255 } else { 0 }])
+    });
+    let mut png = Vec::new();
+    image::DynamicImage::ImageRgba8(tiny)
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    for name in ["Bark_NormalTree.png", "Leaf_Pine_C.png"] {
+        std::fs::write(dir.join(name), &png).unwrap();
+    }
+    let text = std::fs::read(pine.join("Pine_5.gltf")).unwrap();
+    let mut j: serde_json::Value = serde_json::from_slice(&text).unwrap();
+    let mut bin = std::fs::read(pine.join("Pine_5.bin")).unwrap();
+    let view = serde_json::json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": png.len()});
+    bin.extend_from_slice(&png);
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    let views = j["bufferViews"].as_array_mut().unwrap();
+    views.push(view);
+    let v = views.len() - 1;
+    for img in j["images"].as_array_mut().unwrap() {
+        *img = serde_json::json!({"bufferView": v, "mimeType": "image/png"});
+    }
+    j["buffers"] = serde_json::json!([{"byteLength": bin.len()}]);
+    let mut json = serde_json::to_vec(&j).unwrap();
+    while !json.len().is_multiple_of(4) {
+        json.push(b' ');
+    }
+    let mut glb = Vec::new();
+    glb.extend_from_slice(b"glTF");
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&((12 + 8 + json.len() + 8 + bin.len()) as u32).to_le_bytes());
+    glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    glb.extend_from_slice(&0x4E4F_534Au32.to_le_bytes());
+    glb.extend_from_slice(&json);
+    glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    glb.extend_from_slice(&0x004E_4942u32.to_le_bytes());
+    glb.extend_from_slice(&bin);
+    (vec![text, glb], dir)
+}
+
+/// Feeds `count` mutated glTF files (JSON and GLB) to the glTF reader.
+fn fuzz_gltf(count: u64) -> Outcome {
+    use canopy::model::gltf;
+    let (seeds, dir) = gltf_seeds();
+    // Both seeds must be accepted as they are.
+    for seed in &seeds {
+        let tree = gltf::import_slice(seed, &dir, gltf::ImportOptions::default()).unwrap();
+        assert_eq!(tree.mesh.triangle_count(), 1646);
+    }
+    let mut rng = rng();
+    let mut o = Outcome::default();
+    let t0 = Instant::now();
+    for i in 0..count {
+        let a = rng.below(seeds.len());
+        let input = mutate(&seeds[a], &seeds[1 - a], &mut rng);
+        let (result, largest, took) =
+            watched(|| gltf::import_slice(&input, &dir, gltf::ImportOptions::default()));
+        // What an import holds is bounded by its budgets (2,000,000 vertices and
+        // triangles, images of 8192² at most and no more than 1032 pixel bytes per byte
+        // of image data), whatever the input claims.
+        assert!(
+            largest <= 256 << 20,
+            "input {i}: an allocation of {largest} bytes for a {}-byte file",
+            input.len()
+        );
+        assert!(took < Duration::from_secs(2), "input {i} took {took:?}");
+        match result {
+            Ok(_) => o.accepted += 1,
+            Err(e) => {
+                assert!(!e.is_empty());
+                o.refused += 1;
+            }
+        }
+        o.largest_alloc = o.largest_alloc.max(largest);
+        o.slowest = o.slowest.max(took);
+        o.inputs += 1;
+    }
+    o.seconds = t0.elapsed().as_secs_f64();
+    let _ = std::fs::remove_dir_all(&dir);
+    o
+}
+
+#[test]
+fn fuzz_smoke_gltf_reader() {
+    let o = fuzz_gltf(3_000);
+    eprintln!("glTF reader smoke: {o:?}");
+    assert!(o.refused > 0 && o.accepted > 0);
+}
+
+#[test]
+#[ignore = "a million inputs: cargo test --release --test fuzz -- --ignored"]
+fn fuzz_gltf_reader() {
+    let o = fuzz_gltf(inputs(1_000_000));
+    eprintln!(
+        "glTF reader: {} inputs in {:.1} s ({} accepted, {} refused), largest allocation {} bytes, slowest input {:?}",
+        o.inputs, o.seconds, o.accepted, o.refused, o.largest_alloc, o.slowest
+    );
 }
 
 #[test]

@@ -160,7 +160,7 @@ fn instancing_structs_match_instancing_wgsl() {
         wgsl_layout(&source, "PartSet"),
         rust_layout!(PartSetGpu {
             count,
-            _pad0,
+            alpha_cutoff,
             _pad1,
             _pad2
         }),

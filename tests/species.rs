@@ -21,11 +21,8 @@ const DISTANCES: [f32; 3] = [5.0, 50.0, 500.0];
 fn every_variant_of_every_preset_keeps_its_crown_covered() {
     for name in PRESET_NAMES {
         let entry = SpeciesEntry {
-            name: (*name).to_owned(),
-            preset: Some((*name).to_owned()),
-            params: None,
-            seed: 1,
             variants: 3,
+            ..SpeciesEntry::from_preset(name, name, 1)
         };
         let scene = {
             let mut s = Scene::default_scene();

@@ -54,6 +54,11 @@ pub fn level_object(tree: &TreeModel, level: Level) -> TreeModel {
         }
         Level::Tree => {}
     }
+    if level != Level::Tree {
+        // An imported tree's materials cover its trunk's triangles, which these levels
+        // replace.
+        o.surfaces = None;
+    }
     o
 }
 

@@ -138,6 +138,18 @@ pub fn info(args: InfoArgs) -> anyhow::Result<()> {
             );
         }
         for s in &r.species {
+            if s.levels.len() == 1 {
+                println!(
+                    "  {:<10} {} trees; imported: {} triangles, {} materials, {:.1} m tall, crown {:.0} % covered from the side; levels: tree only (no twig or main-branch hierarchy: drawn whole as geometry where its tree billboard is too coarse)",
+                    s.name,
+                    s.trees,
+                    s.triangles.tree,
+                    s.materials,
+                    s.height_m,
+                    100.0 * s.crown_coverage
+                );
+                continue;
+            }
             println!(
                 "  {:<10} {} trees; triangles: twig {}, main branch {}, tree {}; {} main branches, {} twigs, {} leaves/needles, {:.1} m tall, crown {:.0} % covered from the side",
                 s.name,

@@ -4,7 +4,7 @@
 
 use glam::{Mat3, Mat4, Vec3};
 
-/// One vertex as uploaded to the GPU (`#[repr(C)]`, 40 bytes).
+/// One vertex as uploaded to the GPU (`#[repr(C)]`, 48 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Vertex {
@@ -17,6 +17,9 @@ pub struct Vertex {
     pub color: [f32; 3],
     /// 1.0 for leaves and needles (two-sided, drawn without culling), 0.0 for bark and ground.
     pub foliage: f32,
+    /// Texture coordinates of an imported tree's base-colour texture (glTF convention: 0,0
+    /// at the image's top left); 0 for procedural parts, which have no texture.
+    pub uv: [f32; 2],
 }
 
 impl Vertex {
@@ -28,6 +31,7 @@ impl Vertex {
             normal: normal.to_array(),
             color: color.to_array(),
             foliage,
+            uv: [0.0; 2],
         }
     }
 }
@@ -89,6 +93,7 @@ impl Mesh {
                     .to_array(),
                 color: v.color,
                 foliage: v.foliage,
+                uv: v.uv,
             }
         }));
         self.indices.reserve(other.indices.len());
@@ -291,10 +296,10 @@ mod tests {
     }
 
     #[test]
-    fn vertex_layout_is_40_bytes() {
-        assert_eq!(std::mem::size_of::<Vertex>(), 40);
+    fn vertex_layout_is_48_bytes() {
+        assert_eq!(std::mem::size_of::<Vertex>(), 48);
         let v = Vertex::new(Vec3::ONE, Vec3::Y, Vec3::ZERO, 1.0);
-        assert_eq!(bytemuck::bytes_of(&v).len(), 40);
+        assert_eq!(bytemuck::bytes_of(&v).len(), 48);
     }
 
     #[test]

@@ -7,6 +7,7 @@
 
 pub mod far_cover;
 pub mod forest;
+pub mod gltf;
 pub mod level;
 pub mod mesh;
 pub mod params;
@@ -125,10 +126,18 @@ pub enum ModelError {
         preset: String,
     },
     /// A scene entry gives neither or both of `preset` and `params`.
-    #[error("species `{name}`: give exactly one of `preset` and `params`")]
+    #[error("species `{name}`: give exactly one of `preset`, `params` and `gltf`")]
     AmbiguousSpecies {
         /// The species entry's name.
         name: String,
+    },
+    /// A `gltf` species' file cannot be used.
+    #[error("species `{name}`: {error}")]
+    Import {
+        /// The species entry's name.
+        name: String,
+        /// The file and what is wrong with it.
+        error: gltf::GltfError,
     },
 }
 

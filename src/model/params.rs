@@ -257,6 +257,20 @@ pub struct SpeciesEntry {
     /// Full species parameters (`[species.params]`); exactly one of `preset` and `params`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub params: Option<SpeciesParams>,
+    /// A glTF 2.0 tree (`.gltf` with its buffers and images, or `.glb`), the path relative to
+    /// the scene file; instead of `preset` and `params`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gltf: Option<String>,
+    /// Uniform scale of a `gltf` tree (default 1: the file's metres).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f32>,
+    /// The up axis of a `gltf` tree: `y` (default, glTF's own) or `z`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub up: Option<super::gltf::UpAxis>,
+    /// The folder `gltf` is relative to: the scene file's (set when a scene is loaded from a
+    /// file; the working directory otherwise).
+    #[serde(skip)]
+    pub base_dir: Option<std::path::PathBuf>,
     /// Seed of the species generator.
     pub seed: u64,
     /// Prototypes of this species (1..=8, default 1), so that neighbours differ: variant 1
@@ -285,8 +299,40 @@ impl SpeciesEntry {
             name: name.into(),
             preset: Some(preset.into()),
             params: None,
+            gltf: None,
+            scale: None,
+            up: None,
+            base_dir: None,
             seed,
             variants: 1,
+        }
+    }
+
+    /// An entry of the glTF tree at `path` (relative to `base_dir`, or the working
+    /// directory).
+    pub fn from_gltf(name: &str, path: &str, base_dir: Option<&std::path::Path>) -> SpeciesEntry {
+        SpeciesEntry {
+            preset: None,
+            gltf: Some(path.into()),
+            base_dir: base_dir.map(std::path::Path::to_path_buf),
+            ..SpeciesEntry::from_preset(name, "", 1)
+        }
+    }
+
+    /// Where the `gltf` file of this entry is, if it has one.
+    pub fn gltf_path(&self) -> Option<std::path::PathBuf> {
+        let g = self.gltf.as_ref()?;
+        Some(match &self.base_dir {
+            Some(d) => d.join(g),
+            None => std::path::PathBuf::from(g),
+        })
+    }
+
+    /// How a `gltf` tree is placed: `scale` and `up`, defaulted.
+    pub fn import_options(&self) -> super::gltf::ImportOptions {
+        super::gltf::ImportOptions {
+            scale: self.scale.unwrap_or(1.0),
+            up: self.up.unwrap_or_default(),
         }
     }
 

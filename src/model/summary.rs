@@ -48,6 +48,11 @@ pub struct SpeciesSummary {
     /// Side-view crown coverage: the share of the crown's silhouette hull its triangles
     /// cover, the mean of four azimuths ([`super::silhouette`]).
     pub crown_coverage: f32,
+    /// The levels the species has: `twig`, `main branch`, `tree` for a grown one; `tree`
+    /// alone for an imported one (its file gives no hierarchy).
+    pub levels: Vec<&'static str>,
+    /// Materials of an imported tree (0 for a grown one: vertex colours).
+    pub materials: usize,
 }
 
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -90,6 +95,12 @@ impl WorldSummary {
                     leaves: parts.foliage,
                     height_m: t.tree_bounds.max.y - t.tree_bounds.min.y,
                     crown_coverage: crown_coverage(t).mean,
+                    levels: if t.has_hierarchy() {
+                        super::Level::ALL.iter().map(|l| l.name()).collect()
+                    } else {
+                        vec![super::Level::Tree.name()]
+                    },
+                    materials: t.surfaces.as_ref().map_or(0, |s| s.materials.len()),
                 }
             })
             .collect();

@@ -1,14 +1,26 @@
 //! The world: everything the model makes from one scene — the terrain, one prototype per
 //! species (generated in parallel) and the placed forest.
 
+use std::path::PathBuf;
+
 use rayon::prelude::*;
 
 use super::ModelError;
 use super::far_cover::FarCover;
 use super::forest::Forest;
+use super::gltf::{ImportOptions, import};
 use super::params::{ForestParams, SpeciesEntry, TerrainParams, TreeVcm};
+use super::species::SpeciesParams;
 use super::terrain::Terrain;
 use super::tree::TreeModel;
+
+/// Where a species prototype comes from.
+enum Source {
+    /// Grown from parameters and a seed.
+    Grown(SpeciesParams, u64),
+    /// Read from a glTF file.
+    Gltf(PathBuf, ImportOptions),
+}
 
 /// Terrain, species prototypes and tree instances of one scene.
 #[derive(Clone, Debug)]
@@ -34,9 +46,23 @@ impl World {
         species: &[SpeciesEntry],
         forest: &ForestParams,
     ) -> Result<World, ModelError> {
-        // One prototype per variant of each entry, in entry order.
+        // One prototype per variant of each entry, in entry order: grown from parameters,
+        // or read from a glTF file.
         let mut entries = Vec::new();
         for e in species {
+            if let Some(path) = e.gltf_path() {
+                if e.preset.is_some() || e.params.is_some() {
+                    return Err(ModelError::AmbiguousSpecies {
+                        name: e.name.clone(),
+                    });
+                }
+                entries.push((
+                    e.name.as_str(),
+                    e.name.clone(),
+                    Source::Gltf(path, e.import_options()),
+                ));
+                continue;
+            }
             for v in 0..e.variants.max(1) {
                 let (params, seed) = e.variant(v)?;
                 let name = if e.variants > 1 {
@@ -44,7 +70,7 @@ impl World {
                 } else {
                     e.name.clone()
                 };
-                entries.push((e.name.as_str(), name, params, seed));
+                entries.push((e.name.as_str(), name, Source::Grown(params, seed)));
             }
         }
         let variants: Vec<u32> = species.iter().map(|e| e.variants.max(1)).collect();
@@ -53,14 +79,27 @@ impl World {
             || {
                 entries
                     .par_iter()
-                    .map(|(entry, name, params, seed)| {
-                        let mut model =
-                            TreeModel::generate(params, *seed).map_err(|e| match e {
-                                ModelError::InvalidParameter { error, .. } => {
-                                    ModelError::invalid(format!("species `{entry}`"), error)
+                    .map(|(entry, name, source)| {
+                        let (params, seed) = match source {
+                            Source::Grown(params, seed) => (params, *seed),
+                            Source::Gltf(path, options) => {
+                                let tree =
+                                    import(path, *options).map_err(|error| ModelError::Import {
+                                        name: (*entry).to_owned(),
+                                        error,
+                                    })?;
+                                for w in &tree.warnings {
+                                    log::warn!("species `{entry}` ({}): {w}", path.display());
                                 }
-                                other => other,
-                            })?;
+                                return Ok(TreeModel::from_imported(name, tree));
+                            }
+                        };
+                        let mut model = TreeModel::generate(params, seed).map_err(|e| match e {
+                            ModelError::InvalidParameter { error, .. } => {
+                                ModelError::invalid(format!("species `{entry}`"), error)
+                            }
+                            other => other,
+                        })?;
                         model.name = name.clone();
                         Ok(model)
                     })

@@ -16,6 +16,7 @@ pub mod frame;
 mod frame_bindings;
 pub mod ground;
 pub mod knob;
+pub mod material;
 pub mod measure;
 pub mod memory;
 mod meshes;

@@ -276,7 +276,10 @@ impl Layouts {
             label: Some("parts"),
             entries: &[
                 storage_entry(0, wgpu::ShaderStages::VERTEX),
-                uniform_entry(1, wgpu::ShaderStages::VERTEX),
+                uniform_entry(1, vf),
+                // An imported tree's material texture (1x1 white for every other part).
+                texture_entry(2, FILTERABLE, wgpu::TextureViewDimension::D2),
+                sampler_entry(3, wgpu::SamplerBindingType::Filtering),
             ],
         });
         Self {
@@ -391,6 +394,13 @@ pub(crate) fn light_view_pipeline(
             write_mask: wgpu::ColorWrites::ALL,
         })]
     });
+    // Depth only: the parts' alpha test (an imported tree's cards), no target.
+    let cutout = wgpu::FragmentState {
+        module: &module,
+        entry_point: Some("fs_shadow_cutout"),
+        compilation_options: Default::default(),
+        targets: &[],
+    };
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(p.label),
         layout: Some(&layout),
@@ -421,7 +431,8 @@ pub(crate) fn light_view_pipeline(
                 entry_point: Some(f.entry),
                 compilation_options: Default::default(),
                 targets,
-            }),
+            })
+            .or(Some(cutout)),
         multiview_mask: None,
         cache: None,
     })
@@ -709,11 +720,12 @@ pub fn blended_pipeline(device: &wgpu::Device, p: Blended<'_>) -> wgpu::RenderPi
 
 /// Vertex buffer layout of `model::mesh::Vertex`.
 pub fn vertex_layout() -> wgpu::VertexBufferLayout<'static> {
-    const ATTRS: [wgpu::VertexAttribute; 4] = wgpu::vertex_attr_array![
+    const ATTRS: [wgpu::VertexAttribute; 5] = wgpu::vertex_attr_array![
         0 => Float32x3,
         1 => Float32x3,
         2 => Float32x3,
         3 => Float32,
+        4 => Float32x2,
     ];
     wgpu::VertexBufferLayout {
         array_stride: std::mem::size_of::<Vertex>() as u64,

@@ -29,9 +29,21 @@ pub struct TreeGpu {
 pub struct PartSetGpu {
     /// Parts per tree: instance `i` of a draw is part `i % count` of tree `i / count`.
     pub count: u32,
-    pub _pad0: u32,
+    /// Fragments whose texture alpha is below this are discarded (0: none are).
+    pub alpha_cutoff: f32,
     pub _pad1: u32,
     pub _pad2: u32,
+}
+
+/// How a part set is drawn: two-sided (leaves, needles, double-sided materials: no
+/// culling) or not, its vertex colours times `texture` (the 1x1 white one for untextured
+/// parts), and discarded below `alpha_cutoff`.
+#[derive(Clone, Copy)]
+pub struct PartLook<'a> {
+    pub two_sided: bool,
+    pub texture: &'a wgpu::TextureView,
+    pub sampler: &'a wgpu::Sampler,
+    pub alpha_cutoff: f32,
 }
 
 pub struct GpuMesh {
@@ -93,7 +105,7 @@ pub struct PartSet {
     pub mesh: GpuMesh,
     pub count: u32,
     pub bind_group: wgpu::BindGroup,
-    /// Leaves and needles: drawn two-sided.
+    /// Leaves, needles and double-sided imported materials: drawn two-sided, after the rest.
     pub foliage: bool,
 }
 
@@ -105,7 +117,7 @@ impl PartSet {
         label: &str,
         mesh: &Mesh,
         parts: &[Mat4],
-        foliage: bool,
+        look: PartLook<'_>,
     ) -> Option<Self> {
         let mesh = GpuMesh::new(ctx, label, mesh)?;
         if parts.is_empty() {
@@ -125,6 +137,7 @@ impl PartSet {
                 label: Some(&format!("{label} part set")),
                 contents: bytemuck::bytes_of(&PartSetGpu {
                     count: parts.len() as u32,
+                    alpha_cutoff: look.alpha_cutoff,
                     ..bytemuck::Zeroable::zeroed()
                 }),
                 usage: wgpu::BufferUsages::UNIFORM,
@@ -141,6 +154,14 @@ impl PartSet {
                     binding: 1,
                     resource: params.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(look.texture),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::Sampler(look.sampler),
+                },
             ],
         });
         Some(Self {
@@ -148,7 +169,7 @@ impl PartSet {
             mesh,
             count: parts.len() as u32,
             bind_group,
-            foliage,
+            foliage: look.two_sided,
         })
     }
 
@@ -208,6 +229,14 @@ impl WorldGpu {
                 "the forest has {n} trees; canopy draws at most {MAX_TREES}"
             )));
         }
+        let white = super::material::white(ctx);
+        let sampler = super::material::sampler(ctx);
+        let plain = PartLook {
+            two_sided: false,
+            texture: &white,
+            sampler: &sampler,
+            alpha_cutoff: 0.0,
+        };
         let terrain_mesh = world.terrain.mesh();
         let terrain = PartSet::new(
             ctx,
@@ -216,7 +245,7 @@ impl WorldGpu {
             "terrain",
             &terrain_mesh,
             &[Mat4::IDENTITY],
-            false,
+            plain,
         )
         .ok_or_else(|| Error::BadInput("the terrain has no triangles".into()))?;
         let mut mesh_bytes = terrain.mesh.bytes();
@@ -224,16 +253,46 @@ impl WorldGpu {
         for tree in &world.species {
             let twigs = tree.twigs_in_tree_frame();
             let limbs = &tree.tree_branches;
-            let sets = [
-                PartSet::new(
+            // An imported tree's trunk is drawn once per material, with its texture.
+            let surfaces = tree.surfaces.as_deref().map(|surf| {
+                let (meshes, textures) = split_surfaces(ctx, &tree.trunk, surf);
+                surf.ranges
+                    .iter()
+                    .zip(meshes)
+                    .zip(textures)
+                    .filter_map(|((range, mesh), texture)| {
+                        let m = surf.materials.get(range.material as usize)?;
+                        PartSet::new(
+                            ctx,
+                            parts_layout,
+                            PartKind::Trunk,
+                            &format!("{} {}", tree.name, m.name),
+                            &mesh,
+                            &[Mat4::IDENTITY],
+                            PartLook {
+                                two_sided: m.double_sided,
+                                texture: texture.as_ref().unwrap_or(&white),
+                                sampler: &sampler,
+                                alpha_cutoff: m.alpha_cutoff,
+                            },
+                        )
+                    })
+                    .collect::<Vec<_>>()
+            });
+            let trunk = match surfaces {
+                Some(_) => None,
+                None => PartSet::new(
                     ctx,
                     parts_layout,
                     PartKind::Trunk,
                     &format!("{} trunk", tree.name),
                     &tree.trunk,
                     &[Mat4::IDENTITY],
-                    false,
+                    plain,
                 ),
+            };
+            let sets = [
+                trunk,
                 PartSet::new(
                     ctx,
                     parts_layout,
@@ -241,7 +300,7 @@ impl WorldGpu {
                     &format!("{} limbs", tree.name),
                     &tree.branch_limb,
                     limbs,
-                    false,
+                    plain,
                 ),
                 PartSet::new(
                     ctx,
@@ -250,10 +309,14 @@ impl WorldGpu {
                     &format!("{} twigs", tree.name),
                     &tree.twig,
                     &twigs,
-                    true,
+                    PartLook {
+                        two_sided: true,
+                        ..plain
+                    },
                 ),
             ];
-            let parts: Vec<PartSet> = sets.into_iter().flatten().collect();
+            let mut parts: Vec<PartSet> = sets.into_iter().flatten().collect();
+            parts.extend(surfaces.into_iter().flatten());
             mesh_bytes += parts
                 .iter()
                 .map(|p| p.mesh.bytes() + 64 * u64::from(p.count))
@@ -430,6 +493,51 @@ impl WorldGpu {
             .write_buffer(&self.trees_buffer, 0, bytemuck::cast_slice(&data));
         runs
     }
+}
+
+/// The trunk of an imported tree cut into one mesh per surface range (each with only the
+/// vertices it uses), and each range's material texture uploaded (each image once).
+fn split_surfaces(
+    ctx: &GpuContext,
+    trunk: &Mesh,
+    surfaces: &crate::model::tree::Surfaces,
+) -> (Vec<Mesh>, Vec<Option<wgpu::TextureView>>) {
+    let mut meshes = Vec::with_capacity(surfaces.ranges.len());
+    let mut textures = Vec::with_capacity(surfaces.ranges.len());
+    let mut uploaded: Vec<(*const crate::model::gltf::Rgba8Image, wgpu::TextureView)> = Vec::new();
+    for r in &surfaces.ranges {
+        let first = r.first as usize;
+        let indices = trunk
+            .indices
+            .get(first..first + r.count as usize)
+            .unwrap_or(&[]);
+        let mut remap = std::collections::HashMap::new();
+        let mut mesh = Mesh::default();
+        for &i in indices {
+            let Some(v) = trunk.vertices.get(i as usize) else {
+                continue;
+            };
+            let j = *remap.entry(i).or_insert_with(|| mesh.push_vertex(*v));
+            mesh.indices.push(j);
+        }
+        meshes.push(mesh);
+        let image = surfaces
+            .materials
+            .get(r.material as usize)
+            .and_then(|m| m.texture.as_ref());
+        textures.push(image.map(|img| {
+            let key = std::sync::Arc::as_ptr(img);
+            match uploaded.iter().find(|(k, _)| *k == key) {
+                Some((_, view)) => view.clone(),
+                None => {
+                    let view = super::material::upload(ctx, "material", img);
+                    uploaded.push((key, view.clone()));
+                    view
+                }
+            }
+        }));
+    }
+    (meshes, textures)
 }
 
 /// Appends one list's instance records to `data`, species by species, each species' run

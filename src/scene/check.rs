@@ -74,6 +74,36 @@ impl Scene {
                     format!("duplicate species name `{}`", s.name),
                 ));
             }
+            if let Some(g) = &s.gltf {
+                if s.preset.is_some() || s.params.is_some() {
+                    return Err(FieldError::new(
+                        format!("{at}.gltf"),
+                        "give one of `preset`, a [species.params] table and `gltf`, not several",
+                    ));
+                }
+                if g.trim().is_empty() {
+                    return Err(FieldError::new(format!("{at}.gltf"), "must not be empty"));
+                }
+                if let Some(scale) = s.scale {
+                    check::range(&format!("{at}.scale"), scale, 1e-4, 1e4)?;
+                }
+                if s.variants != 1 {
+                    return Err(FieldError::new(
+                        format!("{at}.variants"),
+                        "a `gltf` species has one prototype; give each variant its own [[species]]",
+                    )
+                    .with_found(s.variants));
+                }
+                continue;
+            }
+            for (key, given) in [("scale", s.scale.is_some()), ("up", s.up.is_some())] {
+                if given {
+                    return Err(FieldError::new(
+                        format!("{at}.{key}"),
+                        "only a `gltf` species takes it",
+                    ));
+                }
+            }
             match (&s.preset, &s.params) {
                 (Some(_), Some(_)) => {
                     return Err(FieldError::new(
@@ -85,7 +115,7 @@ impl Scene {
                     return Err(FieldError::new(
                         at,
                         format!(
-                            "give `preset` (one of {}) or a [species.params] table",
+                            "give `preset` (one of {}), a [species.params] table or `gltf`",
                             PRESET_NAMES.join(", ")
                         ),
                     ));

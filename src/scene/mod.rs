@@ -239,7 +239,13 @@ impl Scene {
             });
         }
         let text = std::fs::read_to_string(path).map_err(io)?;
-        Scene::parse(&text, &path.display().to_string())
+        let mut scene = Scene::parse(&text, &path.display().to_string())?;
+        // A `gltf` species' path is relative to the scene file.
+        let dir = path.parent().map(Path::to_path_buf);
+        for s in &mut scene.species {
+            s.base_dir.clone_from(&dir);
+        }
+        Ok(scene)
     }
 
     /// Builds the world of this scene: its terrain, species prototypes and forest

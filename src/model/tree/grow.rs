@@ -66,6 +66,7 @@ impl TreeModel {
             twig_bounds,
             branch_bounds,
             tree_bounds,
+            surfaces: None,
         })
     }
 }

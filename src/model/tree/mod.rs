@@ -10,8 +10,11 @@
 
 mod grow;
 
+use std::sync::Arc;
+
 use glam::Mat4;
 
+use super::gltf::{ImportedTree, Material};
 use super::mesh::{Aabb, Mesh};
 use super::species::FoliageKind;
 
@@ -36,6 +39,16 @@ pub struct PartCounts {
     /// Leaves or needles in the whole tree.
     pub foliage: u64,
 }
+
+/// The bounds given to the twig and main-branch levels of a species that has none (an
+/// imported tree): a centimetre at the origin, so that those levels bake to empty images
+/// with tiny texels, the BTF LOD never picks the twig level, and its "main branch" level
+/// (whose trunk, here the whole tree, is drawn as geometry) takes over wherever the tree
+/// level's billboard is too coarse.
+pub const ABSENT_LEVEL_BOUNDS: Aabb = Aabb {
+    min: glam::Vec3::splat(-0.005),
+    max: glam::Vec3::splat(0.005),
+};
 
 /// One species prototype: a hierarchy of instanced parts (not flattened).
 #[derive(Clone, Debug)]
@@ -67,9 +80,74 @@ pub struct TreeModel {
     pub branch_bounds: Aabb,
     /// Bounds of the whole tree in the tree frame.
     pub tree_bounds: Aabb,
+    /// An imported tree's materials and which of the trunk's triangles each covers; `None`
+    /// for a procedural species (its vertices carry their colours, nothing is textured).
+    pub surfaces: Option<Arc<Surfaces>>,
+}
+
+/// The look of an imported tree: its materials, and the trunk's triangles drawn with each.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Surfaces {
+    pub materials: Vec<Material>,
+    /// Runs of `trunk.indices`, one per material that has triangles, in index order.
+    pub ranges: Vec<SurfaceRange>,
+}
+
+/// The indices `first .. first + count` of the trunk, drawn with `material`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SurfaceRange {
+    pub material: u32,
+    pub first: u32,
+    pub count: u32,
 }
 
 impl TreeModel {
+    /// An imported tree as a species prototype of the tree level only: the whole mesh is
+    /// the trunk, with no main branches or twigs (the file gives no hierarchy).
+    pub fn from_imported(name: &str, imported: ImportedTree) -> TreeModel {
+        let mut ranges: Vec<SurfaceRange> = Vec::new();
+        for (t, &m) in imported.triangle_materials.iter().enumerate() {
+            match ranges.last_mut() {
+                Some(r) if r.material == m => r.count += 3,
+                _ => ranges.push(SurfaceRange {
+                    material: m,
+                    first: 3 * t as u32,
+                    count: 3,
+                }),
+            }
+        }
+        let bounds = imported.mesh.bounds();
+        let foliage = if imported.materials.iter().any(|m| m.cards) {
+            FoliageKind::Needles
+        } else {
+            FoliageKind::Leaves
+        };
+        TreeModel {
+            name: name.to_owned(),
+            foliage,
+            foliage_per_twig: 0,
+            twig: Mesh::default(),
+            branch_limb: Mesh::default(),
+            branch_twigs: Vec::new(),
+            trunk: imported.mesh,
+            tree_branches: Vec::new(),
+            tree_twigs: Vec::new(),
+            twig_bounds: ABSENT_LEVEL_BOUNDS,
+            branch_bounds: ABSENT_LEVEL_BOUNDS,
+            tree_bounds: bounds,
+            surfaces: Some(Arc::new(Surfaces {
+                materials: imported.materials,
+                ranges,
+            })),
+        }
+    }
+
+    /// Whether the species has main-branch and twig levels of its own (a procedural one);
+    /// an imported tree has the tree level only.
+    pub fn has_hierarchy(&self) -> bool {
+        !self.twig.indices.is_empty()
+    }
+
     /// Every twig instance of the tree in the tree frame: each branch transform times each
     /// of the branch's twig transforms, then the twigs on the trunk.
     pub fn twigs_in_tree_frame(&self) -> Vec<Mat4> {
