@@ -14,7 +14,8 @@ struct TreeInstance {
 struct PartSet {
     count: u32,
     alpha_cutoff: f32,
-    _pad1: u32,
+    // 0: the set is untextured (every procedural part): its texel is white, unread.
+    textured: u32,
     _pad2: u32,
 }
 
@@ -36,6 +37,9 @@ struct VertexIn {
 // The part set's texture at `uv`, or nothing (the fragment discarded) where its alpha is
 // below the set's cut-off. Call it first, in uniform control flow.
 fn part_texel(uv: vec2<f32>) -> vec4<f32> {
+    if part_set.textured == 0u {
+        return vec4<f32>(1.0);
+    }
     let t = textureSample(part_texture, part_sampler, uv);
     if t.a < part_set.alpha_cutoff {
         discard;

@@ -161,7 +161,7 @@ fn instancing_structs_match_instancing_wgsl() {
         rust_layout!(PartSetGpu {
             count,
             alpha_cutoff,
-            _pad1,
+            textured,
             _pad2
         }),
     );

@@ -31,7 +31,9 @@ pub struct PartSetGpu {
     pub count: u32,
     /// Fragments whose texture alpha is below this are discarded (0: none are).
     pub alpha_cutoff: f32,
-    pub _pad1: u32,
+    /// 1: the fragments sample the set's texture; 0: they skip it (white, nothing
+    /// discarded), as every procedural part does.
+    pub textured: u32,
     pub _pad2: u32,
 }
 
@@ -44,6 +46,8 @@ pub struct PartLook<'a> {
     pub texture: &'a wgpu::TextureView,
     pub sampler: &'a wgpu::Sampler,
     pub alpha_cutoff: f32,
+    /// The texture is a material's (not the white one) or the alpha test is on.
+    pub textured: bool,
 }
 
 pub struct GpuMesh {
@@ -138,6 +142,7 @@ impl PartSet {
                 contents: bytemuck::bytes_of(&PartSetGpu {
                     count: parts.len() as u32,
                     alpha_cutoff: look.alpha_cutoff,
+                    textured: u32::from(look.textured),
                     ..bytemuck::Zeroable::zeroed()
                 }),
                 usage: wgpu::BufferUsages::UNIFORM,
@@ -236,6 +241,7 @@ impl WorldGpu {
             texture: &white,
             sampler: &sampler,
             alpha_cutoff: 0.0,
+            textured: false,
         };
         let terrain_mesh = world.terrain.mesh();
         let terrain = PartSet::new(
@@ -274,6 +280,7 @@ impl WorldGpu {
                                 texture: texture.as_ref().unwrap_or(&white),
                                 sampler: &sampler,
                                 alpha_cutoff: m.alpha_cutoff,
+                                textured: texture.is_some() || m.alpha_cutoff > 0.0,
                             },
                         )
                     })

@@ -74,7 +74,10 @@ impl TexelAssets {
         let volumes: u64 = self.volumes.iter().map(|v| vec_bytes(&v.voxels)).sum();
         for (name, bytes) in [
             ("texel volumes as baked (CPU)", volumes),
-            ("terrain heights for the texel tiles (CPU)", vec_bytes(&self.terrain.heights)),
+            (
+                "terrain heights for the texel tiles (CPU)",
+                vec_bytes(&self.terrain.heights),
+            ),
         ] {
             if bytes > 0 {
                 out.push(MemoryPart {
