@@ -683,3 +683,31 @@ fn volumes_that_do_not_fit_the_scene_disable_only_the_texel_method() {
         .to_string();
     assert!(e.contains("species 5"), "{e}");
 }
+
+/// The texel volumes go to the GPU when a frame first draws them, not when the bake is
+/// attached: a bake drawn with `btf` holds no 3D texture.
+#[test]
+fn texel_volumes_reach_the_gpu_when_first_drawn() {
+    let ctx = gpu();
+    let (scene, world) = built(lone_tree("fir"));
+    let baked = bake_of(&scene);
+    let mut r = Renderer::new(&ctx, &world).unwrap();
+    r.attach_btf(&ctx, &baked, &world).unwrap();
+    assert!(r.has_texels());
+    let on_gpu = |r: &Renderer| {
+        r.memory_report(&ctx)
+            .gpu_parts
+            .iter()
+            .find(|p| p.name == "texel volumes")
+            .map(|p| p.bytes)
+    };
+    let mut frame = FrameDesc::from_scene(&scene);
+    frame.method = Method::Btf;
+    r.render_image(&ctx, &frame, 32, 32, 1).unwrap();
+    assert_eq!(on_gpu(&r), None);
+    assert_eq!(r.texel_bytes(), 0);
+    frame.method = Method::Texel;
+    r.render_image(&ctx, &frame, 32, 32, 1).unwrap();
+    let bytes = on_gpu(&r).expect("the volumes are on the GPU once drawn");
+    assert!(bytes >= r.texel_bytes() && r.texel_bytes() > 0, "{bytes}");
+}

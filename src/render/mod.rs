@@ -179,7 +179,7 @@ impl Renderer {
 
     /// The attached bake has texel volumes (the `texel` method can draw).
     pub fn has_texels(&self) -> bool {
-        self.bake.texel.is_some()
+        self.bake.has_texels()
     }
 
     /// Names this renderer among the process's (work started for one renderer, such as a
@@ -207,6 +207,13 @@ impl Renderer {
         }
         if let Some(t) = &self.bake.texel {
             t.cpu_parts(&mut cpu);
+        }
+        if let Some(p) = &self.bake.texel_pending {
+            cpu.push(memory::MemoryPart {
+                name: "texel volumes as baked, not yet drawn (CPU)".into(),
+                bytes: p.bytes(),
+                count: 1,
+            });
         }
         memory::MemoryReport::new(&ctx.device, cpu)
     }

@@ -12,7 +12,7 @@
 use super::btf::BtfAssets;
 use super::impostor::ImpostorAssets;
 use super::kind::Method;
-use super::texel::TexelAssets;
+use super::texel::{PendingTexel, TexelAssets};
 use super::view::PrepareView;
 use crate::format::Baked;
 use crate::model::World;
@@ -32,8 +32,11 @@ use crate::{Error, Result};
 pub struct Bake {
     /// The BTF image sets and the visibility cube maps.
     pub btf: Option<BtfAssets>,
-    /// The texel volumes, when the bake has them and they could be loaded.
+    /// The texel volumes on the GPU, once a frame of a method that draws them asked for
+    /// them ([`Self::texel_ready`]).
     pub texel: Option<TexelAssets>,
+    /// The bake's texel volumes, checked, until then.
+    pub texel_pending: Option<PendingTexel>,
     /// Why the bake's texel volumes could not be loaded (the other methods still draw).
     pub texel_problem: Option<String>,
     /// The octahedral impostors, when the bake has them and they could be loaded.
@@ -51,8 +54,9 @@ impl Bake {
             ..Default::default()
         };
         if !baked.texels.is_empty() {
-            match TexelAssets::new(ctx, baked, world) {
-                Ok(t) => bake.texel = Some(t),
+            let max_dim = ctx.device.limits().max_texture_dimension_3d;
+            match PendingTexel::new(baked, world, max_dim) {
+                Ok(t) => bake.texel_pending = Some(t),
                 Err(e) => {
                     log::warn!("the texel method is unavailable: {e}");
                     bake.texel_problem = Some(e.to_string());
@@ -69,6 +73,28 @@ impl Bake {
             }
         }
         Ok(bake)
+    }
+
+    /// The bake has texel volumes that can be drawn (on the GPU or still waiting to be).
+    pub fn has_texels(&self) -> bool {
+        self.texel.is_some() || self.texel_pending.is_some()
+    }
+
+    /// The texel volumes on the GPU, uploaded now if no frame has drawn them yet. None
+    /// without them, or when the upload failed (the reason is then `texel_problem`).
+    pub fn texel_ready(&mut self, ctx: &GpuContext) -> Option<&mut TexelAssets> {
+        if self.texel.is_none()
+            && let Some(pending) = self.texel_pending.take()
+        {
+            match TexelAssets::new(ctx, pending) {
+                Ok(t) => self.texel = Some(t),
+                Err(e) => {
+                    log::warn!("the texel method is unavailable: {e}");
+                    self.texel_problem = Some(e.to_string());
+                }
+            }
+        }
+        self.texel.as_mut()
     }
 
     /// The BTF assets, or the error a method that needs them gives.

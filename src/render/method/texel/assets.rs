@@ -63,6 +63,48 @@ pub struct TexelPipelines {
     pub polygon: Option<wgpu::RenderPipeline>,
 }
 
+/// A bake's texel volumes checked against the scene, and what their upload needs, until a
+/// frame first draws them: a bake attached for another method keeps them on the CPU only
+/// (the GPU's copy, with its mips and padding, is about four times larger).
+pub struct PendingTexel {
+    /// The bake's settings and texel volumes (its other parts left out).
+    baked: Baked,
+    species_count: usize,
+    /// Placed trees (the sun's records are sized by them).
+    trees: usize,
+    terrain: crate::model::Terrain,
+}
+
+impl PendingTexel {
+    /// The texel volumes of `baked` for `world`, or what is wrong with them; `max_dim` is
+    /// the GPU's largest 3D texture side.
+    pub fn new(baked: &Baked, world: &World, max_dim: u32) -> Result<Self> {
+        TexelScene::new(baked, world.species.len(), max_dim)?;
+        Ok(Self {
+            baked: Baked {
+                scene_hash: baked.scene_hash,
+                settings: baked.settings,
+                btf: Vec::new(),
+                vcm: Vec::new(),
+                texels: baked.texels.clone(),
+                impostors: Vec::new(),
+            },
+            species_count: world.species.len(),
+            trees: world.forest.instances.len(),
+            terrain: world.terrain.clone(),
+        })
+    }
+
+    /// Bytes of volumes it holds.
+    pub fn bytes(&self) -> u64 {
+        self.baked
+            .texels
+            .iter()
+            .map(|v| crate::render::memory::vec_bytes(&v.voxels))
+            .sum()
+    }
+}
+
 /// Most texels drawn in one frame.
 pub const MAX_TEXELS: usize = 1 << 17;
 
@@ -89,9 +131,16 @@ impl TexelAssets {
         }
     }
 
-    pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
+    /// The volumes of `pending` on the GPU.
+    pub fn new(ctx: &GpuContext, pending: PendingTexel) -> Result<Self> {
+        let PendingTexel {
+            baked,
+            species_count,
+            trees,
+            terrain,
+        } = pending;
         let max_dim = ctx.device.limits().max_texture_dimension_3d;
-        let scene = TexelScene::new(baked, world, max_dim)?;
+        let scene = TexelScene::new(&baked, species_count, max_dim)?;
         let size = scene.atlas_size();
         let texture = ctx.checked("allocating the texel volumes", || {
             sampled_rgba8_texture(
@@ -102,7 +151,7 @@ impl TexelAssets {
                 scene.mips,
             )
         })?;
-        for (level, (d, data)) in scene.atlas_levels(baked).iter().enumerate() {
+        for (level, (d, data)) in scene.atlas_levels(&baked).iter().enumerate() {
             write_rgba8(&ctx.queue, &texture, level as u32, UVec3::ZERO, data, *d);
         }
         let view = texture.create_view(&Default::default());
@@ -125,7 +174,7 @@ impl TexelAssets {
         let capacity = 64;
         let records = record_buffer(ctx, capacity);
         let bind_group = make_bind_group(ctx, &layout, &records, &view, &sampler);
-        let sun_capacity = world.forest.instances.len().clamp(1, MAX_TEXELS);
+        let sun_capacity = trees.clamp(1, MAX_TEXELS);
         let sun_records = record_buffer(ctx, sun_capacity);
         let sun_bind_group = make_bind_group(ctx, &layout, &sun_records, &view, &sampler);
         Ok(Self {
@@ -143,11 +192,11 @@ impl TexelAssets {
             capacity,
             bind_group,
             pipelines: HashMap::new(),
-            volumes: baked.texels.clone(),
-            species_count: world.species.len(),
+            volumes: baked.texels,
+            species_count,
             stacks: None,
             stack_problem: None,
-            terrain: world.terrain.clone(),
+            terrain,
             tiles: None,
             tile_problem: None,
             polygons: None,

@@ -29,7 +29,7 @@ impl RenderMethod for TexelMethod {
 
     fn check(&self, bake: &Bake) -> Result<()> {
         bake.need_btf(Method::Texel)?;
-        if bake.texel.is_some() {
+        if bake.has_texels() {
             return Ok(());
         }
         Err(Error::BadInput(match &bake.texel_problem {
@@ -48,6 +48,12 @@ impl RenderMethod for TexelMethod {
 
     fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
         let frame = cx.frame;
+        if bake.texel_ready(cx.ctx).is_none() {
+            return Err(Error::Gpu(match &bake.texel_problem {
+                Some(p) => format!("the texel volumes could not be loaded: {p}"),
+                None => "the texel volumes are not loaded".into(),
+            }));
+        }
         let mut sun = SunWork::default();
         let vcm = match bake.btf.as_mut() {
             Some(b) if frame.texel.vcm && frame.trees => {
@@ -80,7 +86,7 @@ impl RenderMethod for TexelMethod {
         _to_sun: glam::Vec3,
         _excluded: &[u32],
     ) -> Option<GroundCasters> {
-        let t = bake.texel.as_mut()?;
+        let t = bake.texel_ready(ctx)?;
         let count = t.prepare_sun(ctx, world);
         Some(GroundCasters {
             pipeline: t
@@ -99,7 +105,7 @@ impl RenderMethod for TexelMethod {
         layouts: &Layouts,
         format: wgpu::TextureFormat,
     ) -> Result<()> {
-        if let Some(t) = bake.texel.as_mut() {
+        if let Some(t) = bake.texel_ready(ctx) {
             self.pipelines = Some(t.pipelines(&ctx.device, &layouts.frame, format));
         }
         Ok(())

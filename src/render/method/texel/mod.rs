@@ -21,7 +21,7 @@ pub mod settings;
 pub mod stacks;
 pub mod tiles;
 
-pub use assets::{MAX_TEXELS, TexelAssets, TexelPipelines};
+pub use assets::{MAX_TEXELS, PendingTexel, TexelAssets, TexelPipelines};
 pub use prepare::{TexelFrame, prepare};
 pub use scene::{SpeciesVolume, TexelScene};
 pub use settings::{TexelMode, TexelSettings, TexelStats};

@@ -4,7 +4,6 @@
 use glam::{UVec3, Vec3};
 
 use crate::format::{Baked, TexelVolume};
-use crate::model::World;
 use crate::render::target::{linear_to_srgb, srgb_lut};
 use crate::sphere::DirectionSet;
 use crate::{Error, Result};
@@ -43,9 +42,9 @@ impl TexelScene {
     /// The layout of `baked`'s texel volumes for `world`, or an error naming what does not
     /// fit (a species without volumes, a light count unlike the bake's, too large a
     /// texture for `max_dim`).
-    pub fn new(baked: &Baked, world: &World, max_dim: u32) -> Result<Self> {
+    pub fn new(baked: &Baked, species_count: usize, max_dim: u32) -> Result<Self> {
         let lights = baked.settings.lights;
-        let mut species = vec![None; world.species.len()];
+        let mut species = vec![None; species_count];
         let mut volumes: Vec<&TexelVolume> = Vec::new();
         for t in &baked.texels {
             let s = t.species as usize;
@@ -63,11 +62,11 @@ impl TexelScene {
             }
             volumes.push(t);
         }
-        if volumes.len() != world.species.len() {
+        if volumes.len() != species_count {
             return Err(Error::BadInput(format!(
                 "the bake has texel volumes for {} of the scene's {} species: bake again with texel_resolution above 0",
                 volumes.len(),
-                world.species.len()
+                species_count
             )));
         }
         let round = |v: u32| v.div_ceil(SLOT_ALIGN) * SLOT_ALIGN;
@@ -98,7 +97,7 @@ impl TexelScene {
         }
         let lights_set = DirectionSet::with_count(lights as usize)
             .map_err(|e| Error::BadInput(e.to_string()))?;
-        let mut slots = vec![Vec::new(); world.species.len()];
+        let mut slots = vec![Vec::new(); species_count];
         let size = atlas.as_vec3();
         for (k, t) in volumes.iter().enumerate() {
             let s = t.species as usize;
@@ -233,7 +232,7 @@ impl TexelScene {
 mod tests {
     use super::*;
     use crate::format::BakeSettings;
-    use crate::model::{TreeModel, preset};
+    use crate::model::{TreeModel, World, preset};
 
     /// Nine prototypes (three species of three variants) with 6 lights: 63 volumes of up
     /// to 64 voxels, more than one 2048-voxel column holds. Each species' volumes stay in
@@ -275,7 +274,7 @@ mod tests {
             texels,
             impostors: Vec::new(),
         };
-        let scene = TexelScene::new(&baked, &world, 2048).unwrap();
+        let scene = TexelScene::new(&baked, world.species.len(), 2048).unwrap();
         let atlas = scene.atlas_size();
         assert!(atlas.max_element() <= 2048, "{atlas}");
         let mut seen = std::collections::HashSet::new();
@@ -292,7 +291,7 @@ mod tests {
             }
         }
         // One species' volumes cannot fit at all: a clear error.
-        let e = TexelScene::new(&baked, &world, 256)
+        let e = TexelScene::new(&baked, world.species.len(), 256)
             .err()
             .unwrap()
             .to_string();
