@@ -499,14 +499,7 @@ fn every_method_draws_a_forest_of_an_imported_tree() {
     frame.trees = true;
     let rows = 96;
     let mut geometry = None;
-    for method in [
-        Method::Geometry,
-        Method::Btf,
-        Method::Billboard,
-        Method::Texel,
-        Method::Hybrid,
-        Method::Impostor,
-    ] {
+    for &method in Method::ALL {
         frame.method = method;
         let (img, stats) = renderer
             .render_image(&ctx, &frame, 128, 96, 1)

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use image::RgbaImage;
 
-use crate::format::{Baked, BtfImageSet, ImageEncoding, MapEncoding, VcmSet, bc};
+use crate::format::{Baked, BtfImageSet, ImageEncoding, bc};
 
 /// Seconds the compression of a bake took, by part.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -23,7 +23,7 @@ pub fn compress(baked: &mut Baked) -> CompressTimes {
     for_each_parallel(&mut baked.btf, compress_btf);
     let btf_seconds = t0.elapsed().as_secs_f64();
     let t1 = std::time::Instant::now();
-    for_each_parallel(&mut baked.vcm, compress_vcm);
+    for_each_parallel(&mut baked.vcm, bc::compress_vcm);
     CompressTimes {
         btf_seconds,
         vcm_seconds: t1.elapsed().as_secs_f64(),
@@ -90,23 +90,10 @@ fn compress_btf(set: &mut BtfImageSet) {
     set.encoding = ImageEncoding::Bc7;
 }
 
-fn compress_vcm(set: &mut VcmSet) {
-    if set.encoding != MapEncoding::R8 {
-        return;
-    }
-    let res = set.resolution;
-    let n = (res * res) as usize;
-    set.opacity = set
-        .opacity
-        .chunks_exact(n.max(1))
-        .flat_map(|face| bc::encode_bc4(face, res, res))
-        .collect();
-    set.encoding = MapEncoding::Bc4;
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::format::MapEncoding;
     use crate::format::test_support::sample;
 
     #[test]

@@ -95,6 +95,22 @@ pub fn encode_bc7(rgba: &[u8], w: u32, h: u32) -> Vec<u8> {
 ///
 /// # Panics
 /// If `r` holds fewer than `w * h` bytes.
+/// A set of cube maps stored a byte a texel re-encoded in BC4, face by face (a set already
+/// in BC4 is left as it is).
+pub fn compress_vcm(set: &mut super::VcmSet) {
+    if set.encoding != super::MapEncoding::R8 {
+        return;
+    }
+    let res = set.resolution;
+    let n = (res * res) as usize;
+    set.opacity = set
+        .opacity
+        .chunks_exact(n.max(1))
+        .flat_map(|face| encode_bc4(face, res, res))
+        .collect();
+    set.encoding = super::MapEncoding::Bc4;
+}
+
 pub fn encode_bc4(r: &[u8], w: u32, h: u32) -> Vec<u8> {
     assert!(r.len() >= w as usize * h as usize, "short image");
     let (data, pw, ph) = padded(r, w, h, 1);

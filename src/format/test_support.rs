@@ -300,16 +300,6 @@ pub fn compress_for_tests(baked: &mut Baked) {
         set.encoding = ImageEncoding::Bc7;
     }
     for set in &mut baked.vcm {
-        if set.encoding != MapEncoding::R8 {
-            continue;
-        }
-        let res = set.resolution;
-        let n = (res * res) as usize;
-        set.opacity = set
-            .opacity
-            .chunks_exact(n.max(1))
-            .flat_map(|face| bc::encode_bc4(face, res, res))
-            .collect();
-        set.encoding = MapEncoding::Bc4;
+        bc::compress_vcm(set);
     }
 }
