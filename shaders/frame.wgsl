@@ -77,12 +77,17 @@ struct Frame {
 // they read. Written only while the overdraw view is on.
 @group(0) @binding(8) var<storage, read_write> overdraw_counts: array<atomic<u32>>;
 
+// The overdraw view's counting is compiled into a pipeline only while the view is on: a
+// fragment shader that may write to memory is depth-tested after it runs (lavapipe, and
+// most GPUs), so with the counters in every pipeline nothing hidden would be skipped.
+override COUNT_OVERDRAW: bool = false;
+
 // Counts a colour pass's fragment at `pixel` (its @builtin(position)) with the `reads`
 // images it samples, while the overdraw view is on. Call it once per fragment, before any
 // `discard` (a fragment counts whether it is kept or not).
 fn count_fragment(pixel: vec4<f32>, reads: u32) {
     let at = vec2<u32>(pixel.xy);
-    if frame.overdraw.x != 0u && at.x < frame.overdraw.y && at.y < frame.overdraw.z {
+    if COUNT_OVERDRAW && frame.overdraw.x != 0u && at.x < frame.overdraw.y && at.y < frame.overdraw.z {
         let i = 2u * (at.y * frame.overdraw.y + at.x);
         atomicAdd(&overdraw_counts[i], 1u);
         atomicAdd(&overdraw_counts[i + 1u], reads);
@@ -93,7 +98,7 @@ fn count_fragment(pixel: vec4<f32>, reads: u32) {
 // known only at its end).
 fn count_reads(pixel: vec4<f32>, reads: u32) {
     let at = vec2<u32>(pixel.xy);
-    if frame.overdraw.x != 0u && at.x < frame.overdraw.y && at.y < frame.overdraw.z {
+    if COUNT_OVERDRAW && frame.overdraw.x != 0u && at.x < frame.overdraw.y && at.y < frame.overdraw.z {
         atomicAdd(&overdraw_counts[2u * (at.y * frame.overdraw.y + at.x) + 1u], reads);
     }
 }

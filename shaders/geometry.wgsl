@@ -40,10 +40,21 @@ struct VertexOut {
 
 // The fragment as its material colours it: the vertex colour times the part set's texture
 // (1 for untextured parts), cut away below its alpha cut-off. First in every entry point.
+// The terrain's skirts carry in uv.y how far below the chunk's edge they hang: they are
+// shaded as the edge above them, not as the ground's inside (`model::terrain_lod`).
 fn textured(in: VertexOut) -> VertexOut {
     var out = in;
     out.color = in.color * part_texel(in.uv).rgb;
+    if in.tree == 0.0 {
+        out.world.y += in.uv.y;
+    }
     return out;
+}
+
+// How far the terrain's point is raised for its own shadows: a coarse level's height error
+// there (uv.x), so that the surface cutting below the hills is not shadowed by them.
+fn shadow_lift(in: VertexOut) -> vec3<f32> {
+    return vec3<f32>(0.0, select(0.0, in.uv.x, in.tree == 0.0), 0.0);
 }
 
 @vertex
@@ -204,7 +215,7 @@ fn shade_as(in: VertexOut, front: bool, own_cascades: bool) -> vec3<f32> {
     let n = surface_normal(in, front);
     let view_depth = dot(in.world - frame.camera_pos, frame.camera_forward);
     let offset_normal = shadow_offset_normal(in, n);
-    var vis = sun_visibility(in.world, offset_normal, view_depth);
+    var vis = sun_visibility(in.world + shadow_lift(in), offset_normal, view_depth);
     if own_cascades {
         vis = 1.0;
         if frame.shadows_on != 0u {

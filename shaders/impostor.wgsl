@@ -272,8 +272,21 @@ struct ImpostorFragment {
     @builtin(frag_depth) depth: f32,
 }
 
+// The impostor with the depth of its blended point (`parallax_depth` on): the depth test
+// runs after the shader, on every fragment.
 @fragment
 fn fs_impostor(in: ImpostorOut) -> ImpostorFragment {
+    return impostor_fragment(in);
+}
+
+// The impostor at its quad's depth (`parallax_depth` off): the depth test runs before
+// the shader, so the fragments behind nearer impostors are not shaded.
+@fragment
+fn fs_impostor_quad(in: ImpostorOut) -> @location(0) vec4<f32> {
+    return impostor_fragment(in).color;
+}
+
+fn impostor_fragment(in: ImpostorOut) -> ImpostorFragment {
     let b = impostors[in.instance];
     let ray = in.p - in.eye;
     // The level whose texels are a pixel wide on the quad (the frames' own planes are

@@ -121,6 +121,8 @@ fn btf_matches_geometry_where_the_tree_level_is_valid() {
     let (scene, world, mut renderer) = setup(&ctx);
     let mut frame = far_frame(&scene, 520.0);
     frame.fog_density = 0.0;
+    // The terrain at full detail, as the bare frame the trees' mask is made from.
+    frame.terrain_px = 0.0;
     // The BTF images alone: VCM shading is judged in tests/vcm.rs. (Here, 520 m away where
     // the geometry's coarsest shadow cascade barely shades one tree from another, VCMs
     // measure 0.161 against 0.143 without.)

@@ -13,7 +13,7 @@ use egui_kittest::kittest::Queryable;
 /// A harness as tall as a full-height viewer panel: the default 600 px would leave the
 /// buttons at the bottom off screen, where a click does not reach them.
 fn tall<S>() -> egui_kittest::HarnessBuilder<S> {
-    Harness::builder().with_size(egui::vec2(800.0, 1000.0))
+    Harness::builder().with_size(egui::vec2(800.0, 1200.0))
 }
 
 struct State {

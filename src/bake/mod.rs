@@ -399,6 +399,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         trees: true,
         ground_shadows: false,
         ground_sky: false,
+        terrain_px: 0.0,
         sun_held: false,
         reference: Some(Reference::default()),
         render_scale: Default::default(),

@@ -17,6 +17,7 @@ pub mod species;
 pub mod stands;
 pub mod summary;
 pub mod terrain;
+pub mod terrain_lod;
 pub mod tree;
 pub mod world;
 

@@ -287,6 +287,15 @@ pub static GROUND_KNOBS: &[Knob] = &[
         |d| d.ground_sky,
         |d, v| d.ground_sky = v,
     ),
+    Knob::number(
+        "terrain_px",
+        "terrain detail (px of height error)",
+        "terrain chunks out of view are skipped and the others drawn as coarse as keeps their height error below this many pixels (0: every chunk at full detail)",
+        (0.0, 16.0),
+        |d| d.terrain_px,
+        |d, v| d.terrain_px = v,
+    )
+    .slider(0.0, 4.0, false),
 ];
 
 /// A set of knob values, applied in order; setting a knob again replaces its value.

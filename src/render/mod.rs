@@ -78,6 +78,8 @@ pub struct Renderer {
     layouts: Layouts,
     world: WorldGpu,
     color_pipelines: HashMap<wgpu::TextureFormat, ColorPipelines>,
+    /// The pipelines built so far count fragments for the overdraw view.
+    counting: bool,
     frame_uniforms: wgpu::Buffer,
     shadow_sampler: wgpu::Sampler,
     ground_sampler: wgpu::Sampler,
@@ -146,6 +148,7 @@ impl Renderer {
             layouts,
             world: world_gpu,
             color_pipelines: HashMap::new(),
+            counting: false,
             frame_uniforms,
             shadow_sampler,
             bindings: None,
@@ -415,6 +418,18 @@ impl Renderer {
         if overdraw_view.is_some() && self.overdraw.pixels() < pixels {
             self.overdraw = overdraw::OverdrawCounts::new(ctx, pixels)?;
         }
+        // Pipelines count fragments only while the view is on (`frame.wgsl`): built again
+        // when it turns on or off.
+        let counting = overdraw_view.is_some();
+        if counting != self.counting {
+            self.counting = counting;
+            self.color_pipelines.clear();
+            if let Some(s) = self.self_shadow.as_mut() {
+                s.forget_pipelines();
+            }
+            self.bake.forget_pipelines();
+        }
+        shaders::set_counting(counting);
         self.ensure_bindings(ctx, frame.shadows.map_size)?;
         if !self.color_pipelines.contains_key(&format) {
             let p = ctx.checked("building the render pipelines", || {
@@ -430,6 +445,14 @@ impl Renderer {
         let cam = &frame.camera;
         let frustum = cam.frustum(aspect);
         let method = &mut self.methods[index];
+        let terrain_levels = (method.shades_ground() && frame.terrain_px > 0.0).then(|| {
+            self.world.terrain_chunks.levels(
+                &frustum,
+                cam.position,
+                cam.focal_px(height),
+                frame.terrain_px,
+            )
+        });
         let visible = if frame.trees && !method.culls_itself(&self.bake, frame) {
             self.world.cull(&frustum)
         } else {
@@ -566,9 +589,18 @@ impl Renderer {
             if !studio {
                 // Instance 0 of every method's upload is the terrain's.
                 spans.mark(&mut pass, "terrain");
-                let (tris, _, calls) =
-                    self.world
-                        .draw(&mut pass, &[], Some(pipes.meshes()), true, &[]);
+                let (tris, calls) = match &terrain_levels {
+                    Some(levels) => {
+                        pass.set_pipeline(pipes.meshes().opaque);
+                        self.world.draw_terrain_levels(&mut pass, levels)
+                    }
+                    None => {
+                        let (tris, _, calls) =
+                            self.world
+                                .draw(&mut pass, &[], Some(pipes.meshes()), true, &[]);
+                        (tris, calls)
+                    }
+                };
                 stats.triangles += tris;
                 stats.draw_calls += calls;
             }

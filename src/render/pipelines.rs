@@ -398,7 +398,7 @@ pub(crate) fn light_view_pipeline(
     let cutout = wgpu::FragmentState {
         module: &module,
         entry_point: Some("fs_shadow_cutout"),
-        compilation_options: Default::default(),
+        compilation_options: crate::render::shaders::frame_options(),
         targets: &[],
     };
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
@@ -407,7 +407,7 @@ pub(crate) fn light_view_pipeline(
         vertex: wgpu::VertexState {
             module: &module,
             entry_point: Some(p.vertex),
-            compilation_options: Default::default(),
+            compilation_options: crate::render::shaders::frame_options(),
             buffers: &[Some(vertex_layout())],
         },
         primitive: wgpu::PrimitiveState {
@@ -429,7 +429,7 @@ pub(crate) fn light_view_pipeline(
             .map(|(f, targets)| wgpu::FragmentState {
                 module: fragment_module.as_ref().unwrap_or(&module),
                 entry_point: Some(f.entry),
-                compilation_options: Default::default(),
+                compilation_options: crate::render::shaders::frame_options(),
                 targets,
             })
             .or(Some(cutout)),
@@ -507,7 +507,7 @@ impl ColorPipelines {
             vertex: wgpu::VertexState {
                 module: &sky,
                 entry_point: Some("vs_sky"),
-                compilation_options: Default::default(),
+                compilation_options: crate::render::shaders::frame_options(),
                 buffers: &[],
             },
             primitive: Default::default(),
@@ -522,7 +522,7 @@ impl ColorPipelines {
             fragment: Some(wgpu::FragmentState {
                 module: &sky,
                 entry_point: Some("fs_sky"),
-                compilation_options: Default::default(),
+                compilation_options: crate::render::shaders::frame_options(),
                 targets: &target,
             }),
             multiview_mask: None,
@@ -538,7 +538,7 @@ impl ColorPipelines {
             vertex: wgpu::VertexState {
                 module: &overdraw_module,
                 entry_point: Some("vs_sky"),
-                compilation_options: Default::default(),
+                compilation_options: crate::render::shaders::frame_options(),
                 buffers: &[],
             },
             primitive: Default::default(),
@@ -547,7 +547,7 @@ impl ColorPipelines {
             fragment: Some(wgpu::FragmentState {
                 module: &overdraw_module,
                 entry_point: Some("fs_overdraw"),
-                compilation_options: Default::default(),
+                compilation_options: crate::render::shaders::frame_options(),
                 targets: &target,
             }),
             multiview_mask: None,
@@ -626,7 +626,7 @@ impl GeometryPass {
             vertex: wgpu::VertexState {
                 module: &self.module,
                 entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
+                compilation_options: crate::render::shaders::frame_options(),
                 buffers: &[Some(vertex_layout())],
             },
             primitive: wgpu::PrimitiveState {
@@ -644,7 +644,7 @@ impl GeometryPass {
             fragment: Some(wgpu::FragmentState {
                 module: &self.module,
                 entry_point: Some(fragment),
-                compilation_options: Default::default(),
+                compilation_options: crate::render::shaders::frame_options(),
                 targets,
             }),
             multiview_mask: None,
@@ -685,7 +685,7 @@ pub fn blended_pipeline(device: &wgpu::Device, p: Blended<'_>) -> wgpu::RenderPi
         vertex: wgpu::VertexState {
             module: &module,
             entry_point: Some(p.vertex),
-            compilation_options: Default::default(),
+            compilation_options: crate::render::shaders::frame_options(),
             buffers: &[],
         },
         primitive: wgpu::PrimitiveState {
@@ -703,7 +703,7 @@ pub fn blended_pipeline(device: &wgpu::Device, p: Blended<'_>) -> wgpu::RenderPi
         fragment: Some(wgpu::FragmentState {
             module: &module,
             entry_point: Some(p.fragment),
-            compilation_options: Default::default(),
+            compilation_options: crate::render::shaders::frame_options(),
             targets: &[Some(wgpu::ColorTargetState {
                 format: p.format,
                 blend: Some(wgpu::BlendState {

@@ -395,6 +395,11 @@ impl SelfShadow {
         Ok(())
     }
 
+    /// Drops the colour pipelines built so far.
+    pub fn forget_pipelines(&mut self) {
+        self.color.clear();
+    }
+
     /// Builds the reference trees' pipelines for a target of `format`, once.
     pub fn ensure_pipelines(
         &mut self,

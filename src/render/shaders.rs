@@ -4,6 +4,28 @@
 //! prepended, since WGSL has no include. Everything is embedded at build time, so the binary
 //! runs from any directory.
 
+use std::cell::Cell;
+
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Builds the pipelines made in this thread with the overdraw view's counters in them
+/// (`COUNT_OVERDRAW` in `frame.wgsl`) or without, until set again. The renderer sets it
+/// for its frame and drops its pipelines when it changes.
+pub fn set_counting(on: bool) {
+    COUNTING.with(|c| c.set(on));
+}
+
+/// The pipeline constants of a module with `frame.wgsl` in it.
+pub fn frame_options() -> wgpu::PipelineCompilationOptions<'static> {
+    const ON: &[(&str, f64)] = &[("COUNT_OVERDRAW", 1.0)];
+    wgpu::PipelineCompilationOptions {
+        constants: if COUNTING.with(Cell::get) { ON } else { &[] },
+        ..Default::default()
+    }
+}
+
 const FRAME: &str = include_str!("../../shaders/frame.wgsl");
 const INSTANCING: &str = include_str!("../../shaders/instancing.wgsl");
 const BILLBOARD_RECORD: &str = include_str!("../../shaders/billboard_record.wgsl");

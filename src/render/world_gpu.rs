@@ -196,6 +196,79 @@ impl SpeciesGpu {
     }
 }
 
+/// Where each terrain chunk's levels lie in the terrain's index buffer.
+pub struct TerrainChunksGpu {
+    pub chunks: Vec<crate::model::terrain_lod::TerrainChunk>,
+    pub horizon: Vec<(Aabb, std::ops::Range<u32>)>,
+    pub full: std::ops::Range<u32>,
+}
+
+/// What of the terrain a view draws: each chunk's level (None: out of view) and whether
+/// each sector of the horizon ring is in view.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TerrainView {
+    pub chunks: Vec<Option<usize>>,
+    pub horizon: Vec<bool>,
+}
+
+impl TerrainChunksGpu {
+    /// The chunks in `frustum` and the level of each for a view from `eye` (see
+    /// [`crate::model::terrain_lod::ChunkedTerrain::levels`]).
+    pub fn levels(
+        &self,
+        frustum: &super::Frustum,
+        eye: glam::Vec3,
+        focal_px: f32,
+        tolerance_px: f32,
+    ) -> TerrainView {
+        let levels = crate::model::terrain_lod::levels(&self.chunks, eye, focal_px, tolerance_px);
+        TerrainView {
+            chunks: self
+                .chunks
+                .iter()
+                .zip(levels)
+                .map(|(c, l)| frustum.intersects(&c.bounds).then_some(l))
+                .collect(),
+            horizon: self
+                .horizon
+                .iter()
+                .map(|(b, _)| frustum.intersects(b))
+                .collect(),
+        }
+    }
+
+    /// The index ranges that draw the horizon and each chunk at its level, neighbours in
+    /// the buffer merged.
+    pub fn ranges(&self, view: &TerrainView) -> Vec<std::ops::Range<u32>> {
+        let mut out: Vec<std::ops::Range<u32>> = Vec::new();
+        let mut push = |r: std::ops::Range<u32>| {
+            if r.is_empty() {
+                return;
+            }
+            match out.last_mut() {
+                Some(last) if last.end == r.start => last.end = r.end,
+                _ => out.push(r),
+            }
+        };
+        for ((_, r), seen) in self.horizon.iter().zip(&view.horizon) {
+            if *seen {
+                push(r.clone());
+            }
+        }
+        for (c, l) in self.chunks.iter().zip(&view.chunks) {
+            match *l {
+                Some(0) => {
+                    push(c.ranges[0].clone());
+                    push(c.skirts0.clone());
+                }
+                Some(l) => push(c.ranges[l.min(c.ranges.len() - 1)].clone()),
+                None => {}
+            }
+        }
+        out
+    }
+}
+
 /// A contiguous run of one species' trees in the per-frame instance buffer.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TreeRun {
@@ -205,7 +278,10 @@ pub struct TreeRun {
 }
 
 pub struct WorldGpu {
+    /// The terrain: its index buffer holds every chunk at every level
+    /// ([`crate::model::terrain_lod`]); `terrain_chunks` says which range is which.
     pub terrain: PartSet,
+    pub terrain_chunks: TerrainChunksGpu,
     pub species: Vec<SpeciesGpu>,
     /// Per tree: species, world transform + tint, world bounds.
     pub tree_species: Vec<u32>,
@@ -243,13 +319,19 @@ impl WorldGpu {
             alpha_cutoff: 0.0,
             textured: false,
         };
-        let terrain_mesh = world.terrain.mesh();
+        let chunked = world.terrain.chunked();
+        let terrain_mesh = &chunked.mesh;
+        let terrain_chunks = TerrainChunksGpu {
+            chunks: chunked.chunks.clone(),
+            horizon: chunked.horizon.clone(),
+            full: chunked.full.clone(),
+        };
         let terrain = PartSet::new(
             ctx,
             parts_layout,
             PartKind::Trunk,
             "terrain",
-            &terrain_mesh,
+            terrain_mesh,
             &[Mat4::IDENTITY],
             plain,
         )
@@ -379,6 +461,7 @@ impl WorldGpu {
         });
         Ok(Self {
             terrain,
+            terrain_chunks,
             species,
             tree_species,
             tree_data,
@@ -421,6 +504,16 @@ impl WorldGpu {
         if let Some(p) = pipes {
             pass.set_pipeline(p.opaque);
         }
+        if terrain {
+            let set = &self.terrain;
+            pass.set_bind_group(2, &set.bind_group, &[]);
+            pass.set_vertex_buffer(0, set.mesh.vertices.slice(..));
+            pass.set_index_buffer(set.mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+            let full = self.terrain_chunks.full.clone();
+            tris += u64::from(full.len() as u32 / 3);
+            pass.draw_indexed(full, 0, 0..1);
+            calls += 1;
+        }
         let mut draw = |pass: &mut wgpu::RenderPass<'_>, set: &PartSet, first: u32, n: u32| {
             pass.set_bind_group(2, &set.bind_group, &[]);
             pass.set_vertex_buffer(0, set.mesh.vertices.slice(..));
@@ -430,9 +523,6 @@ impl WorldGpu {
             tris += set.mesh.triangles() * u64::from(n) * u64::from(set.count);
             calls += 1;
         };
-        if terrain {
-            draw(pass, &self.terrain, 0, 1);
-        }
         // Opaque parts of every species first, then foliage, to switch pipelines twice only.
         for foliage in [false, true] {
             if let Some(p) = pipes {
@@ -452,6 +542,28 @@ impl WorldGpu {
             trees += run.count;
         }
         (tris, trees, calls)
+    }
+
+    /// Draws the terrain for the camera (its pipeline and groups 0 and 1 set by the
+    /// caller): the horizon ring's sectors and the chunks in `view`, each chunk at its
+    /// level, neighbouring ranges merged into one draw. Returns (triangles, draw calls).
+    pub fn draw_terrain_levels(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        view: &TerrainView,
+    ) -> (u64, u32) {
+        let set = &self.terrain;
+        pass.set_bind_group(2, &set.bind_group, &[]);
+        pass.set_vertex_buffer(0, set.mesh.vertices.slice(..));
+        pass.set_index_buffer(set.mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+        let mut tris = 0u64;
+        let mut calls = 0u32;
+        for r in self.terrain_chunks.ranges(view) {
+            tris += u64::from(r.len() as u32 / 3);
+            pass.draw_indexed(r, 0, 0..1);
+            calls += 1;
+        }
+        (tris, calls)
     }
 
     /// Builds the instance list for this frame: index 0 is the terrain's identity, then each

@@ -46,6 +46,19 @@ pub struct Bake {
 }
 
 impl Bake {
+    /// Drops every render pipeline the assets built (they are built again on next use).
+    pub fn forget_pipelines(&mut self) {
+        if let Some(b) = self.btf.as_mut() {
+            b.forget_pipelines();
+        }
+        if let Some(t) = self.texel.as_mut() {
+            t.forget_pipelines();
+        }
+        if let Some(i) = self.impostor.as_mut() {
+            i.forget_pipeline();
+        }
+    }
+
     /// Loads `baked` for `world`. Volumes that cannot be loaded leave `btf` and `billboard`
     /// working (the reason is kept for the `texel` method's error).
     pub fn load(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {

@@ -79,6 +79,15 @@ pub struct BtfAssets {
 }
 
 impl BtfAssets {
+    /// Drops the render pipelines built so far (they are built again on next use).
+    pub fn forget_pipelines(&mut self) {
+        self.pipelines.clear();
+        self.opacity_pipeline = None;
+        if let Some(c) = self.canopy.as_mut() {
+            c.forget_pipeline();
+        }
+    }
+
     /// What it keeps on the CPU: the visibility cube maps (read there, as in the
     /// thesis), every image's mean and the far canopy's map until it is uploaded.
     pub fn cpu_parts(&self, out: &mut Vec<crate::render::memory::MemoryPart>) {

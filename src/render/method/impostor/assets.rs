@@ -27,7 +27,8 @@ pub struct ImpostorAssets {
     albedo: wgpu::TextureView,
     normal: wgpu::TextureView,
     sampler: wgpu::Sampler,
-    pipeline: Option<(wgpu::TextureFormat, wgpu::RenderPipeline)>,
+    /// The pipeline, for a target format and with or without the parallax point's depth.
+    pipeline: Option<(wgpu::TextureFormat, bool, wgpu::RenderPipeline)>,
     /// Bytes of both atlases on the GPU.
     pub bytes: u64,
 }
@@ -39,6 +40,11 @@ fn same_layout(a: &Impostor, b: &Impostor) -> bool {
 }
 
 impl ImpostorAssets {
+    /// Drops the pipeline built so far.
+    pub fn forget_pipeline(&mut self) {
+        self.pipeline = None;
+    }
+
     /// Uploads `baked`'s impostors for `world`'s species; fails with what to do when the
     /// bake has none or not one per species.
     pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
@@ -233,14 +239,20 @@ impl ImpostorAssets {
         }
     }
 
-    /// The pipeline for `format`, built once per format.
+    /// The pipeline for `format`, writing the parallax point's depth or the quad's
+    /// (`parallax_depth`), built once per choice.
     pub fn ensure_pipeline(
         &mut self,
         device: &wgpu::Device,
         layouts: &Layouts,
         format: wgpu::TextureFormat,
+        parallax_depth: bool,
     ) {
-        if self.pipeline.as_ref().is_some_and(|(f, _)| *f == format) {
+        if self
+            .pipeline
+            .as_ref()
+            .is_some_and(|(f, d, _)| *f == format && *d == parallax_depth)
+        {
             return;
         }
         let pipeline = crate::render::pipelines::blended_pipeline(
@@ -250,7 +262,11 @@ impl ImpostorAssets {
                 layouts: [&layouts.frame, &self.layout],
                 source: crate::render::shaders::impostor(),
                 vertex: "vs_impostor",
-                fragment: "fs_impostor",
+                fragment: if parallax_depth {
+                    "fs_impostor"
+                } else {
+                    "fs_impostor_quad"
+                },
                 format,
                 blend: wgpu::BlendComponent::REPLACE,
                 cull: None,
@@ -258,12 +274,12 @@ impl ImpostorAssets {
                 depth_write: true,
             },
         );
-        self.pipeline = Some((format, pipeline));
+        self.pipeline = Some((format, parallax_depth, pipeline));
     }
 
     /// Draws `count` records (group 0 bound by the caller).
     pub fn draw(&self, pass: &mut wgpu::RenderPass<'_>, count: u32) {
-        let Some((_, pipeline)) = &self.pipeline else {
+        let Some((_, _, pipeline)) = &self.pipeline else {
             return;
         };
         if count == 0 {

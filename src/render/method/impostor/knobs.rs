@@ -23,6 +23,13 @@ pub static KNOBS: &[Knob] = &[
         |d, v| d.impostor.parallax = v,
     )
     .tuned(&["off", "on"]),
+    Knob::toggle(
+        "parallax_depth",
+        "depth of the parallax point",
+        "write the depth of the point the parallax found (exact where impostors cross) instead of the quad's (the depth test then runs after shading: slower)",
+        |d| d.impostor.parallax_depth,
+        |d, v| d.impostor.parallax_depth = v,
+    ),
     Knob::number(
         "self_shadow",
         "self-shadowing",

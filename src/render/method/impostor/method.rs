@@ -27,6 +27,8 @@ pub struct ImpostorMethod {
     /// The geometry trees' runs: trunks and limbs, then twigs, all faded.
     runs: Vec<Vec<TreeRun>>,
     stats: ImpostorStats,
+    /// The frame's `parallax_depth` knob.
+    parallax_depth: bool,
 }
 
 /// The impostor assets, or the error that says how to get them.
@@ -59,6 +61,7 @@ impl RenderMethod for ImpostorMethod {
     fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
         need(bake)?;
         let settings = cx.frame.impostor;
+        self.parallax_depth = settings.parallax_depth;
         let mut sun = SunWork::default();
         let (Some(btf), Some(imp)) = (bake.btf.as_mut(), bake.impostor.as_mut()) else {
             return Err(crate::Error::Gpu("the impostors are not loaded".into()));
@@ -131,7 +134,7 @@ impl RenderMethod for ImpostorMethod {
         format: wgpu::TextureFormat,
     ) -> Result<()> {
         if let Some(imp) = bake.impostor.as_mut() {
-            imp.ensure_pipeline(&ctx.device, layouts, format);
+            imp.ensure_pipeline(&ctx.device, layouts, format, self.parallax_depth);
         }
         Ok(())
     }

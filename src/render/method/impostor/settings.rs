@@ -12,6 +12,10 @@ pub struct ImpostorSettings {
     /// crown between a point and the surface the frame nearest the sun (or the zenith) sees
     /// first; 0: none.
     pub self_shadow: f32,
+    /// Write the depth of the blended point (moved by the parallax) instead of the quad's:
+    /// exact where impostors cross, but the depth test then runs after the shader, so
+    /// hidden fragments are shaded too.
+    pub parallax_depth: bool,
     /// Shade with the trees' visibility cube maps (when the bake has them).
     pub vcm: bool,
     /// Colour every impostor by the LOD overlay's colour.
@@ -30,6 +34,7 @@ impl Default for ImpostorSettings {
             alpha_cutoff: 0.5,
             parallax: true,
             self_shadow: 64.0,
+            parallax_depth: false,
             vcm: true,
             show_lod: false,
             geometry_px: 2.0,

@@ -109,6 +109,18 @@ impl PendingTexel {
 pub const MAX_TEXELS: usize = 1 << 17;
 
 impl TexelAssets {
+    /// Drops the render pipelines built so far (they are built again on next use).
+    pub fn forget_pipelines(&mut self) {
+        self.pipelines.clear();
+        self.opacity_pipeline = None;
+        if let Some(s) = self.stacks.as_mut() {
+            s.pass.forget_pipelines();
+        }
+        if let Some(t) = self.tiles.as_mut() {
+            t.pass.forget_pipelines();
+        }
+    }
+
     /// What it keeps on the CPU: the baked volumes (for the stack atlas, built the first
     /// time the stacks mode draws) and the terrain (for the forest-cover tiles).
     pub fn cpu_parts(&self, out: &mut Vec<crate::render::memory::MemoryPart>) {

@@ -148,6 +148,11 @@ pub(crate) struct OverPass {
 }
 
 impl OverPass {
+    /// Drops the pipelines built so far.
+    pub fn forget_pipelines(&mut self) {
+        self.pipelines.clear();
+    }
+
     /// A pass whose group 1 is `entries`, its layout and bind groups labelled `label`.
     pub fn new(
         device: &wgpu::Device,

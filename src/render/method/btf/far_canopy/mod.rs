@@ -99,6 +99,11 @@ pub struct CanopyGpu {
 }
 
 impl CanopyGpu {
+    /// Drops the pipeline built so far.
+    pub fn forget_pipeline(&mut self) {
+        self.pipeline = None;
+    }
+
     /// Uploads `map`; its coverage is read through `sampler` (linear, clamped, mipmapped:
     /// the BTF images' own).
     pub fn new(ctx: &GpuContext, map: &CanopyMap, sampler: &wgpu::Sampler) -> Result<Self> {
