@@ -91,10 +91,6 @@ pub fn encode_bc7(rgba: &[u8], w: u32, h: u32) -> Vec<u8> {
     intel_tex_2::bc7::compress_blocks(&bc7_settings(), &surface)
 }
 
-/// BC4 blocks of a `w` x `h` one-channel image.
-///
-/// # Panics
-/// If `r` holds fewer than `w * h` bytes.
 /// A set of cube maps stored a byte a texel re-encoded in BC4, face by face (a set already
 /// in BC4 is left as it is).
 pub fn compress_vcm(set: &mut super::VcmSet) {
@@ -111,6 +107,10 @@ pub fn compress_vcm(set: &mut super::VcmSet) {
     set.encoding = super::MapEncoding::Bc4;
 }
 
+/// BC4 blocks of a `w` x `h` one-channel image.
+///
+/// # Panics
+/// If `r` holds fewer than `w * h` bytes.
 pub fn encode_bc4(r: &[u8], w: u32, h: u32) -> Vec<u8> {
     assert!(r.len() >= w as usize * h as usize, "short image");
     let (data, pw, ph) = padded(r, w, h, 1);
