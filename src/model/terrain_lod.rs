@@ -44,43 +44,90 @@ pub struct TerrainChunk {
     /// Level 0's skirts (drawn with it when the chunks are drawn by level).
     pub skirts0: Range<u32>,
     pub error: [f32; TERRAIN_LODS],
-    /// The grid's spacing (m).
-    pub cell: f32,
 }
 
-/// The terrain mesh with its skirt vertices appended, and the ranges to draw.
-#[derive(Clone, Debug)]
-pub struct ChunkedTerrain {
-    pub mesh: Mesh,
+/// Which ranges of the terrain's index buffer draw what.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TerrainLayout {
     pub chunks: Vec<TerrainChunk>,
     /// The horizon ring's indices, by sector of the compass, with their bounds (none
     /// without a ring).
     pub horizon: Vec<(Aabb, Range<u32>)>,
     /// The horizon and every chunk at level 0.
     pub full: Range<u32>,
+    /// The grid's spacing (m).
+    pub cell: f32,
 }
 
-/// The level of each chunk for a view from `eye` with a focal length of `focal_px` pixels:
-/// the coarsest whose height error projects below `tolerance_px` and whose grid points
-/// fall at most [`SPACING_PX`] apart at the chunk's nearest point. A tolerance of 0 (or NaN) keeps every chunk at level 0.
-pub fn levels(chunks: &[TerrainChunk], eye: Vec3, focal_px: f32, tolerance_px: f32) -> Vec<usize> {
-    chunks
-        .iter()
-        .map(|c| {
-            if !(tolerance_px > 0.0 && focal_px > 0.0) {
-                return 0;
+/// What of the terrain a view draws: each chunk's level (None: out of view) and whether
+/// each sector of the horizon ring is in view.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TerrainView {
+    pub chunks: Vec<Option<usize>>,
+    pub horizon: Vec<bool>,
+}
+
+/// The terrain mesh with its level and skirt vertices appended, and its layout.
+#[derive(Clone, Debug)]
+pub struct ChunkedTerrain {
+    pub mesh: Mesh,
+    pub layout: TerrainLayout,
+}
+
+impl TerrainLayout {
+    /// The level of each chunk for a view from `eye` with a focal length of `focal_px`
+    /// pixels: the coarsest whose height error projects below `tolerance_px` and whose grid
+    /// points fall at most [`SPACING_PX`] apart at the chunk's nearest point. A tolerance
+    /// of 0 (or NaN) keeps every chunk at level 0.
+    pub fn levels(&self, eye: Vec3, focal_px: f32, tolerance_px: f32) -> Vec<usize> {
+        if !(tolerance_px > 0.0 && focal_px > 0.0) {
+            return vec![0; self.chunks.len()];
+        }
+        self.chunks
+            .iter()
+            .map(|c| {
+                let d = eye.distance(eye.clamp(c.bounds.min, c.bounds.max));
+                (0..TERRAIN_LODS)
+                    .rev()
+                    .find(|&l| {
+                        c.error[l] * focal_px <= tolerance_px * d
+                            && (1 << l) as f32 * self.cell * focal_px <= SPACING_PX * d
+                    })
+                    .unwrap_or(0)
+            })
+            .collect()
+    }
+
+    /// The index ranges that draw the horizon's sectors and the chunks in `view`, each
+    /// chunk at its level, neighbours in the buffer merged.
+    pub fn ranges(&self, view: &TerrainView) -> Vec<Range<u32>> {
+        let mut out: Vec<Range<u32>> = Vec::new();
+        let mut push = |r: Range<u32>| {
+            if r.is_empty() {
+                return;
             }
-            let nearest = eye.clamp(c.bounds.min, c.bounds.max);
-            let d = eye.distance(nearest);
-            (0..TERRAIN_LODS)
-                .rev()
-                .find(|&l| {
-                    c.error[l] * focal_px <= tolerance_px * d
-                        && (1 << l) as f32 * c.cell * focal_px <= SPACING_PX * d
-                })
-                .unwrap_or(0)
-        })
-        .collect()
+            match out.last_mut() {
+                Some(last) if last.end == r.start => last.end = r.end,
+                _ => out.push(r),
+            }
+        };
+        for ((_, r), seen) in self.horizon.iter().zip(&view.horizon) {
+            if *seen {
+                push(r.clone());
+            }
+        }
+        for (c, l) in self.chunks.iter().zip(&view.chunks) {
+            match *l {
+                Some(0) => {
+                    push(c.ranges[0].clone());
+                    push(c.skirts0.clone());
+                }
+                Some(l) => push(c.ranges[l.min(TERRAIN_LODS - 1)].clone()),
+                None => {}
+            }
+        }
+        out
+    }
 }
 
 /// Grid points along one side of a chunk from `a` to `b` (inclusive) every `step`, the
@@ -322,15 +369,17 @@ impl Terrain {
                     ranges: ranges[cj * n + ci].clone(),
                     skirts0: skirts0[cj * n + ci].clone(),
                     error: errors[cj * n + ci],
-                    cell: step,
                 });
             }
         }
         ChunkedTerrain {
             mesh,
-            chunks,
-            horizon,
-            full,
+            layout: TerrainLayout {
+                chunks,
+                horizon,
+                full,
+                cell: step,
+            },
         }
     }
 }
@@ -415,13 +464,13 @@ mod tests {
         let t = terrain(70, |i, j| ((i * 7 + j * 3) % 11) as f32);
         let c = t.chunked();
         let mesh = t.mesh();
-        let full = &c.mesh.indices[c.full.start as usize..c.full.end as usize];
+        let full = &c.mesh.indices[c.layout.full.start as usize..c.layout.full.end as usize];
         assert_eq!(
             triangles(full, &c.mesh.vertices),
             triangles(&mesh.indices, &mesh.vertices)
         );
         // 69 cells: chunks of 32, 32 and 5.
-        assert_eq!(c.chunks.len(), 9);
+        assert_eq!(c.layout.chunks.len(), 9);
     }
 
     #[test]
@@ -429,7 +478,7 @@ mod tests {
         // Flat but for one grid point (33, 33): odd, so every coarser level skips it.
         let t = terrain(65, |i, j| if (i, j) == (33, 33) { 5.0 } else { 1.0 });
         let c = t.chunked();
-        for (k, chunk) in c.chunks.iter().enumerate() {
+        for (k, chunk) in c.layout.chunks.iter().enumerate() {
             let holds = k == 3; // the chunk at cells 32..64 in x, 32..64 in z
             assert_eq!(chunk.error[0], 0.0);
             for l in 1..TERRAIN_LODS {
@@ -452,14 +501,15 @@ mod tests {
         let eye = Vec3::new(-50.0, 10.0, -50.0);
         // 100 m terrain, cells of 0.78 m: at a focal length of 100 px every level's
         // spacing stays within 4 px from 16 m on.
-        let near = levels(&c.chunks, eye, 100.0, 0.5);
+        let near = c.layout.levels(eye, 100.0, 0.5);
         assert_eq!(near[0], 0, "the chunk under the eye is full detail");
-        let far = levels(&c.chunks, eye, 100.0, 50.0);
+        let far = c.layout.levels(eye, 100.0, 50.0);
         assert!(far[15] > near[0], "{far:?}");
         assert!(far.iter().zip(&near).all(|(f, n)| f >= n));
-        assert!(levels(&c.chunks, eye, 100.0, 0.0).iter().all(|&l| l == 0));
+        assert!(c.layout.levels(eye, 100.0, 0.0).iter().all(|&l| l == 0));
         assert!(
-            levels(&c.chunks, eye, 100.0, f32::NAN)
+            c.layout
+                .levels(eye, 100.0, f32::NAN)
                 .iter()
                 .all(|&l| l == 0)
         );
@@ -474,11 +524,12 @@ mod tests {
         let t = terrain(70, |i, j| ((i * 13 + j * 7) % 17) as f32 * 0.5);
         let c = t.chunked();
         let worst = c
+            .layout
             .chunks
             .iter()
             .flat_map(|ch| ch.error)
             .fold(0.0f32, f32::max);
-        for ch in &c.chunks {
+        for ch in &c.layout.chunks {
             let (lo, hi) = (ch.bounds.min, ch.bounds.max);
             for l in 0..TERRAIN_LODS {
                 let mut used: Vec<u32> =
@@ -519,6 +570,7 @@ mod tests {
         let c = t.chunked();
         let lowest = t.heights.iter().copied().fold(f32::INFINITY, f32::min);
         let worst = c
+            .layout
             .chunks
             .iter()
             .flat_map(|ch| ch.error)

@@ -446,7 +446,7 @@ impl Renderer {
         let frustum = cam.frustum(aspect);
         let method = &mut self.methods[index];
         let terrain_levels = (method.shades_ground() && frame.terrain_px > 0.0).then(|| {
-            self.world.terrain_chunks.levels(
+            self.world.terrain_view(
                 &frustum,
                 cam.position,
                 cam.focal_px(height),

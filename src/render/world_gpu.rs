@@ -10,6 +10,7 @@ use super::camera::Frustum;
 use super::pipelines::MeshPipelines;
 use crate::model::World;
 use crate::model::mesh::{Aabb, Mesh};
+use crate::model::terrain_lod::{ChunkedTerrain, TerrainLayout, TerrainView};
 use crate::{Error, Result};
 
 /// Largest forest the GPU buffers are sized for: the scene file's own limit.
@@ -196,79 +197,6 @@ impl SpeciesGpu {
     }
 }
 
-/// Where each terrain chunk's levels lie in the terrain's index buffer.
-pub struct TerrainChunksGpu {
-    pub chunks: Vec<crate::model::terrain_lod::TerrainChunk>,
-    pub horizon: Vec<(Aabb, std::ops::Range<u32>)>,
-    pub full: std::ops::Range<u32>,
-}
-
-/// What of the terrain a view draws: each chunk's level (None: out of view) and whether
-/// each sector of the horizon ring is in view.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct TerrainView {
-    pub chunks: Vec<Option<usize>>,
-    pub horizon: Vec<bool>,
-}
-
-impl TerrainChunksGpu {
-    /// The chunks in `frustum` and the level of each for a view from `eye` (see
-    /// [`crate::model::terrain_lod::ChunkedTerrain::levels`]).
-    pub fn levels(
-        &self,
-        frustum: &super::Frustum,
-        eye: glam::Vec3,
-        focal_px: f32,
-        tolerance_px: f32,
-    ) -> TerrainView {
-        let levels = crate::model::terrain_lod::levels(&self.chunks, eye, focal_px, tolerance_px);
-        TerrainView {
-            chunks: self
-                .chunks
-                .iter()
-                .zip(levels)
-                .map(|(c, l)| frustum.intersects(&c.bounds).then_some(l))
-                .collect(),
-            horizon: self
-                .horizon
-                .iter()
-                .map(|(b, _)| frustum.intersects(b))
-                .collect(),
-        }
-    }
-
-    /// The index ranges that draw the horizon and each chunk at its level, neighbours in
-    /// the buffer merged.
-    pub fn ranges(&self, view: &TerrainView) -> Vec<std::ops::Range<u32>> {
-        let mut out: Vec<std::ops::Range<u32>> = Vec::new();
-        let mut push = |r: std::ops::Range<u32>| {
-            if r.is_empty() {
-                return;
-            }
-            match out.last_mut() {
-                Some(last) if last.end == r.start => last.end = r.end,
-                _ => out.push(r),
-            }
-        };
-        for ((_, r), seen) in self.horizon.iter().zip(&view.horizon) {
-            if *seen {
-                push(r.clone());
-            }
-        }
-        for (c, l) in self.chunks.iter().zip(&view.chunks) {
-            match *l {
-                Some(0) => {
-                    push(c.ranges[0].clone());
-                    push(c.skirts0.clone());
-                }
-                Some(l) => push(c.ranges[l.min(c.ranges.len() - 1)].clone()),
-                None => {}
-            }
-        }
-        out
-    }
-}
-
 /// A contiguous run of one species' trees in the per-frame instance buffer.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TreeRun {
@@ -279,9 +207,9 @@ pub struct TreeRun {
 
 pub struct WorldGpu {
     /// The terrain: its index buffer holds every chunk at every level
-    /// ([`crate::model::terrain_lod`]); `terrain_chunks` says which range is which.
+    /// ([`crate::model::terrain_lod`]); `terrain_layout` says which range is which.
     pub terrain: PartSet,
-    pub terrain_chunks: TerrainChunksGpu,
+    pub terrain_layout: TerrainLayout,
     pub species: Vec<SpeciesGpu>,
     /// Per tree: species, world transform + tint, world bounds.
     pub tree_species: Vec<u32>,
@@ -319,19 +247,16 @@ impl WorldGpu {
             alpha_cutoff: 0.0,
             textured: false,
         };
-        let chunked = world.terrain.chunked();
-        let terrain_mesh = &chunked.mesh;
-        let terrain_chunks = TerrainChunksGpu {
-            chunks: chunked.chunks.clone(),
-            horizon: chunked.horizon.clone(),
-            full: chunked.full.clone(),
-        };
+        let ChunkedTerrain {
+            mesh: terrain_mesh,
+            layout: terrain_layout,
+        } = world.terrain.chunked();
         let terrain = PartSet::new(
             ctx,
             parts_layout,
             PartKind::Trunk,
             "terrain",
-            terrain_mesh,
+            &terrain_mesh,
             &[Mat4::IDENTITY],
             plain,
         )
@@ -461,7 +386,7 @@ impl WorldGpu {
         });
         Ok(Self {
             terrain,
-            terrain_chunks,
+            terrain_layout,
             species,
             tree_species,
             tree_data,
@@ -505,11 +430,8 @@ impl WorldGpu {
             pass.set_pipeline(p.opaque);
         }
         if terrain {
-            let set = &self.terrain;
-            pass.set_bind_group(2, &set.bind_group, &[]);
-            pass.set_vertex_buffer(0, set.mesh.vertices.slice(..));
-            pass.set_index_buffer(set.mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-            let full = self.terrain_chunks.full.clone();
+            self.bind_terrain(pass);
+            let full = self.terrain_layout.full.clone();
             tris += u64::from(full.len() as u32 / 3);
             pass.draw_indexed(full, 0, 0..1);
             calls += 1;
@@ -544,6 +466,40 @@ impl WorldGpu {
         (tris, trees, calls)
     }
 
+    /// Binds the terrain's part set, vertices and indices.
+    fn bind_terrain(&self, pass: &mut wgpu::RenderPass<'_>) {
+        let set = &self.terrain;
+        pass.set_bind_group(2, &set.bind_group, &[]);
+        pass.set_vertex_buffer(0, set.mesh.vertices.slice(..));
+        pass.set_index_buffer(set.mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+    }
+
+    /// What of the terrain a view from `eye` draws: the chunks and horizon sectors in
+    /// `frustum`, each chunk at its level ([`TerrainLayout::levels`]).
+    pub fn terrain_view(
+        &self,
+        frustum: &Frustum,
+        eye: Vec3,
+        focal_px: f32,
+        tolerance_px: f32,
+    ) -> TerrainView {
+        let layout = &self.terrain_layout;
+        let levels = layout.levels(eye, focal_px, tolerance_px);
+        TerrainView {
+            chunks: layout
+                .chunks
+                .iter()
+                .zip(levels)
+                .map(|(c, l)| frustum.intersects(&c.bounds).then_some(l))
+                .collect(),
+            horizon: layout
+                .horizon
+                .iter()
+                .map(|(b, _)| frustum.intersects(b))
+                .collect(),
+        }
+    }
+
     /// Draws the terrain for the camera (its pipeline and groups 0 and 1 set by the
     /// caller): the horizon ring's sectors and the chunks in `view`, each chunk at its
     /// level, neighbouring ranges merged into one draw. Returns (triangles, draw calls).
@@ -552,13 +508,10 @@ impl WorldGpu {
         pass: &mut wgpu::RenderPass<'_>,
         view: &TerrainView,
     ) -> (u64, u32) {
-        let set = &self.terrain;
-        pass.set_bind_group(2, &set.bind_group, &[]);
-        pass.set_vertex_buffer(0, set.mesh.vertices.slice(..));
-        pass.set_index_buffer(set.mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+        self.bind_terrain(pass);
         let mut tris = 0u64;
         let mut calls = 0u32;
-        for r in self.terrain_chunks.ranges(view) {
+        for r in self.terrain_layout.ranges(view) {
             tris += u64::from(r.len() as u32 / 3);
             pass.draw_indexed(r, 0, 0..1);
             calls += 1;
