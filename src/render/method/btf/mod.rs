@@ -39,12 +39,11 @@ use crate::render::GpuContext;
 use crate::render::camera::Frustum;
 use crate::render::frame::FrameStats;
 use crate::render::method::interface::DrawCx;
-use crate::render::pipelines::{
-    FILTERABLE, sampler_entry, storage_buffer_of, storage_entry, texture_entry,
-};
+use crate::render::pipelines::storage_buffer_of;
 use crate::render::timing::PassSpans;
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
 use crate::{Error, Result};
+use pipelines_btf::{btf_layout, make_bind_group};
 
 /// The BTF image sets on the GPU and the per-frame billboard buffer.
 pub struct BtfAssets {
@@ -751,51 +750,6 @@ impl BtfAssets {
     }
 }
 
-/// The btf pass's bind group: billboards, view axes, the image atlas and its sampler.
-pub(super) fn btf_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("btf"),
-        entries: &[
-            storage_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
-            storage_entry(1, wgpu::ShaderStages::FRAGMENT),
-            texture_entry(2, FILTERABLE, wgpu::TextureViewDimension::D2Array),
-            sampler_entry(3, wgpu::SamplerBindingType::Filtering),
-        ],
-    })
-}
-
 fn billboard_buffer(ctx: &GpuContext, capacity: usize) -> wgpu::Buffer {
     storage_buffer_of::<BillboardGpu>(&ctx.device, "btf billboards", capacity)
-}
-
-fn make_bind_group(
-    ctx: &GpuContext,
-    layout: &wgpu::BindGroupLayout,
-    billboards: &wgpu::Buffer,
-    view_axes: &wgpu::Buffer,
-    view: &wgpu::TextureView,
-    sampler: &wgpu::Sampler,
-) -> wgpu::BindGroup {
-    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("btf"),
-        layout,
-        entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: billboards.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: view_axes.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: wgpu::BindingResource::TextureView(view),
-            },
-            wgpu::BindGroupEntry {
-                binding: 3,
-                resource: wgpu::BindingResource::Sampler(sampler),
-            },
-        ],
-    })
 }

@@ -1,5 +1,9 @@
 //! The `btf` billboards' render pipelines: the main view's (premultiplied "over") and the
-//! ground alpha map's (transmittance multiplied), both over `billboard.wgsl`'s quad.
+//! ground alpha map's (transmittance multiplied), both over `billboard.wgsl`'s quad; and
+//! the bind group they read.
+
+use crate::render::GpuContext;
+use crate::render::pipelines::{FILTERABLE, sampler_entry, storage_entry, texture_entry};
 
 pub(super) fn build_opacity_pipeline(
     device: &wgpu::Device,
@@ -74,4 +78,49 @@ fn billboard_pipeline(
             depth_write: false,
         },
     )
+}
+
+/// The btf pass's bind group: billboards, view axes, the image atlas and its sampler.
+pub(super) fn btf_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("btf"),
+        entries: &[
+            storage_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
+            storage_entry(1, wgpu::ShaderStages::FRAGMENT),
+            texture_entry(2, FILTERABLE, wgpu::TextureViewDimension::D2Array),
+            sampler_entry(3, wgpu::SamplerBindingType::Filtering),
+        ],
+    })
+}
+
+pub(super) fn make_bind_group(
+    ctx: &GpuContext,
+    layout: &wgpu::BindGroupLayout,
+    billboards: &wgpu::Buffer,
+    view_axes: &wgpu::Buffer,
+    view: &wgpu::TextureView,
+    sampler: &wgpu::Sampler,
+) -> wgpu::BindGroup {
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("btf"),
+        layout,
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: billboards.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: view_axes.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::TextureView(view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::Sampler(sampler),
+            },
+        ],
+    })
 }
