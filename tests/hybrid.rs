@@ -1,7 +1,8 @@
 //! `hybrid` (issue 13 item 5): up close, where even the twig level's texels are larger than
 //! the LOD bound, a tree is drawn as geometry and comes much closer to the reference than
-//! `btf`'s magnified twig images; far away it is `btf` itself. (The switch's cross-fade is
-//! judged in tests/stability.rs.)
+//! `btf`'s magnified twig images; far away it is `btf` itself, its tree level drawn as
+//! impostors where the bake has them. (The switch's cross-fade is judged in
+//! tests/stability.rs.)
 
 mod common;
 
@@ -111,13 +112,33 @@ fn up_close_hybrid_draws_geometry_and_far_away_it_is_btf() {
     );
     assert!(f_btf > 2.0 * f_hybrid, "btf near: {f_btf:.4}");
 
-    // Far: the tree level is valid; hybrid is btf, pixel for pixel.
+    // Far: with `tree_impostors` off hybrid is btf, pixel for pixel; on (the default;
+    // this bake has impostors), where it draws the tree level, that level is the
+    // `impostor` method's impostor, pixel for pixel.
     let far = view(Vec3::new(60.0, 10.0, 55.0));
-    let (hybrid, hs) = draw(far, Some(Method::Hybrid));
+    let mut billboards = far;
+    billboards.btf.tree_impostors = false;
+    let (hybrid, hs) = draw(billboards, Some(Method::Hybrid));
     let (btf, _) = draw(far, Some(Method::Btf));
     let hb = hs.btf.expect("hybrid reports btf stats");
-    assert_eq!((hb.geometry_trees, hb.faded_trees), (0, 0));
+    assert_eq!((hb.geometry_trees, hb.faded_trees, hb.impostors), (0, 0, 0));
     assert_eq!(hs.shadow_triangles, 0, "no cascades without geometry trees");
     let same = flip(&btf, &hybrid);
     assert!(same < 1e-4, "far, hybrid against btf: {same}");
+    // Farther, at the tree level alone.
+    let farther = view(Vec3::new(150.0, 30.0, 140.0));
+    let (hybrid, hs) = draw(farther, Some(Method::Hybrid));
+    let (impostor, is) = draw(farther, Some(Method::Impostor));
+    let mut billboards = farther;
+    billboards.btf.tree_impostors = false;
+    let (btf, _) = draw(billboards, Some(Method::Hybrid));
+    let hb = hs.btf.expect("hybrid reports btf stats");
+    assert_eq!((hb.impostors, hb.billboards.tree), (1, 0), "{hb:?}");
+    assert_eq!(is.impostor.map(|s| s.impostors), Some(1));
+    let same = flip(&impostor, &hybrid);
+    assert!(same < 1e-4, "far, hybrid against impostor: {same}");
+    assert!(
+        flip(&btf, &hybrid) > 1e-3,
+        "the impostor is not btf's billboard"
+    );
 }

@@ -164,6 +164,13 @@ pub fn controls(
                 ui.label("trees as geometry");
                 ui.label(s.geometry_trees.to_string());
                 ui.end_row();
+                ui.label("tree level as impostors");
+                ui.label(match (frame.btf.tree_impostors, &stats.impostor) {
+                    (false, _) => "off".to_string(),
+                    (true, Some(_)) => format_count(u64::from(s.impostors)),
+                    (true, None) => "none baked ([bake] impostor_frames)".to_string(),
+                });
+                ui.end_row();
             }
             if s.gpu_billboards > 0 {
                 ui.label("built on the GPU");
@@ -209,7 +216,7 @@ pub fn controls(
     if frame.method == Method::Texel {
         texel_stats(ui, stats);
     }
-    if let (Method::Impostor, Some(s)) = (frame.method, &stats.impostor) {
+    if let (Method::Impostor | Method::Hybrid, Some(s)) = (frame.method, &stats.impostor) {
         egui::Grid::new("impostor stats")
             .num_columns(2)
             .show(ui, |ui| {

@@ -144,6 +144,7 @@ pub fn prepare(
         trunk_only: vec![Vec::new(); scene.species_count()],
         trunk_and_limbs: vec![Vec::new(); scene.species_count()],
         twigs: vec![Vec::new(); scene.species_count()],
+        impostors: vec![Vec::new(); scene.species_count()],
         billboards: records.len() as u32,
         far: false,
         records,
@@ -201,7 +202,15 @@ impl RenderMethod for Billboard {
         stats: &mut FrameStats,
     ) {
         let frame = (&self.frame, &self.runs[..]);
-        super::btf::method::draw_frame(bake, pass, cx, frame, self.pipeline.as_ref(), stats);
+        super::btf::method::draw_frame(
+            bake,
+            pass,
+            cx,
+            frame,
+            self.pipeline.as_ref(),
+            stats,
+            &mut |_, _| {},
+        );
         // The btf knobs do not apply.
         stats.btf = None;
     }

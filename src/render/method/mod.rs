@@ -16,6 +16,7 @@
 pub mod billboard;
 pub mod btf;
 pub mod geometry;
+pub mod hybrid;
 pub mod impostor;
 pub mod interface;
 pub mod kind;
@@ -87,7 +88,7 @@ pub fn registry() -> Vec<Box<dyn RenderMethod>> {
         Box::new(btf::method::BtfMethod::new(false)),
         Box::new(billboard::Billboard::default()),
         Box::new(texel::method::TexelMethod::default()),
-        Box::new(btf::method::BtfMethod::new(true)),
+        Box::new(hybrid::HybridMethod::default()),
         Box::new(impostor::method::ImpostorMethod::default()),
     ]
 }
@@ -132,7 +133,21 @@ mod tests {
         for want in ["lod_scale", "vcm", "texel_mode", "ground_sky"] {
             assert!(names.contains(&want), "{want} missing from {names:?}");
         }
-        assert_eq!(knobs_named("vcm").len(), 3, "btf's, texel's and impostor's");
+        assert_eq!(
+            knobs_named("vcm").len(),
+            4,
+            "btf's, hybrid's copy of it, texel's and impostor's"
+        );
+        assert!(
+            knobs_of(Method::Hybrid)
+                .iter()
+                .any(|k| k.name == "tree_impostors")
+        );
+        assert!(
+            !knobs_of(Method::Btf)
+                .iter()
+                .any(|k| k.name == "tree_impostors")
+        );
         assert!(knobs_of(Method::Geometry).is_empty());
         assert!(
             knobs_of(Method::Hybrid)

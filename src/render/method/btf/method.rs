@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use super::prepare::BtfFrame;
-use super::settings::GEOMETRY_COLOR;
+use super::settings::{BtfSettings, GEOMETRY_COLOR};
 use crate::Result;
 use crate::model::mesh::Aabb;
 use crate::render::GpuContext;
@@ -28,7 +28,7 @@ pub struct BtfMethod {
 }
 
 impl BtfMethod {
-    /// `btf`, or with `hybrid`, `hybrid`.
+    /// `btf`, or with `hybrid`, the BTF part of `hybrid` ([`crate::render::method::hybrid`]).
     pub fn new(hybrid: bool) -> Self {
         Self {
             hybrid,
@@ -36,6 +36,96 @@ impl BtfMethod {
             runs: Vec::new(),
             pipeline: None,
         }
+    }
+
+    /// The frame's knobs as this method reads them: the tree level as impostors only in
+    /// `hybrid` with a bake that has them (`impostors`), and then every tree prepared on
+    /// the CPU.
+    pub(crate) fn settings(&self, frame: &FrameDesc, impostors: bool) -> BtfSettings {
+        let mut s = frame.btf;
+        s.tree_impostors &= self.hybrid && impostors;
+        if s.tree_impostors {
+            s.gpu_far = false;
+        }
+        s
+    }
+
+    /// The frame prepared last (None before the first).
+    pub(crate) fn frame(&self) -> Option<&BtfFrame> {
+        self.frame.as_ref()
+    }
+
+    /// [`RenderMethod::prepare`] with the knobs `settings` ([`Self::settings`]).
+    pub(crate) fn prepare_with(
+        &mut self,
+        bake: &mut Bake,
+        cx: &PrepareCx<'_>,
+        settings: &BtfSettings,
+    ) -> Result<Plan> {
+        let method = self.method();
+        bake.need_btf(method)?;
+        let Some(b) = bake.btf.as_mut() else {
+            return Err(crate::Error::Gpu("the BTF images are not loaded".into()));
+        };
+        let frame = cx.frame;
+        let mut sun = SunWork::default();
+        if settings.vcm && frame.trees {
+            let t0 = Instant::now();
+            if b.update_sun(cx.view.to_sun) {
+                sun.moved = true;
+                sun.ms += t0.elapsed().as_secs_f64() * 1e3;
+            }
+        }
+        // The tree level's light blends follow the sun: weights here, drawn before the
+        // frame's other passes (`encode_compute`). Not while impostors draw that level.
+        if settings.light_blend && !settings.tree_impostors && frame.trees {
+            let t0 = Instant::now();
+            if b.update_light_blend(cx.ctx, cx.view.to_sun, settings) {
+                sun.moved = true;
+                sun.ms += t0.elapsed().as_secs_f64() * 1e3;
+            }
+        }
+        let culls = b.takes_far(settings);
+        let (bf, shade_ms) = b.prepare(
+            cx.ctx,
+            cx.world,
+            (!culls).then_some(&cx.visible[..]),
+            frame.trees,
+            cx.view.camera,
+            cx.view.focal_px,
+            cx.view.to_sun,
+            cx.view.frustum,
+            settings,
+            self.hybrid,
+            crate::render::uniforms::frame_lights(frame),
+        );
+        // The far trees' VCM factors, uploaded after the sun moved.
+        sun.ms += shade_ms;
+        let (runs, plan) = plan_geometry(cx.ctx, cx.world, frame, &bf, sun);
+        self.runs = runs;
+        self.frame = Some(bf);
+        Ok(plan)
+    }
+
+    /// [`RenderMethod::draw`], with `between` drawn after the meshes and before the
+    /// billboards.
+    pub(crate) fn draw_with(
+        &self,
+        bake: &Bake,
+        pass: &mut wgpu::RenderPass<'_>,
+        cx: &DrawCx<'_>,
+        stats: &mut FrameStats,
+        between: super::Between<'_>,
+    ) {
+        draw_frame(
+            bake,
+            pass,
+            cx,
+            (&self.frame, &self.runs),
+            self.pipeline.as_ref(),
+            stats,
+            between,
+        );
     }
 }
 
@@ -180,9 +270,10 @@ pub(crate) fn draw_frame(
     (frame, runs): (&Option<BtfFrame>, &[Vec<TreeRun>]),
     pipeline: Option<&wgpu::RenderPipeline>,
     stats: &mut FrameStats,
+    between: super::Between<'_>,
 ) {
     if let (Some(bf), Some(b)) = (frame, &bake.btf) {
-        b.draw_main(pass, cx, runs, pipeline, bf, stats);
+        b.draw_main(pass, cx, runs, pipeline, bf, stats, between);
     }
 }
 
@@ -200,7 +291,8 @@ impl RenderMethod for BtfMethod {
     }
 
     fn culls_itself(&self, bake: &Bake, frame: &FrameDesc) -> bool {
-        bake.btf.as_ref().is_some_and(|b| b.takes_far(&frame.btf))
+        let settings = self.settings(frame, bake.impostor.is_some());
+        bake.btf.as_ref().is_some_and(|b| b.takes_far(&settings))
     }
 
     fn shades_ground(&self) -> bool {
@@ -212,49 +304,8 @@ impl RenderMethod for BtfMethod {
     }
 
     fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
-        let method = self.method();
-        bake.need_btf(method)?;
-        let Some(b) = bake.btf.as_mut() else {
-            return Err(crate::Error::Gpu("the BTF images are not loaded".into()));
-        };
-        let frame = cx.frame;
-        let mut sun = SunWork::default();
-        if frame.btf.vcm && frame.trees {
-            let t0 = Instant::now();
-            if b.update_sun(cx.view.to_sun) {
-                sun.moved = true;
-                sun.ms += t0.elapsed().as_secs_f64() * 1e3;
-            }
-        }
-        // The tree level's light blends follow the sun: weights here, drawn before the
-        // frame's other passes (`encode_compute`).
-        if frame.btf.light_blend && frame.trees {
-            let t0 = Instant::now();
-            if b.update_light_blend(cx.ctx, cx.view.to_sun, &frame.btf) {
-                sun.moved = true;
-                sun.ms += t0.elapsed().as_secs_f64() * 1e3;
-            }
-        }
-        let culls = b.takes_far(&frame.btf);
-        let (bf, shade_ms) = b.prepare(
-            cx.ctx,
-            cx.world,
-            (!culls).then_some(&cx.visible[..]),
-            frame.trees,
-            cx.view.camera,
-            cx.view.focal_px,
-            cx.view.to_sun,
-            cx.view.frustum,
-            &frame.btf,
-            self.hybrid,
-            crate::render::uniforms::frame_lights(frame),
-        );
-        // The far trees' VCM factors, uploaded after the sun moved.
-        sun.ms += shade_ms;
-        let (runs, plan) = plan_geometry(cx.ctx, cx.world, frame, &bf, sun);
-        self.runs = runs;
-        self.frame = Some(bf);
-        Ok(plan)
+        let settings = self.settings(cx.frame, bake.impostor.is_some());
+        self.prepare_with(bake, &cx, &settings)
     }
 
     fn ground_casters(
@@ -301,14 +352,7 @@ impl RenderMethod for BtfMethod {
         cx: &DrawCx<'_>,
         stats: &mut FrameStats,
     ) {
-        draw_frame(
-            bake,
-            pass,
-            cx,
-            (&self.frame, &self.runs),
-            self.pipeline.as_ref(),
-            stats,
-        );
+        self.draw_with(bake, pass, cx, stats, &mut |_, _| {});
     }
 
     fn finish(&self, bake: &Bake, ctx: &GpuContext, wait: bool, stats: &mut FrameStats) {

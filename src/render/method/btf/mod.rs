@@ -45,6 +45,9 @@ use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
 use crate::{Error, Result};
 use pipelines_btf::{btf_layout, make_bind_group};
 
+/// Draws made in the main pass after a BTF frame's meshes and before its billboards.
+pub(crate) type Between<'a> = &'a mut dyn FnMut(&mut wgpu::RenderPass<'_>, &mut FrameStats);
+
 /// The BTF image sets on the GPU and the per-frame billboard buffer.
 pub struct BtfAssets {
     scene: BtfScene,
@@ -602,7 +605,8 @@ impl BtfAssets {
     /// The frame's draws in the main pass: the trunks (and limbs) of the trees drawn at the
     /// finer levels as geometry (`runs`: trunk only, then trunk and limbs; the terrain with
     /// the first when asked), `hybrid`'s geometry trees (`runs[2]` whole, `runs[3]` fading),
-    /// then every billboard in one instanced draw, back to front.
+    /// `between` (what is opaque and not geometry: `hybrid`'s impostors), then every
+    /// billboard in one instanced draw, back to front.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn draw_main(
         &self,
@@ -612,6 +616,7 @@ impl BtfAssets {
         pipeline: Option<&wgpu::RenderPipeline>,
         bf: &BtfFrame,
         stats: &mut FrameStats,
+        between: Between<'_>,
     ) {
         let (world, pipes) = (cx.world, cx.pipes);
         // The trees drawn as meshes (trunks and limbs, `hybrid`'s whole trees), then the
@@ -643,6 +648,7 @@ impl BtfAssets {
         stats.triangles += t0 + t1 + t2 + 2 * u64::from(bf.billboards);
         stats.trees_drawn = bf.stats.trees_per_level.iter().sum::<u32>() + bf.stats.geometry_trees;
         stats.draw_calls += c0 + c1 + c2;
+        between(pass, stats);
         // The far canopy under the billboards that fade into it.
         if bf.far
             && bf.stats.canopy_tiles > 0

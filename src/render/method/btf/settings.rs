@@ -72,6 +72,10 @@ pub struct BtfSettings {
     /// forest is drawn as the far canopy (needs `gpu_far`).
     pub far_canopy: bool,
     pub canopy_px: f32,
+    /// `hybrid`: the tree level is drawn as the bake's octahedral impostors (when it has
+    /// them) instead of BTF billboards; every tree is then prepared on the CPU
+    /// (`gpu_far` and the far canopy are not used).
+    pub tree_impostors: bool,
 }
 
 /// The default [`BtfSettings::light_gain`]. Bench, 320x180, 3 frames, mean FLIP against
@@ -100,6 +104,7 @@ impl Default for BtfSettings {
             light_blend: true,
             far_canopy: true,
             canopy_px: CANOPY_PX,
+            tree_impostors: true,
         }
     }
 }
@@ -172,6 +177,9 @@ pub struct BtfStats {
     pub gpu_billboards: u32,
     /// The billboards were shaded by visibility cube maps.
     pub vcm: bool,
+    /// `hybrid` with `tree_impostors`: trees whose tree level is drawn as an impostor
+    /// (whole, or fading out under a finer level's billboards).
+    pub impostors: u32,
 }
 
 impl BtfStats {
@@ -191,6 +199,7 @@ impl BtfStats {
         self.dropped += o.dropped;
         self.gpu_billboards += o.gpu_billboards;
         self.vcm |= o.vcm;
+        self.impostors += o.impostors;
     }
 
     pub fn total_billboards(&self) -> u32 {

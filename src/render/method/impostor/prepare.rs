@@ -107,30 +107,18 @@ pub fn prepare(
     shade: &mut TreeShade<'_>,
 ) -> ImpostorFrame {
     let cam = view.camera.position;
-    let forward = view.camera.forward();
-    let mut sorted: Vec<(f32, ImpostorGpu)> = Vec::new();
     let mut geometry: Vec<Vec<(u32, f32)>> = vec![Vec::new(); visible.len()];
     let mut whole = 0u32;
+    let mut drawn: Vec<Vec<(u32, f32)>> = vec![Vec::new(); visible.len()];
     for (sp, list) in visible.iter().enumerate() {
         let Some(info) = species.get(sp) else {
             continue;
         };
         for &t in list {
-            let Some(data) = trees.get(t as usize) else {
+            let Some((center, scale)) = trees.get(t as usize).and_then(|d| placed(info, d)) else {
                 continue;
             };
-            let m = Mat4::from_cols_array_2d(&data.model);
-            let scale = m.x_axis.truncate().length();
-            if !(scale > 0.0 && scale.is_finite()) {
-                continue;
-            }
-            let center = m.transform_point3(info.center);
-            let radius = info.radius * scale;
-            let sphere = Aabb {
-                min: center - Vec3::splat(radius),
-                max: center + Vec3::splat(radius),
-            };
-            if !view.frustum.intersects(&sphere) {
+            if !in_view(view, center, info.radius * scale) {
                 continue;
             }
             let z = (center - cam).length();
@@ -141,6 +129,74 @@ pub fn prepare(
                     whole += 1;
                     continue;
                 }
+            }
+            drawn[sp].push((t, 1.0 - fade));
+        }
+    }
+    let tint = settings.show_lod.then_some(IMPOSTOR_COLOR);
+    let records = records(species, trees, &drawn, view, settings, tint, max, shade);
+    let stats = ImpostorStats {
+        impostors: records.len() as u32,
+        geometry_trees: geometry.iter().map(|l| l.len() as u32).sum(),
+        ..Default::default()
+    };
+    debug_assert!(stats.geometry_trees >= whole);
+    ImpostorFrame {
+        records,
+        geometry,
+        stats,
+    }
+}
+
+/// Tree `data`'s impostor sphere centre in the world and its scale; None for a tree of no
+/// valid scale.
+fn placed(info: &SpeciesImpostor, data: &TreeGpu) -> Option<(Vec3, f32)> {
+    let m = Mat4::from_cols_array_2d(&data.model);
+    let scale = m.x_axis.truncate().length();
+    (scale > 0.0 && scale.is_finite()).then(|| (m.transform_point3(info.center), scale))
+}
+
+/// The sphere of `radius` around `center` meets the view.
+fn in_view(view: &PrepareView, center: Vec3, radius: f32) -> bool {
+    view.frustum.intersects(&Aabb {
+        min: center - Vec3::splat(radius),
+        max: center + Vec3::splat(radius),
+    })
+}
+
+/// The records of the trees `drawn` (per species: tree and opacity) whose sphere is in
+/// view, front to back, at most `max` (the nearest kept); `tint`: every record shows this
+/// colour instead of its images (the LOD overlay). `hybrid` draws its tree level with
+/// these.
+#[allow(clippy::too_many_arguments)]
+pub fn records(
+    species: &[SpeciesImpostor],
+    trees: &[TreeGpu],
+    drawn: &[Vec<(u32, f32)>],
+    view: &PrepareView,
+    settings: &ImpostorSettings,
+    tint: Option<[f32; 3]>,
+    max: usize,
+    shade: &mut TreeShade<'_>,
+) -> Vec<ImpostorGpu> {
+    let cam = view.camera.position;
+    let forward = view.camera.forward();
+    let mut sorted: Vec<(f32, ImpostorGpu)> = Vec::new();
+    for (sp, list) in drawn.iter().enumerate() {
+        let Some(info) = species.get(sp) else {
+            continue;
+        };
+        for &(t, opacity) in list {
+            let Some(data) = trees.get(t as usize) else {
+                continue;
+            };
+            let Some((center, scale)) = placed(info, data) else {
+                continue;
+            };
+            let m = Mat4::from_cols_array_2d(&data.model);
+            let radius = info.radius * scale;
+            if !in_view(view, center, radius) {
+                continue;
             }
             let rot = Mat3::from_mat4(m) * (1.0 / scale);
             let unit = Aabb {
@@ -153,10 +209,9 @@ pub fn prepare(
                 .flatten()
                 .unwrap_or((Shade::NONE, unit));
             let ext = (bounds.max - bounds.min).max(Vec3::splat(1e-6));
-            let (tint, mode) = if settings.show_lod {
-                (IMPOSTOR_COLOR, MODE_TINT)
-            } else {
-                ([data.tint[0], data.tint[1], data.tint[2]], MODE_IMAGES)
+            let (tint, mode) = match tint {
+                Some(c) => (c, MODE_TINT),
+                None => ([data.tint[0], data.tint[1], data.tint[2]], MODE_IMAGES),
             };
             let d = s.direct;
             let k = s.sky;
@@ -166,7 +221,7 @@ pub fn prepare(
                 axis_x: rot.x_axis.normalize_or(Vec3::X).to_array(),
                 layer: info.layer,
                 axis_y: rot.y_axis.normalize_or(Vec3::Y).to_array(),
-                opacity: 1.0 - fade,
+                opacity,
                 axis_z: rot.z_axis.normalize_or(Vec3::Z).to_array(),
                 mode,
                 tint,
@@ -183,18 +238,7 @@ pub fn prepare(
     }
     sorted.sort_by(|a, b| a.0.total_cmp(&b.0));
     sorted.truncate(max);
-    let records: Vec<ImpostorGpu> = sorted.into_iter().map(|(_, r)| r).collect();
-    let stats = ImpostorStats {
-        impostors: records.len() as u32,
-        geometry_trees: geometry.iter().map(|l| l.len() as u32).sum(),
-        ..Default::default()
-    };
-    debug_assert!(stats.geometry_trees >= whole);
-    ImpostorFrame {
-        records,
-        geometry,
-        stats,
-    }
+    sorted.into_iter().map(|(_, r)| r).collect()
 }
 
 #[cfg(test)]

@@ -101,6 +101,7 @@ pub(super) struct Prepared {
     pub(super) trunk_only: Vec<Vec<u32>>,
     pub(super) trunk_and_limbs: Vec<Vec<u32>>,
     pub(super) twigs: Vec<Vec<(u32, f32)>>,
+    pub(super) impostors: Vec<Vec<(u32, f32)>>,
 }
 
 impl Prepared {
@@ -113,6 +114,7 @@ impl Prepared {
             trunk_only: vec![Vec::new(); species],
             trunk_and_limbs: vec![Vec::new(); species],
             twigs: vec![Vec::new(); species],
+            impostors: vec![Vec::new(); species],
         }
     }
 }

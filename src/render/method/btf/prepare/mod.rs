@@ -77,6 +77,9 @@ pub struct BtfFrame {
     /// the bound; not in the two lists above), each with the opacity its twigs fade in at
     /// (1 = whole; its trunk and limbs are always whole).
     pub twigs: Vec<Vec<(u32, f32)>>,
+    /// `hybrid` with `tree_impostors`, per species: the trees whose tree level is drawn as
+    /// an impostor instead of billboards, each with that level's opacity.
+    pub impostors: Vec<Vec<(u32, f32)>>,
     /// The billboard records, back to front.
     pub records: Vec<BillboardGpu>,
     /// Billboards drawn (`records.len()` until the records are handed to the GPU).
@@ -536,6 +539,7 @@ impl BtfScene {
             trunk_only: vec![Vec::new(); self.species.len()],
             trunk_and_limbs: vec![Vec::new(); self.species.len()],
             twigs: vec![Vec::new(); self.species.len()],
+            impostors: vec![Vec::new(); self.species.len()],
             billboards: 0,
             far: false,
             records: Vec::new(),
@@ -550,6 +554,7 @@ impl BtfScene {
                 frame.trunk_only[sp].extend_from_slice(&p.trunk_only[sp]);
                 frame.trunk_and_limbs[sp].extend_from_slice(&p.trunk_and_limbs[sp]);
                 frame.twigs[sp].extend_from_slice(&p.twigs[sp]);
+                frame.impostors[sp].extend_from_slice(&p.impostors[sp]);
             }
         }
         frame
@@ -772,6 +777,11 @@ impl BtfScene {
             opacity: 1.0,
         };
         for (level, opacity) in choice.draws().filter(|_| !gpu) {
+            if level == Level::Tree && hybrid && settings.tree_impostors {
+                pusher.stats.impostors += 1;
+                out.impostors[sp].push((t, opacity * (1.0 - geometry)));
+                continue;
+            }
             pusher.opacity = opacity * (1.0 - geometry);
             if let Some(overlay) = settings.overlay(level) {
                 pusher.tint = overlay;

@@ -540,3 +540,42 @@ fn trees_outside_the_view_make_no_billboards_and_overlays_tint_by_level() {
 }
 
 mod far_gpu;
+
+#[test]
+fn hybrid_hands_the_tree_level_to_impostors_with_its_opacity() {
+    let trees = [tree_at(0.0, 0.0, 0.3)];
+    let s = BtfSettings {
+        tree_impostors: true,
+        ..BtfSettings::default()
+    };
+    // The tree texel (0.1 m) is 1 px at 50 m: at 100 m the tree level alone.
+    let (far, _) = run_as(&trees, Vec3::new(0.0, 5.0, 100.0), &s, true);
+    assert_eq!(far.impostors[0], vec![(0, 1.0)]);
+    assert_eq!(far.stats.impostors, 1);
+    assert!(
+        far.records.is_empty(),
+        "no tree billboard besides the impostor"
+    );
+    assert_eq!(far.stats.trees_per_level.tree, 1);
+    // `btf` ignores the knob: its tree billboard.
+    let (plain, _) = run_as(&trees, Vec3::new(0.0, 5.0, 100.0), &s, false);
+    assert!(plain.impostors[0].is_empty() && plain.stats.impostors == 0);
+    assert_eq!(plain.records.len(), 1);
+    // Inside the band before the tree level's bound (0.8 to 1 px: 50 to 62.5 m), the
+    // impostor fades out under the main branches' billboards, fading in.
+    let (band, _) = run_as(&trees, Vec3::new(0.0, 5.0, 56.0), &s, true);
+    let (t, o) = band.impostors[0][0];
+    assert!(t == 0 && o > 0.1 && o < 0.9, "{o}");
+    assert!(!band.records.is_empty());
+    assert!(band.stats.billboards.branch > 0 && band.stats.billboards.tree == 0);
+    for r in &band.records {
+        assert!(
+            (r.opacity - (1.0 - o)).abs() < 1e-4,
+            "{} against {o}",
+            r.opacity
+        );
+    }
+    // Near: no tree level, no impostor.
+    let (near, _) = run_as(&trees, Vec3::new(0.0, 5.0, 20.0), &s, true);
+    assert!(near.impostors[0].is_empty() && !near.records.is_empty());
+}

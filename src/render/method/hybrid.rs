@@ -1,0 +1,202 @@
+//! The `hybrid` method: `btf`'s hierarchy with each tree drawn as geometry wherever even
+//! its twig level is too coarse (cross-faded), and its tree level drawn as the bake's
+//! octahedral impostors (`tree_impostors`, when the bake has them): where the two were
+//! charted side by side the impostor drew the tree level as accurately for less time
+//! (docs/RESULTS.md, "hybrid with impostors").
+//!
+//! A tree's tree level becomes one impostor record (alpha-tested, depth-written, front to
+//! back) with the opacity the level choice gave it; the finer levels' billboards, blended,
+//! are drawn after the impostors, so a tree fading from its tree level to its main
+//! branches shows the impostor in the share of its pixels that its opacity keeps.
+
+use std::sync::LazyLock;
+
+use super::btf::method::{BtfMethod, billboard_casters};
+use super::btf::settings::LOD_COLORS;
+use super::impostor::prepare::ImpostorGpu;
+use super::impostor::{ImpostorSettings, ImpostorStats};
+use super::interface::{Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod};
+use super::kind::Method;
+use crate::Result;
+use crate::model::Level;
+use crate::render::GpuContext;
+use crate::render::frame::{FrameDesc, FrameStats};
+use crate::render::knob::Knob;
+use crate::render::pipelines::Layouts;
+use crate::render::timing::PassSpans;
+use crate::render::world_gpu::WorldGpu;
+
+/// `hybrid`'s own knob: its tree level drawn as impostors.
+static TREE_IMPOSTORS: Knob = Knob::toggle(
+    "tree_impostors",
+    "tree level as impostors",
+    "draw the tree level as the bake's octahedral impostors (when it has them) instead of BTF billboards; every tree is then prepared on the CPU, without the far canopy",
+    |d| d.btf.tree_impostors,
+    |d, v| d.btf.tree_impostors = v,
+);
+
+/// `btf`'s knobs, `tree_impostors`, and the impostor's knobs its impostors read (out of
+/// `tune`'s grid, which stays `btf`'s for `hybrid`).
+static KNOBS: LazyLock<Vec<Knob>> = LazyLock::new(|| {
+    let mut knobs: Vec<Knob> = super::btf::knobs::KNOBS.to_vec();
+    knobs.push(TREE_IMPOSTORS);
+    let shared = ["alpha_cutoff", "parallax", "parallax_depth", "self_shadow"];
+    for k in super::impostor::knobs::KNOBS {
+        if shared.contains(&k.name) {
+            knobs.push(Knob { tune: &[], ..*k });
+        }
+    }
+    knobs
+});
+
+/// `hybrid`: the BTF frame and geometry ([`BtfMethod`]), and the impostors of its tree level.
+pub struct HybridMethod {
+    btf: BtfMethod,
+    /// The frame's impostor records (0: none, or the tree level drawn as billboards).
+    impostors: u32,
+    stats: Option<ImpostorStats>,
+    /// The frame's `parallax_depth` knob.
+    parallax_depth: bool,
+}
+
+impl Default for HybridMethod {
+    fn default() -> Self {
+        Self {
+            btf: BtfMethod::new(true),
+            impostors: 0,
+            stats: None,
+            parallax_depth: false,
+        }
+    }
+}
+
+/// The impostor knobs `hybrid`'s impostors are drawn with: the frame's, shaded by the
+/// cube maps as `btf`'s billboards are, never geometry (the BTF levels decide that).
+fn impostor_settings(frame: &FrameDesc) -> ImpostorSettings {
+    ImpostorSettings {
+        vcm: frame.btf.vcm,
+        show_lod: frame.btf.show_lod,
+        geometry_px: 0.0,
+        ..frame.impostor
+    }
+}
+
+impl RenderMethod for HybridMethod {
+    fn method(&self) -> Method {
+        Method::Hybrid
+    }
+
+    fn check(&self, bake: &Bake) -> Result<()> {
+        self.btf.check(bake)
+    }
+
+    fn culls_itself(&self, bake: &Bake, frame: &FrameDesc) -> bool {
+        self.btf.culls_itself(bake, frame)
+    }
+
+    fn shades_ground(&self) -> bool {
+        true
+    }
+
+    fn knobs(&self) -> &'static [Knob] {
+        &KNOBS
+    }
+
+    fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
+        let settings = self.btf.settings(cx.frame, bake.impostor.is_some());
+        let plan = self.btf.prepare_with(bake, &cx, &settings)?;
+        self.impostors = 0;
+        self.stats = None;
+        let (Some(b), Some(imp), Some(bf)) =
+            (bake.btf.as_ref(), bake.impostor.as_mut(), self.btf.frame())
+        else {
+            return Ok(plan);
+        };
+        if !settings.tree_impostors {
+            return Ok(plan);
+        }
+        let s = impostor_settings(cx.frame);
+        let scene = b.scene();
+        let limit = cx.ctx.device.limits().max_storage_buffer_binding_size as usize;
+        let records = super::impostor::prepare::records(
+            &imp.species,
+            &cx.world.tree_data,
+            &bf.impostors,
+            &cx.view,
+            &s,
+            s.show_lod.then_some(LOD_COLORS[Level::Tree]),
+            limit / std::mem::size_of::<ImpostorGpu>(),
+            &mut |t, sp, m| scene.tree_shade(t, sp, m),
+        );
+        imp.upload(cx.ctx, &records, &s);
+        self.impostors = records.len() as u32;
+        self.parallax_depth = s.parallax_depth;
+        let (frames, frame_px) = imp.grid();
+        self.stats = Some(ImpostorStats {
+            impostors: self.impostors,
+            geometry_trees: 0,
+            frames,
+            frame_px,
+            atlas_bytes: imp.bytes,
+        });
+        Ok(plan)
+    }
+
+    fn ground_casters(
+        &mut self,
+        bake: &mut Bake,
+        ctx: &GpuContext,
+        layouts: &Layouts,
+        world: &WorldGpu,
+        to_sun: glam::Vec3,
+        excluded: &[u32],
+    ) -> Option<GroundCasters> {
+        billboard_casters(bake, ctx, layouts, world, to_sun, excluded)
+    }
+
+    fn ensure_pipelines(
+        &mut self,
+        bake: &mut Bake,
+        ctx: &GpuContext,
+        layouts: &Layouts,
+        format: wgpu::TextureFormat,
+    ) -> Result<()> {
+        self.btf.ensure_pipelines(bake, ctx, layouts, format)?;
+        if self.impostors > 0
+            && let Some(imp) = bake.impostor.as_mut()
+        {
+            imp.ensure_pipeline(&ctx.device, layouts, format, self.parallax_depth);
+        }
+        Ok(())
+    }
+
+    fn encode_compute(&self, bake: &Bake, encoder: &mut wgpu::CommandEncoder, spans: &PassSpans) {
+        self.btf.encode_compute(bake, encoder, spans);
+    }
+
+    fn draw(
+        &self,
+        bake: &Bake,
+        pass: &mut wgpu::RenderPass<'_>,
+        cx: &DrawCx<'_>,
+        stats: &mut FrameStats,
+    ) {
+        let count = self.impostors;
+        let mut impostors = |pass: &mut wgpu::RenderPass<'_>, stats: &mut FrameStats| {
+            let Some(imp) = bake.impostor.as_ref().filter(|_| count > 0) else {
+                return;
+            };
+            cx.spans.mark(pass, "impostors");
+            // Group 1 is the impostors'; the billboards after them bind their own.
+            imp.draw(pass, count);
+            stats.draw_calls += 1;
+            stats.triangles += 2 * u64::from(count);
+            stats.impostor = self.stats;
+        };
+        self.btf.draw_with(bake, pass, cx, stats, &mut impostors);
+    }
+
+    fn finish(&self, bake: &Bake, ctx: &GpuContext, wait: bool, stats: &mut FrameStats) {
+        self.btf.finish(bake, ctx, wait, stats);
+    }
+}
