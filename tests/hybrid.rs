@@ -112,12 +112,12 @@ fn up_close_hybrid_draws_geometry_and_far_away_it_is_btf() {
     );
     assert!(f_btf > 2.0 * f_hybrid, "btf near: {f_btf:.4}");
 
-    // Far: with `tree_impostors` off hybrid is btf, pixel for pixel; on (the default;
+    // Far: with `impostor_px` 0 hybrid is btf, pixel for pixel; on (the default;
     // this bake has impostors), where it draws the tree level, that level is the
     // `impostor` method's impostor, pixel for pixel.
     let far = view(Vec3::new(60.0, 10.0, 55.0));
     let mut billboards = far;
-    billboards.btf.tree_impostors = false;
+    billboards.btf.impostor_px = 0.0;
     let (hybrid, hs) = draw(billboards, Some(Method::Hybrid));
     let (btf, _) = draw(far, Some(Method::Btf));
     let hb = hs.btf.expect("hybrid reports btf stats");
@@ -130,7 +130,7 @@ fn up_close_hybrid_draws_geometry_and_far_away_it_is_btf() {
     let (hybrid, hs) = draw(farther, Some(Method::Hybrid));
     let (impostor, is) = draw(farther, Some(Method::Impostor));
     let mut billboards = farther;
-    billboards.btf.tree_impostors = false;
+    billboards.btf.impostor_px = 0.0;
     let (btf, _) = draw(billboards, Some(Method::Hybrid));
     let hb = hs.btf.expect("hybrid reports btf stats");
     assert_eq!((hb.impostors, hb.billboards.tree), (1, 0), "{hb:?}");

@@ -148,7 +148,7 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
         assert_adds_up(method.name(), &stats);
     }
     // `hybrid` draws its tree level as impostors (a LOD scale that puts the lone tree
-    // there), or with `tree_impostors` off as BTF billboards: `btf`'s passes.
+    // there), or with `impostor_px` 0 as BTF billboards: `btf`'s passes.
     let stats = measured_with(&ctx, &mut r, &scene, Method::Hybrid, |d| {
         d.btf.lod_scale = 16.0
     });
@@ -166,7 +166,7 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
     );
     assert_adds_up("hybrid", &stats);
     let stats = measured_with(&ctx, &mut r, &scene, Method::Hybrid, |d| {
-        d.btf.tree_impostors = false
+        d.btf.impostor_px = 0.0
     });
     assert_eq!(
         names(&stats),
@@ -178,9 +178,9 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
             "near trees",
             "billboards"
         ],
-        "hybrid's passes with tree_impostors off"
+        "hybrid's passes with impostor_px 0"
     );
-    assert_adds_up("hybrid, tree_impostors off", &stats);
+    assert_adds_up("hybrid, impostor_px 0", &stats);
 }
 
 #[test]

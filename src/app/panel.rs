@@ -165,7 +165,7 @@ pub fn controls(
                 ui.label(s.geometry_trees.to_string());
                 ui.end_row();
                 ui.label("tree level as impostors");
-                ui.label(match (frame.btf.tree_impostors, &stats.impostor) {
+                ui.label(match (frame.btf.impostor_px > 0.0, &stats.impostor) {
                     (false, _) => "off".to_string(),
                     (true, Some(_)) => format_count(u64::from(s.impostors)),
                     (true, None) => "none baked ([bake] impostor_frames)".to_string(),

@@ -1,6 +1,6 @@
 //! The `hybrid` method: `btf`'s hierarchy with each tree drawn as geometry wherever even
 //! its twig level is too coarse (cross-faded), and its tree level drawn as the bake's
-//! octahedral impostors (`tree_impostors`, when the bake has them): where the two were
+//! octahedral impostors (`impostor_px`, when the bake has them): where the two were
 //! charted side by side the impostor drew the tree level as accurately for less time
 //! (docs/RESULTS.md, "hybrid with impostors").
 //!
@@ -26,20 +26,22 @@ use crate::render::pipelines::Layouts;
 use crate::render::timing::PassSpans;
 use crate::render::world_gpu::WorldGpu;
 
-/// `hybrid`'s own knob: its tree level drawn as impostors.
-static TREE_IMPOSTORS: Knob = Knob::toggle(
-    "tree_impostors",
-    "tree level as impostors",
-    "draw the tree level as the bake's octahedral impostors (when it has them) instead of BTF billboards; every tree is then prepared on the CPU, without the far canopy",
-    |d| d.btf.tree_impostors,
-    |d, v| d.btf.tree_impostors = v,
-);
+/// `hybrid`'s own knob: where its tree level is drawn as impostors.
+static IMPOSTOR_PX: Knob = Knob::number(
+    "impostor_px",
+    "impostors below (px)",
+    "where a tree's tree-level texels project below this many pixels its tree level is drawn as the bake's octahedral impostor (when it has them), cross-faded over the LOD band; 0: never; at the LOD scale or above: the whole tree level. Above 0 every tree is prepared on the CPU, without the far canopy",
+    (0.0, 64.0),
+    |d| d.btf.impostor_px,
+    |d, v| d.btf.impostor_px = v,
+)
+.slider(0.0, 4.0, false);
 
-/// `btf`'s knobs, `tree_impostors`, and the impostor's knobs its impostors read (out of
+/// `btf`'s knobs, `impostor_px`, and the impostor's knobs its impostors read (out of
 /// `tune`'s grid, which stays `btf`'s for `hybrid`).
 static KNOBS: LazyLock<Vec<Knob>> = LazyLock::new(|| {
     let mut knobs: Vec<Knob> = super::btf::knobs::KNOBS.to_vec();
-    knobs.push(TREE_IMPOSTORS);
+    knobs.push(IMPOSTOR_PX);
     let shared = ["alpha_cutoff", "parallax", "parallax_depth", "self_shadow"];
     for k in super::impostor::knobs::KNOBS {
         if shared.contains(&k.name) {
@@ -112,7 +114,7 @@ impl RenderMethod for HybridMethod {
         else {
             return Ok(plan);
         };
-        if !settings.tree_impostors {
+        if settings.impostor_px <= 0.0 {
             return Ok(plan);
         }
         let s = impostor_settings(cx.frame);

@@ -141,12 +141,12 @@ mod tests {
         assert!(
             knobs_of(Method::Hybrid)
                 .iter()
-                .any(|k| k.name == "tree_impostors")
+                .any(|k| k.name == "impostor_px")
         );
         assert!(
             !knobs_of(Method::Btf)
                 .iter()
-                .any(|k| k.name == "tree_impostors")
+                .any(|k| k.name == "impostor_px")
         );
         assert!(knobs_of(Method::Geometry).is_empty());
         assert!(

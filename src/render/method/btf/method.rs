@@ -43,8 +43,10 @@ impl BtfMethod {
     /// the CPU.
     pub(crate) fn settings(&self, frame: &FrameDesc, impostors: bool) -> BtfSettings {
         let mut s = frame.btf;
-        s.tree_impostors &= self.hybrid && impostors;
-        if s.tree_impostors {
+        if !(self.hybrid && impostors && s.impostor_px > 0.0) {
+            s.impostor_px = 0.0;
+        }
+        if s.impostor_px > 0.0 {
             s.gpu_far = false;
         }
         s
@@ -77,8 +79,8 @@ impl BtfMethod {
             }
         }
         // The tree level's light blends follow the sun: weights here, drawn before the
-        // frame's other passes (`encode_compute`). Not while impostors draw that level.
-        if settings.light_blend && !settings.tree_impostors && frame.trees {
+        // frame's other passes (`encode_compute`).
+        if settings.light_blend && frame.trees {
             let t0 = Instant::now();
             if b.update_light_blend(cx.ctx, cx.view.to_sun, settings) {
                 sun.moved = true;

@@ -72,10 +72,12 @@ pub struct BtfSettings {
     /// forest is drawn as the far canopy (needs `gpu_far`).
     pub far_canopy: bool,
     pub canopy_px: f32,
-    /// `hybrid`: the tree level is drawn as the bake's octahedral impostors (when it has
-    /// them) instead of BTF billboards; every tree is then prepared on the CPU
-    /// (`gpu_far` and the far canopy are not used).
-    pub tree_impostors: bool,
+    /// `hybrid`: where a tree's tree-level texels project below this many pixels, its
+    /// tree level is drawn as the bake's octahedral impostor (when it has them) instead of
+    /// BTF billboards, cross-faded over the last `lod_fade` fraction below it; 0: never,
+    /// `lod_scale` or more: wherever the tree level is drawn. Above 0 every tree is
+    /// prepared on the CPU (`gpu_far` and the far canopy are not used).
+    pub impostor_px: f32,
 }
 
 /// The default [`BtfSettings::light_gain`]. Bench, 320x180, 3 frames, mean FLIP against
@@ -83,6 +85,10 @@ pub struct BtfSettings {
 /// 0.0285, sunset 0.0899 / 0.0875 / 0.0869, walk 0.0497 / 0.0471 / 0.0458; the dense
 /// stand.toml's overview 0.1295 / 0.1283 / 0.1329, sunset 0.2791 / 0.2817 / 0.2888.
 pub const LIGHT_GAIN: f32 = 0.5;
+
+/// Default [`BtfSettings::impostor_px`]: `hybrid` draws its whole tree level as
+/// impostors (docs/RESULTS.md, "hybrid with impostors").
+pub const IMPOSTOR_PX: f32 = 1.0;
 
 /// Default on-screen crown width (px) below which trees are drawn as the far canopy.
 pub const CANOPY_PX: f32 = 4.0;
@@ -104,7 +110,7 @@ impl Default for BtfSettings {
             light_blend: true,
             far_canopy: true,
             canopy_px: CANOPY_PX,
-            tree_impostors: true,
+            impostor_px: IMPOSTOR_PX,
         }
     }
 }
@@ -177,8 +183,8 @@ pub struct BtfStats {
     pub gpu_billboards: u32,
     /// The billboards were shaded by visibility cube maps.
     pub vcm: bool,
-    /// `hybrid` with `tree_impostors`: trees whose tree level is drawn as an impostor
-    /// (whole, or fading out under a finer level's billboards).
+    /// `hybrid` with `impostor_px`: trees whose tree level is drawn as an impostor (whole,
+    /// or cross-fading with a finer level's billboards or its own tree billboard).
     pub impostors: u32,
 }
 

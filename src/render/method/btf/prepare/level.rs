@@ -43,6 +43,36 @@ pub fn geometry_fade(
     }
 }
 
+/// How much of a tree's tree level `hybrid` draws as its impostor (0 = none, 1 = all):
+/// all where the tree-level texel projects below the start of the band before
+/// `impostor_px` (its last `lod_fade` fraction), none from `impostor_px` up, linear
+/// between; none while `impostor_px` is 0, all while it is `lod_scale` or more (the
+/// tree level's own fade band is then the impostor's).
+pub fn impostor_share(
+    texels: &LevelTexels,
+    scale: f32,
+    focal_px: f32,
+    z: f32,
+    settings: &BtfSettings,
+) -> f32 {
+    let bound = settings.impostor_px;
+    if bound.is_nan() || bound <= 0.0 {
+        return 0.0;
+    }
+    if bound >= settings.lod_scale {
+        return 1.0;
+    }
+    let px = lod::projected_px(texels[Level::Tree] * scale, focal_px, z);
+    let start = bound * (1.0 - settings.lod_fade.clamp(0.0, 1.0));
+    if px >= bound {
+        0.0
+    } else if px <= start {
+        1.0
+    } else {
+        ((bound - px) / (bound - start).max(1e-6)).clamp(0.0, 1.0)
+    }
+}
+
 /// Chooses the level of a tree of `scale` whose centre is `z` from the eye. While the chosen
 /// level's texel is within the last `lod_fade` fraction of the bound, the next finer level
 /// fades in over it, so that the switch at the bound itself changes nothing.

@@ -65,7 +65,7 @@ pub use expand::{NearDrawGpu, SortedBillboards};
 
 mod expand;
 mod level;
-pub use level::{LevelChoice, choose_level, geometry_fade};
+pub use level::{LevelChoice, choose_level, geometry_fade, impostor_share};
 
 /// One frame's billboards and the trees the `btf` method draws partly as geometry.
 pub struct BtfFrame {
@@ -77,8 +77,9 @@ pub struct BtfFrame {
     /// the bound; not in the two lists above), each with the opacity its twigs fade in at
     /// (1 = whole; its trunk and limbs are always whole).
     pub twigs: Vec<Vec<(u32, f32)>>,
-    /// `hybrid` with `tree_impostors`, per species: the trees whose tree level is drawn as
-    /// an impostor instead of billboards, each with that level's opacity.
+    /// `hybrid` with `impostor_px`, per species: the trees whose tree level is drawn as an
+    /// impostor instead of billboards (or cross-fading with them), each with the
+    /// impostor's opacity.
     pub impostors: Vec<Vec<(u32, f32)>>,
     /// The billboard records, back to front.
     pub records: Vec<BillboardGpu>,
@@ -777,12 +778,19 @@ impl BtfScene {
             opacity: 1.0,
         };
         for (level, opacity) in choice.draws().filter(|_| !gpu) {
-            if level == Level::Tree && hybrid && settings.tree_impostors {
-                pusher.stats.impostors += 1;
-                out.impostors[sp].push((t, opacity * (1.0 - geometry)));
-                continue;
+            let mut opacity = opacity * (1.0 - geometry);
+            if level == Level::Tree && hybrid {
+                let share = impostor_share(&parts.texels, scale, view.focal_px, z, settings);
+                if share > 0.0 {
+                    pusher.stats.impostors += 1;
+                    out.impostors[sp].push((t, opacity * share));
+                }
+                if share >= 1.0 {
+                    continue;
+                }
+                opacity *= 1.0 - share;
             }
-            pusher.opacity = opacity * (1.0 - geometry);
+            pusher.opacity = opacity;
             if let Some(overlay) = settings.overlay(level) {
                 pusher.tint = overlay;
             }

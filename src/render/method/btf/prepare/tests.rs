@@ -545,7 +545,7 @@ mod far_gpu;
 fn hybrid_hands_the_tree_level_to_impostors_with_its_opacity() {
     let trees = [tree_at(0.0, 0.0, 0.3)];
     let s = BtfSettings {
-        tree_impostors: true,
+        impostor_px: 1.0,
         ..BtfSettings::default()
     };
     // The tree texel (0.1 m) is 1 px at 50 m: at 100 m the tree level alone.
@@ -578,4 +578,42 @@ fn hybrid_hands_the_tree_level_to_impostors_with_its_opacity() {
     // Near: no tree level, no impostor.
     let (near, _) = run_as(&trees, Vec3::new(0.0, 5.0, 20.0), &s, true);
     assert!(near.impostors[0].is_empty() && !near.records.is_empty());
+    // 0: never.
+    let never = BtfSettings {
+        impostor_px: 0.0,
+        ..s
+    };
+    let (far, _) = run_as(&trees, Vec3::new(0.0, 5.0, 100.0), &never, true);
+    assert!(far.impostors[0].is_empty() && far.records.len() == 1);
+}
+
+#[test]
+fn hybrid_impostors_begin_below_impostor_px_cross_faded_with_the_tree_billboard() {
+    let s = BtfSettings {
+        impostor_px: 0.5,
+        lod_fade: 0.2,
+        ..BtfSettings::default()
+    };
+    // The tree texel (0.1 m) projects 0.5 px at 100 m, 0.4 px (the band's start) at 125 m.
+    let share = |z: f32| impostor_share(&TEXELS, 1.0, FOCAL, z, &s);
+    assert_eq!(share(90.0), 0.0);
+    assert_eq!(share(130.0), 1.0);
+    let mid = share(0.1 * FOCAL / 0.45);
+    assert!((mid - 0.5).abs() < 1e-4, "{mid}");
+    assert_eq!(
+        impostor_share(&TEXELS, 1.0, FOCAL, 130.0, &BtfSettings::default()),
+        1.0
+    );
+    let trees = [tree_at(0.0, 0.0, 0.3)];
+    let (billboard, _) = run_as(&trees, Vec3::new(0.0, 5.0, 90.0), &s, true);
+    assert!(billboard.impostors[0].is_empty() && billboard.records.len() == 1);
+    let (impostor, _) = run_as(&trees, Vec3::new(0.0, 5.0, 130.0), &s, true);
+    assert_eq!(impostor.impostors[0], vec![(0, 1.0)]);
+    assert!(impostor.records.is_empty());
+    // In the band: the impostor and the tree billboard, their opacities summing to 1.
+    let (band, _) = run_as(&trees, Vec3::new(0.0, 5.0, 0.1 * FOCAL / 0.45), &s, true);
+    let (_, o) = band.impostors[0][0];
+    assert!(o > 0.2 && o < 0.8, "{o}");
+    assert_eq!(band.records.len(), 1);
+    assert!((band.records[0].opacity + o - 1.0).abs() < 1e-4);
 }
