@@ -241,6 +241,7 @@ fn the_frame_time_plot_shows_cpu_and_gpu_lines_and_the_bench_button_opens_the_wi
     harness.get_by_label("Example scenes").click();
     harness.run();
     harness.get_by_label("default");
+    harness.get_by_label("pines");
     harness.get_by_label("forest").click();
     harness.run();
     assert_eq!(harness.state().actions.open_example, Some("forest"));

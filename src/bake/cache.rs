@@ -49,7 +49,10 @@ pub fn scene_hash(scene: &Scene) -> u64 {
     for path in scene.species.iter().filter_map(|s| s.gltf_path()) {
         for file in crate::model::gltf::files_of(&path) {
             h = fnv1a(file.to_string_lossy().as_bytes(), h);
-            h = fnv1a(&std::fs::read(&file).unwrap_or_default(), h);
+            h = fnv1a(
+                &crate::model::gltf::file_bytes(&file).unwrap_or_default(),
+                h,
+            );
         }
     }
     // The horizon ring is drawn only: it changes nothing baked.

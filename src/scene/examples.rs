@@ -14,6 +14,10 @@ pub const FOREST_SCENE_TOML: &str = include_str!("../../assets/scenes/forest.tom
 /// One stand of the example forest, 250 m a side (`assets/scenes/stand.toml`).
 pub const STAND_SCENE_TOML: &str = include_str!("../../assets/scenes/stand.toml");
 
+/// Pine_5 (a glTF tree, Quaternius, CC0) among the fir and pine presets
+/// (`assets/scenes/pines.toml`); its tree is embedded too ([`crate::model::gltf::embedded`]).
+pub const PINES_SCENE_TOML: &str = include_str!("../../assets/scenes/pines.toml");
+
 /// The example scenes embedded in the binary (the viewer's scene menu): name, a line on
 /// what it is, and the scene file's text.
 pub const EXAMPLE_SCENES: &[(&str, &str, &str)] = &[
@@ -32,6 +36,11 @@ pub const EXAMPLE_SCENES: &[(&str, &str, &str)] = &[
         "one stand of that forest, 250 m a side at the same density: about 1,800 trees (a bake of minutes)",
         STAND_SCENE_TOML,
     ),
+    (
+        "pines",
+        "a glTF tree among the presets: Pine_5 by Quaternius (CC0, assets/trees/pine5/SOURCE.md) with the fir and pine presets, about 300 trees (a bake of about 5 minutes)",
+        PINES_SCENE_TOML,
+    ),
 ];
 
 /// The small test scene (used by tests; about 30 trees on 100 m).
@@ -41,11 +50,19 @@ pub const SMALL_TEST_SCENE_TOML: &str = include_str!("../../tests/data/small.tom
 impl Scene {
     /// The embedded example scene `name` (see [`EXAMPLE_SCENES`]), or `None` for a name
     /// that is not one.
+    /// Its `gltf` species read their files from those embedded beside it.
     pub fn example(name: &str) -> Option<Result<Scene, SceneError>> {
         EXAMPLE_SCENES
             .iter()
             .find(|(n, _, _)| *n == name)
-            .map(|(n, _, text)| Scene::parse(text, &format!("{n}.toml")))
+            .map(|(n, _, text)| {
+                let mut scene = Scene::parse(text, &format!("{n}.toml"))?;
+                let dir = crate::model::gltf::embedded::scenes_dir();
+                for s in &mut scene.species {
+                    s.base_dir = Some(dir.clone());
+                }
+                Ok(scene)
+            })
     }
 
     /// The embedded default scene (`assets/default.toml`): 1,000 trees, the scene of every
@@ -80,6 +97,17 @@ mod tests {
             }
         }
         assert!(Scene::example("nope").is_none());
+        // The glTF example builds from the files embedded beside it.
+        let pines = match Scene::example("pines") {
+            Some(Ok(s)) => s,
+            _ => panic!("pines"),
+        };
+        let world = match pines.build_world() {
+            Ok(w) => w,
+            Err(e) => panic!("pines: {e}"),
+        };
+        assert_eq!(world.species[0].name, "pine5");
+        assert!(world.species[0].triangle_counts().tree > 1_000);
         let forest = match Scene::example("forest") {
             Some(Ok(s)) => s,
             _ => panic!("forest"),

@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use super::mesh::Mesh;
 
+pub mod embedded;
 mod read;
 use read::{load_buffers, percent_decode, read_file, read_image, read_primitive};
 
@@ -168,17 +169,28 @@ pub fn import(path: &Path, options: ImportOptions) -> Result<ImportedTree, GltfE
         file: path.to_path_buf(),
         message,
     };
-    let size = std::fs::metadata(path)
-        .map_err(|e| fail(format!("cannot read it: {e}")))?
-        .len();
-    if size > MAX_FILE_BYTES {
-        return Err(fail(format!(
-            "it is {size} bytes; canopy reads files up to {MAX_FILE_BYTES} bytes"
-        )));
-    }
-    let bytes = std::fs::read(path).map_err(|e| fail(format!("cannot read it: {e}")))?;
+    let bytes = match embedded::lookup(path) {
+        Some(b) => b.to_vec(),
+        None => {
+            let size = std::fs::metadata(path)
+                .map_err(|e| fail(format!("cannot read it: {e}")))?
+                .len();
+            if size > MAX_FILE_BYTES {
+                return Err(fail(format!(
+                    "it is {size} bytes; canopy reads files up to {MAX_FILE_BYTES} bytes"
+                )));
+            }
+            std::fs::read(path).map_err(|e| fail(format!("cannot read it: {e}")))?
+        }
+    };
     let dir = path.parent().unwrap_or(Path::new("."));
     import_slice(&bytes, dir, options).map_err(fail)
+}
+
+/// The bytes of one of a glTF tree's files ([`files_of`]), embedded or on disk, refused
+/// over the reader's size limit.
+pub fn file_bytes(path: &Path) -> Result<Vec<u8>, String> {
+    read_file(path)
 }
 
 /// The files a glTF tree is made of: the file itself, then the local buffers and images its

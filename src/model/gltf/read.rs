@@ -11,6 +11,9 @@ use crate::model::mesh::{Mesh, Vertex};
 
 /// Reads a whole file, refusing one over [`MAX_FILE_BYTES`] before reading it.
 pub(super) fn read_file(path: &Path) -> Res<Vec<u8>> {
+    if let Some(bytes) = super::embedded::lookup(path) {
+        return Ok(bytes.to_vec());
+    }
     let size = std::fs::metadata(path)
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?
         .len();
