@@ -84,6 +84,7 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
             dropped: 0,
             gpu_billboards: 0,
             vcm: true,
+            impostors: 0,
         }),
         btf_bytes: 16_500_000,
         vcm_bytes: 53_182_464,
