@@ -227,9 +227,9 @@ fn sample_frame(index: u32, layer: i32, eye: vec3<f32>, ray: vec3<f32>, lod: f32
     let axes = view_axes(dir);
     var h = ray_at_height(eye, ray, dir, 0.0);
     var nd = textureSampleLevel(normal_atlas, atlas_sampler, atlas_uv(index, frame_uv(axes, h), lod), layer, lod);
-    // The parallax fades out as the frames are minified: a coarse level's depth blends
-    // the crown's front with what lies behind it, and moving the point by it misplaces
-    // the crown (the default forest's start camera: mean FLIP 0.0915 with it at every
+    // The parallax fades out as the frames are minified: a coarse level's depth is the
+    // mean of the crown's front over a wide footprint, not the depth under the pixel, and
+    // moving the point by it misplaces the crown (the default forest's start camera: mean FLIP 0.0915 with it at every
     // level, 0.0816 without, 0.0796 faded out by level 1).
     let k = clamp(1.0 - lod, 0.0, 1.0);
     if params.parallax != 0u && k > 0.0 {
