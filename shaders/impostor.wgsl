@@ -215,35 +215,29 @@ fn atlas_uv(index: u32, uv: vec2<f32>, lod: f32) -> vec2<f32> {
     return (cell + clamp(uv, vec2<f32>(half), vec2<f32>(1.0 - half))) / n;
 }
 
-struct FrameSample {
-    albedo: vec4<f32>,
-    normal_depth: vec4<f32>,
-    // The object-frame point the sample stands for (radii).
+// A frame's point under the pixel (object frame, radii) and its atlas coordinates.
+struct FramePoint {
+    uv: vec2<f32>,
     point: vec3<f32>,
 }
 
-fn sample_frame(index: u32, layer: i32, eye: vec3<f32>, ray: vec3<f32>, lod: f32) -> FrameSample {
+fn frame_point(index: u32, layer: i32, eye: vec3<f32>, ray: vec3<f32>, lod: f32) -> FramePoint {
     let dir = frame_dir(index);
     let axes = view_axes(dir);
     var h = ray_at_height(eye, ray, dir, 0.0);
-    var nd = textureSampleLevel(normal_atlas, atlas_sampler, atlas_uv(index, frame_uv(axes, h), lod), layer, lod);
     // The parallax fades out as the frames are minified: a coarse level's depth is the
     // mean of the crown's front over a wide footprint, not the depth under the pixel, and
-    // moving the point by it misplaces the crown (the default forest's start camera: mean FLIP 0.0915 with it at every
-    // level, 0.0816 without, 0.0796 faded out by level 1).
+    // moving the point by it misplaces the crown (the default forest's start camera: mean
+    // FLIP 0.0915 with it at every level, 0.0816 without, 0.0788 faded out by level 1).
     let k = clamp(1.0 - lod, 0.0, 1.0);
     if params.parallax != 0u && k > 0.0 {
         // Two steps towards where the ray meets the stored surface.
+        var nd = textureSampleLevel(normal_atlas, atlas_sampler, atlas_uv(index, frame_uv(axes, h), lod), layer, lod);
         h = ray_at_height(eye, ray, dir, k * (1.0 - 2.0 * nd.a));
         nd = textureSampleLevel(normal_atlas, atlas_sampler, atlas_uv(index, frame_uv(axes, h), lod), layer, lod);
         h = ray_at_height(eye, ray, dir, k * (1.0 - 2.0 * nd.a));
     }
-    let uv = atlas_uv(index, frame_uv(axes, h), lod);
-    var s: FrameSample;
-    s.albedo = textureSampleLevel(albedo_atlas, atlas_sampler, uv, layer, lod);
-    s.normal_depth = textureSampleLevel(normal_atlas, atlas_sampler, uv, layer, lod);
-    s.point = h;
-    return s;
+    return FramePoint(atlas_uv(index, frame_uv(axes, h), lod), h);
 }
 
 // The share of the light from `index`'s direction that reaches the object-frame point
@@ -299,31 +293,50 @@ fn impostor_fragment(in: ImpostorOut) -> ImpostorFragment {
     let footprint = max(length(dpdx(in.p)), length(dpdy(in.p))) * 0.5 * f32(params.resolution);
     let lod = clamp(log2(max(footprint, 1e-6)), 0.0, f32(params.mips - 1u));
     let layer = i32(b.layer);
+    // The fade's dither first: a pixel it drops reads nothing.
+    if fade_threshold(in.clip.xy) < 1.0 - b.opacity {
+        count_fragment(in.clip, 0u);
+        discard;
+    }
+    // Coverage and colour of the 3 frames, then the alpha test, then their normals: a
+    // pixel of the quad outside the crown reads 3 texels (more with the parallax).
     var albedo = vec3<f32>(0.0);
-    var normal = vec3<f32>(0.0);
     var point = vec3<f32>(0.0);
     var alpha = 0.0;
+    var uvs: array<vec2<f32>, 3>;
+    var weights = array<f32, 3>(0.0, 0.0, 0.0);
     for (var k = 0; k < 3; k++) {
         let w = in.weights[k];
         if w <= 0.0 {
             continue;
         }
-        let s = sample_frame(in.frames[k], layer, in.eye, ray, lod);
-        let wa = w * s.albedo.a;
-        albedo += wa * s.albedo.rgb;
-        normal += wa * (s.normal_depth.rgb * 2.0 - 1.0);
-        point += wa * s.point;
+        let f = frame_point(in.frames[k], layer, in.eye, ray, lod);
+        let a = textureSampleLevel(albedo_atlas, atlas_sampler, f.uv, layer, lod);
+        let wa = w * a.a;
+        albedo += wa * a.rgb;
+        point += wa * f.point;
         alpha += wa;
+        uvs[k] = f.uv;
+        weights[k] = wa;
     }
-    let reads = select(6u, 12u, params.parallax != 0u) + select(0u, 4u, params.self_shadow > 0.0);
-    count_fragment(in.clip, reads);
+    let parallax_reads = select(0u, 6u, params.parallax != 0u && lod < 1.0);
     // Dithered alpha test: at a cut-off of 0.5 the threshold spans [0, 1], so a pixel's
     // chance to be drawn is its coverage; nearer 0 or 1 the edge is sharper.
     let spread = min(params.alpha_cutoff, 1.0 - params.alpha_cutoff);
     let d = dither(in.clip.xy);
     let threshold = params.alpha_cutoff + (2.0 * d - 1.0) * spread;
-    if alpha <= max(threshold, 1e-3) || fade_threshold(in.clip.xy) < 1.0 - b.opacity {
+    if alpha <= max(threshold, 1e-3) {
+        count_fragment(in.clip, 3u + parallax_reads);
         discard;
+    }
+    count_fragment(in.clip, 6u + parallax_reads + select(0u, 4u, params.self_shadow > 0.0));
+    var normal = vec3<f32>(0.0);
+    for (var k = 0; k < 3; k++) {
+        if weights[k] <= 0.0 {
+            continue;
+        }
+        let nd = textureSampleLevel(normal_atlas, atlas_sampler, uvs[k], layer, lod);
+        normal += weights[k] * (nd.rgb * 2.0 - 1.0);
     }
     albedo /= alpha;
     point /= alpha;
