@@ -112,13 +112,11 @@ fn up_close_hybrid_draws_geometry_and_far_away_it_is_btf() {
     );
     assert!(f_btf > 2.0 * f_hybrid, "btf near: {f_btf:.4}");
 
-    // Far: with `impostor_px` 0 hybrid is btf, pixel for pixel; on (the default;
-    // this bake has impostors), where it draws the tree level, that level is the
-    // `impostor` method's impostor, pixel for pixel.
+    // Far: with `impostor_px` 0 (the default) hybrid is btf, pixel for pixel; with it at
+    // the LOD scale (this bake has impostors), where it draws the tree level, that level
+    // is the `impostor` method's impostor, pixel for pixel.
     let far = view(Vec3::new(60.0, 10.0, 55.0));
-    let mut billboards = far;
-    billboards.btf.impostor_px = 0.0;
-    let (hybrid, hs) = draw(billboards, Some(Method::Hybrid));
+    let (hybrid, hs) = draw(far, Some(Method::Hybrid));
     let (btf, _) = draw(far, Some(Method::Btf));
     let hb = hs.btf.expect("hybrid reports btf stats");
     assert_eq!((hb.geometry_trees, hb.faded_trees, hb.impostors), (0, 0, 0));
@@ -127,11 +125,11 @@ fn up_close_hybrid_draws_geometry_and_far_away_it_is_btf() {
     assert!(same < 1e-4, "far, hybrid against btf: {same}");
     // Farther, at the tree level alone.
     let farther = view(Vec3::new(150.0, 30.0, 140.0));
-    let (hybrid, hs) = draw(farther, Some(Method::Hybrid));
+    let mut impostors = farther;
+    impostors.btf.impostor_px = 1.0;
+    let (hybrid, hs) = draw(impostors, Some(Method::Hybrid));
     let (impostor, is) = draw(farther, Some(Method::Impostor));
-    let mut billboards = farther;
-    billboards.btf.impostor_px = 0.0;
-    let (btf, _) = draw(billboards, Some(Method::Hybrid));
+    let (btf, _) = draw(farther, Some(Method::Hybrid));
     let hb = hs.btf.expect("hybrid reports btf stats");
     assert_eq!((hb.impostors, hb.billboards.tree), (1, 0), "{hb:?}");
     assert_eq!(is.impostor.map(|s| s.impostors), Some(1));

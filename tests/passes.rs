@@ -147,10 +147,11 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
         assert_eq!(names(&stats), want, "{}'s passes", method.name());
         assert_adds_up(method.name(), &stats);
     }
-    // `hybrid` draws its tree level as impostors (a LOD scale that puts the lone tree
-    // there), or with `impostor_px` 0 as BTF billboards: `btf`'s passes.
+    // `hybrid` draws its tree level as impostors (`impostor_px` at a LOD scale that puts
+    // the lone tree there), or by default as BTF billboards: `btf`'s passes.
     let stats = measured_with(&ctx, &mut r, &scene, Method::Hybrid, |d| {
-        d.btf.lod_scale = 16.0
+        d.btf.lod_scale = 16.0;
+        d.btf.impostor_px = 16.0;
     });
     assert_eq!(
         names(&stats),
@@ -164,10 +165,8 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
         ],
         "hybrid's passes"
     );
-    assert_adds_up("hybrid", &stats);
-    let stats = measured_with(&ctx, &mut r, &scene, Method::Hybrid, |d| {
-        d.btf.impostor_px = 0.0
-    });
+    assert_adds_up("hybrid with impostors", &stats);
+    let stats = measured(&ctx, &mut r, &scene, Method::Hybrid);
     assert_eq!(
         names(&stats),
         [
@@ -178,9 +177,9 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
             "near trees",
             "billboards"
         ],
-        "hybrid's passes with impostor_px 0"
+        "hybrid's passes by default"
     );
-    assert_adds_up("hybrid, impostor_px 0", &stats);
+    assert_adds_up("hybrid", &stats);
 }
 
 #[test]

@@ -1,8 +1,8 @@
 //! The `hybrid` method: `btf`'s hierarchy with each tree drawn as geometry wherever even
 //! its twig level is too coarse (cross-faded), and its tree level drawn as the bake's
-//! octahedral impostors (`impostor_px`, when the bake has them): where the two were
-//! charted side by side the impostor drew the tree level as accurately for less time
-//! (docs/RESULTS.md, "hybrid with impostors").
+//! octahedral impostors where asked (`impostor_px`, when the bake has them): faster, and
+//! more accurate on the overview flight, less on the walk, at sunset and at the default
+//! start camera (docs/RESULTS.md, "hybrid with impostors"; off by default).
 //!
 //! A tree's tree level becomes one impostor record (alpha-tested, depth-written, front to
 //! back) with the opacity the level choice gave it; the finer levels' billboards, blended,

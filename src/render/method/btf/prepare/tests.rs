@@ -600,9 +600,15 @@ fn hybrid_impostors_begin_below_impostor_px_cross_faded_with_the_tree_billboard(
     assert_eq!(share(130.0), 1.0);
     let mid = share(0.1 * FOCAL / 0.45);
     assert!((mid - 0.5).abs() < 1e-4, "{mid}");
+    let whole = BtfSettings {
+        impostor_px: 1.0,
+        ..BtfSettings::default()
+    };
+    assert_eq!(impostor_share(&TEXELS, 1.0, FOCAL, 130.0, &whole), 1.0);
     assert_eq!(
         impostor_share(&TEXELS, 1.0, FOCAL, 130.0, &BtfSettings::default()),
-        1.0
+        0.0,
+        "off by default"
     );
     let trees = [tree_at(0.0, 0.0, 0.3)];
     let (billboard, _) = run_as(&trees, Vec3::new(0.0, 5.0, 90.0), &s, true);
