@@ -6,6 +6,7 @@ pub mod args;
 pub mod bake;
 pub mod bench;
 pub mod compare;
+pub mod export;
 pub mod info;
 pub mod knobs;
 pub mod render;
@@ -47,6 +48,10 @@ pub enum Command {
     /// Describe a scene: species, triangles per level, trees, terrain, bake estimate;
     /// --map draws where the trees stand, seen from above.
     Info(info::InfoArgs),
+    /// Write one species of a scene as a glTF 2.0 binary file (.glb): its trunk, main
+    /// branches and twigs as meshes placed by nodes, with its colours; it opens in Blender
+    /// or an engine and comes back as a species (`gltf = "..."`).
+    Export(export::ExportArgs),
 }
 
 /// Runs the command (the viewer on the example forest when none is given).
@@ -60,6 +65,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Command::Info(args)) => info::info(args),
         Some(Command::Bench(args)) => bench::bench(args),
         Some(Command::Tune(args)) => tune::tune(args),
+        Some(Command::Export(args)) => export::export(args),
     }
 }
 

@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 use super::mesh::Mesh;
 
 pub mod embedded;
+pub mod export;
 mod read;
 use read::{load_buffers, percent_decode, read_file, read_image, read_primitive};
 
@@ -121,9 +122,12 @@ pub struct Material {
     pub alpha_cutoff: f32,
     /// Drawn without back-face culling.
     pub double_sided: bool,
-    /// Leaf or needle cards: alpha-tested and its texture actually cuts texels away. Drawn
-    /// lit as foliage (two-sided normals, some light through from behind, the tree's tint).
+    /// Leaf or needle cards: alpha-tested and its texture actually cuts texels away.
     pub cards: bool,
+    /// Lit as foliage (two-sided normals, some light through from behind, the tree's
+    /// tint): cards, or a material `canopy export` marked so
+    /// (`"extras": {"canopy": {"foliage": true}}`).
+    pub foliage: bool,
 }
 
 /// A tree read from a glTF file.
@@ -367,11 +371,11 @@ pub fn import_slice(bytes: &[u8], dir: &Path, options: ImportOptions) -> Res<Imp
     if triangles == 0 {
         return Err("the default scene has no triangles".into());
     }
-    // One mesh, sorted by material; cards flagged as foliage.
+    // One mesh, sorted by material; foliage flagged.
     let mut out = Mesh::default();
     let mut triangle_materials = Vec::with_capacity(triangles as usize);
     for (m, part) in per_material.iter().enumerate() {
-        let foliage = if materials[m].cards { 1.0 } else { 0.0 };
+        let foliage = if materials[m].foliage { 1.0 } else { 0.0 };
         let first = out.vertices.len();
         out.append(part, Mat4::IDENTITY);
         for v in &mut out.vertices[first..] {
@@ -589,7 +593,20 @@ fn read_material(
         alpha_cutoff,
         double_sided: m.double_sided(),
         cards,
+        foliage: cards || marked_foliage(m.extras()),
     })
+}
+
+/// The material's extras say `canopy export` wrote it as foliage.
+fn marked_foliage(extras: &::gltf::json::Extras) -> bool {
+    extras
+        .as_ref()
+        .and_then(|raw| serde_json::from_str::<serde_json::Value>(raw.get()).ok())
+        .and_then(|v| {
+            v.pointer("/canopy/foliage")
+                .and_then(serde_json::Value::as_bool)
+        })
+        .unwrap_or(false)
 }
 
 #[cfg(test)]
