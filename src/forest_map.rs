@@ -36,7 +36,7 @@ pub fn draw(
     let entry_of: Vec<usize> = species
         .iter()
         .enumerate()
-        .flat_map(|(i, e)| std::iter::repeat_n(i, e.variants.max(1) as usize))
+        .flat_map(|(i, e)| std::iter::repeat_n(i, e.prototypes() as usize))
         .collect();
     let t = &world.terrain;
     let half = 0.5 * t.size;

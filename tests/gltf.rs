@@ -346,6 +346,20 @@ fn a_scene_mixing_a_gltf_species_with_a_preset_parses_and_builds() {
     let used = world.forest.species_histogram(2);
     assert!(used.iter().all(|&n| n > 0), "{used:?}");
 
+    // Variants as more files: a prototype each, named by number, every one placed.
+    std::fs::copy(trees.join("Pine_5.gltf"), trees.join("Pine_5_b.gltf")).unwrap();
+    let text = mixed_scene_text("trees/Pine_5.gltf", 36).replace(
+        "gltf = \"trees/Pine_5.gltf\"\n",
+        "gltf = \"trees/Pine_5.gltf\"\ngltf_variants = [\"trees/Pine_5_b.gltf\"]\n",
+    );
+    let variants_path = dir.join("variants.toml");
+    std::fs::write(&variants_path, text).unwrap();
+    let world = Scene::load(&variants_path).unwrap().build_world().unwrap();
+    let names: Vec<&str> = world.species.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names, ["pine5 1", "pine5 2", "fir"]);
+    let used = world.forest.species_histogram(3);
+    assert!(used.iter().all(|&n| n > 0), "{used:?}");
+
     // The path is relative to the scene file: from elsewhere it is not found, and the
     // error names the species and the file.
     let moved = dir.join("elsewhere");
@@ -387,6 +401,16 @@ fn scene_errors_about_gltf_species_name_the_key_and_line() {
     // `scale` on a preset.
     let e = err(&text.replace("seed = 3\n", "seed = 3\nscale = 2.0\n"));
     assert!(e.contains("species[1].scale") && e.contains("gltf"), "{e}");
+    // Variants: files for a glTF species, a number for a preset.
+    let e = err(&text.replace("seed = 11\n", "seed = 11\nvariants = 2\n"));
+    assert!(
+        e.contains("species[0].variants") && e.contains("gltf_variants"),
+        "{e}"
+    );
+    let e = err(&text.replace("seed = 3\n", "seed = 3\ngltf_variants = [\"a.glb\"]\n"));
+    assert!(e.contains("species[1].gltf_variants"), "{e}");
+    let e = err(&text.replace("seed = 11\n", "seed = 11\ngltf_variants = [\" \"]\n"));
+    assert!(e.contains("species[0].gltf_variants"), "{e}");
 }
 
 /// Share of the pixels of the top `rows` rows of `img` that differ from `empty` (the same

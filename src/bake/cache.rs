@@ -46,7 +46,7 @@ pub fn scene_hash(scene: &Scene) -> u64 {
     .unwrap_or_default();
     h = fnv1a(species.as_bytes(), h);
     // An imported tree is baked from its files: their bytes are part of the key.
-    for path in scene.species.iter().filter_map(|s| s.gltf_path()) {
+    for path in scene.species.iter().flat_map(|s| s.gltf_paths()) {
         for file in crate::model::gltf::files_of(&path) {
             h = fnv1a(file.to_string_lossy().as_bytes(), h);
             h = fnv1a(

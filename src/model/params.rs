@@ -261,6 +261,10 @@ pub struct SpeciesEntry {
     /// the scene file; instead of `preset` and `params`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gltf: Option<String>,
+    /// More glTF files of the same species (relative to the scene file like `gltf`): each
+    /// a variant of it, a prototype of its own; a tree of the species takes one at random.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub gltf_variants: Vec<String>,
     /// Uniform scale of a `gltf` tree (default 1: the file's metres).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scale: Option<f32>,
@@ -300,6 +304,7 @@ impl SpeciesEntry {
             preset: Some(preset.into()),
             params: None,
             gltf: None,
+            gltf_variants: Vec::new(),
             scale: None,
             up: None,
             base_dir: None,
@@ -321,11 +326,35 @@ impl SpeciesEntry {
 
     /// Where the `gltf` file of this entry is, if it has one.
     pub fn gltf_path(&self) -> Option<std::path::PathBuf> {
-        let g = self.gltf.as_ref()?;
-        Some(match &self.base_dir {
-            Some(d) => d.join(g),
-            None => std::path::PathBuf::from(g),
-        })
+        self.gltf.as_ref().map(|g| self.relative(g))
+    }
+
+    /// Every glTF file of this entry: `gltf`, then its `gltf_variants` (none without `gltf`).
+    pub fn gltf_paths(&self) -> Vec<std::path::PathBuf> {
+        match &self.gltf {
+            Some(g) => std::iter::once(g)
+                .chain(&self.gltf_variants)
+                .map(|g| self.relative(g))
+                .collect(),
+            None => Vec::new(),
+        }
+    }
+
+    /// `path` relative to the scene file's folder.
+    fn relative(&self, path: &str) -> std::path::PathBuf {
+        match &self.base_dir {
+            Some(d) => d.join(path),
+            None => std::path::PathBuf::from(path),
+        }
+    }
+
+    /// The prototypes this entry makes: one per glTF file, or `variants` grown ones.
+    pub fn prototypes(&self) -> u32 {
+        if self.gltf.is_some() {
+            1 + self.gltf_variants.len() as u32
+        } else {
+            self.variants.max(1)
+        }
     }
 
     /// How a `gltf` tree is placed: `scale` and `up`, defaulted.

@@ -50,17 +50,26 @@ impl World {
         // or read from a glTF file.
         let mut entries = Vec::new();
         for e in species {
-            if let Some(path) = e.gltf_path() {
+            let files = e.gltf_paths();
+            if !files.is_empty() {
                 if e.preset.is_some() || e.params.is_some() {
                     return Err(ModelError::AmbiguousSpecies {
                         name: e.name.clone(),
                     });
                 }
-                entries.push((
-                    e.name.as_str(),
-                    e.name.clone(),
-                    Source::Gltf(path, e.import_options()),
-                ));
+                let many = files.len() > 1;
+                for (v, path) in files.into_iter().enumerate() {
+                    let name = if many {
+                        format!("{} {}", e.name, v + 1)
+                    } else {
+                        e.name.clone()
+                    };
+                    entries.push((
+                        e.name.as_str(),
+                        name,
+                        Source::Gltf(path, e.import_options()),
+                    ));
+                }
                 continue;
             }
             for v in 0..e.variants.max(1) {
@@ -73,7 +82,7 @@ impl World {
                 entries.push((e.name.as_str(), name, Source::Grown(params, seed)));
             }
         }
-        let variants: Vec<u32> = species.iter().map(|e| e.variants.max(1)).collect();
+        let variants: Vec<u32> = species.iter().map(SpeciesEntry::prototypes).collect();
         let (terrain, species) = rayon::join(
             || Terrain::generate(terrain),
             || {

@@ -48,7 +48,7 @@ impl Scene {
                 crate::model::params::MAX_VARIANTS,
             )?;
         }
-        let prototypes: usize = self.species.iter().map(|s| s.variants as usize).sum();
+        let prototypes: usize = self.species.iter().map(|s| s.prototypes() as usize).sum();
         if prototypes > MAX_SPECIES {
             return Err(FieldError::new(
                 "species",
@@ -84,19 +84,35 @@ impl Scene {
                 if g.trim().is_empty() {
                     return Err(FieldError::new(format!("{at}.gltf"), "must not be empty"));
                 }
+                if s.gltf_variants.iter().any(|v| v.trim().is_empty()) {
+                    return Err(FieldError::new(
+                        format!("{at}.gltf_variants"),
+                        "must not hold an empty path",
+                    ));
+                }
+                check::range_u32(
+                    &format!("{at}.gltf_variants"),
+                    s.prototypes(),
+                    1,
+                    crate::model::params::MAX_VARIANTS,
+                )?;
                 if let Some(scale) = s.scale {
                     check::range(&format!("{at}.scale"), scale, 1e-4, 1e4)?;
                 }
                 if s.variants != 1 {
                     return Err(FieldError::new(
                         format!("{at}.variants"),
-                        "a `gltf` species has one prototype; give each variant its own [[species]]",
+                        "a `gltf` species takes its variants as files: `gltf_variants = [\"b.glb\", ...]`",
                     )
                     .with_found(s.variants));
                 }
                 continue;
             }
-            for (key, given) in [("scale", s.scale.is_some()), ("up", s.up.is_some())] {
+            for (key, given) in [
+                ("scale", s.scale.is_some()),
+                ("up", s.up.is_some()),
+                ("gltf_variants", !s.gltf_variants.is_empty()),
+            ] {
                 if given {
                     return Err(FieldError::new(
                         format!("{at}.{key}"),
