@@ -133,8 +133,10 @@ impl BtfMethod {
 
 /// Uploads the geometry a BTF frame draws (the trunks of the trees at the main-branch
 /// level, the trunks and limbs of those at the twig level, `hybrid`'s whole trees with their
-/// twigs fading) and plans its sun cascades: fitted to `hybrid`'s geometry trees alone, which
-/// then cast and receive through them and are left out of the ground alpha map.
+/// twigs fading) and plans its sun cascades: fitted to the trees drawn wholly as geometry
+/// (`hybrid`'s, and imported trees at a finer level than their tree level, whose trunk is
+/// the whole tree) alone, which then cast and receive through them and are left out of the
+/// ground alpha map (where their own billboard would shade them).
 pub(crate) fn plan_geometry(
     ctx: &GpuContext,
     world: &WorldGpu,
@@ -148,10 +150,25 @@ pub(crate) fn plan_geometry(
         .iter()
         .map(|l| l.iter().map(|&(t, _)| (t, 1.0)).collect())
         .collect();
+    // Imported trees at the finer levels: their trunk is the whole tree. Uploaded once
+    // more as a list of their own, for the cascades.
+    let imported: Vec<Vec<(u32, f32)>> = bf
+        .trunk_only
+        .iter()
+        .zip(&bf.trunk_and_limbs)
+        .enumerate()
+        .map(|(sp, (a, b))| {
+            if world.species.get(sp).is_some_and(|s| s.whole_trunk) {
+                a.iter().chain(b).map(|&t| (t, 1.0)).collect()
+            } else {
+                Vec::new()
+            }
+        })
+        .collect();
     let runs = world.upload_lists_faded(
         ctx,
         &[bf.trunk_only.clone(), bf.trunk_and_limbs.clone()],
-        &[&whole, &bf.twigs],
+        &[&whole, &bf.twigs, &imported],
         frame.btf.show_lod.then_some(GEOMETRY_COLOR),
     );
     log::debug!(
@@ -160,7 +177,13 @@ pub(crate) fn plan_geometry(
         bf.trunk_and_limbs.iter().map(Vec::len).sum::<usize>(),
         t0.elapsed().as_secs_f64() * 1e3
     );
-    let plan = geometry_tree_plan(world, frame, &bf.twigs, &runs[2], sun);
+    let mut trees = bf.twigs.clone();
+    for (list, more) in trees.iter_mut().zip(&imported) {
+        list.extend_from_slice(more);
+    }
+    let mut casters = runs[2].clone();
+    casters.extend_from_slice(&runs[4]);
+    let plan = geometry_tree_plan(world, frame, &trees, &casters, sun);
     (runs, plan)
 }
 
