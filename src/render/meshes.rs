@@ -13,7 +13,8 @@ use crate::Result;
 
 /// The pipeline and buffers of the sun cascades' pass, and the main pass's mesh draws.
 pub struct MeshPasses {
-    shadow_pipeline: wgpu::RenderPipeline,
+    /// Depth only: untextured parts and the terrain, then parts with an alpha test.
+    shadow_pipelines: (wgpu::RenderPipeline, wgpu::RenderPipeline),
     /// Per cascade: the frame uniforms with the cascade's light matrix, and their group 0.
     cascade_uniforms: Vec<(wgpu::Buffer, wgpu::BindGroup)>,
 }
@@ -21,8 +22,8 @@ pub struct MeshPasses {
 impl MeshPasses {
     pub fn new(ctx: &GpuContext, layouts: &Layouts) -> Result<Self> {
         let device = &ctx.device;
-        let shadow_pipeline = ctx.checked("building the shadow pipeline", || {
-            pipelines::shadow_pipeline(device, layouts)
+        let shadow_pipelines = ctx.checked("building the shadow pipelines", || {
+            pipelines::shadow_pipelines(device, layouts)
         })?;
         let cascade_uniforms = (0..CASCADES)
             .map(|i| {
@@ -44,7 +45,7 @@ impl MeshPasses {
             })
             .collect();
         Ok(Self {
-            shadow_pipeline,
+            shadow_pipelines,
             cascade_uniforms,
         })
     }
@@ -80,10 +81,18 @@ impl MeshPasses {
         pipeline: Option<&wgpu::RenderPipeline>,
         stats: &mut FrameStats,
     ) {
-        pass.set_pipeline(pipeline.unwrap_or(&self.shadow_pipeline));
         pass.set_bind_group(0, &self.cascade_uniforms[c].1, &[]);
         pass.set_bind_group(1, &world.trees_bind_group, &[]);
-        let (tris, casters, calls) = world.draw(pass, runs, None, terrain, &ALL_PARTS);
+        let (tris, casters, calls) = match pipeline {
+            Some(p) => {
+                pass.set_pipeline(p);
+                world.draw(pass, runs, None, terrain, &ALL_PARTS)
+            }
+            None => {
+                let (plain, cutout) = &self.shadow_pipelines;
+                world.draw_depth(pass, runs, (plain, cutout), terrain, &ALL_PARTS)
+            }
+        };
         stats.shadow_triangles += tris;
         stats.shadow_casters += casters;
         stats.draw_calls += calls;

@@ -298,16 +298,23 @@ pub(crate) const SHADOW_BIAS: wgpu::DepthBiasState = wgpu::DepthBiasState {
     clamp: 0.0,
 };
 
-/// The shadow pipeline (independent of the colour format): depth only, biased.
-pub fn shadow_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu::RenderPipeline {
-    light_view_pipeline(
-        device,
-        &LightView {
-            label: "shadow",
-            compare: wgpu::CompareFunction::LessEqual,
-            bias: SHADOW_BIAS,
-            ..LightView::shadow_frame(layouts)
-        },
+/// The shadow pipelines (independent of the colour format): depth only, biased; the
+/// first without a fragment stage (untextured parts, the terrain), the second with the
+/// parts' alpha test (an imported tree's cards).
+pub fn shadow_pipelines(
+    device: &wgpu::Device,
+    layouts: &Layouts,
+) -> (wgpu::RenderPipeline, wgpu::RenderPipeline) {
+    let view = |label, cutout| LightView {
+        label,
+        compare: wgpu::CompareFunction::LessEqual,
+        bias: SHADOW_BIAS,
+        cutout,
+        ..LightView::shadow_frame(layouts)
+    };
+    (
+        light_view_pipeline(device, &view("shadow", false)),
+        light_view_pipeline(device, &view("shadow, cut out", true)),
     )
 }
 
@@ -338,6 +345,9 @@ pub(crate) struct LightView<'a> {
     pub compare: wgpu::CompareFunction,
     pub bias: wgpu::DepthBiasState,
     pub fragment: Option<LightFragment<'a>>,
+    /// Without `fragment`: the parts' alpha test as the fragment stage (false: none, for
+    /// what has no texture to cut out).
+    pub cutout: bool,
 }
 
 /// The fragment stage of a [`LightView`]: its entry point in `source` (None: `shadow.wgsl`
@@ -364,6 +374,7 @@ impl<'a> LightView<'a> {
             compare: wgpu::CompareFunction::LessEqual,
             bias: Default::default(),
             fragment: None,
+            cutout: true,
         }
     }
 }
@@ -432,7 +443,7 @@ pub(crate) fn light_view_pipeline(
                 compilation_options: crate::render::shaders::frame_options(),
                 targets,
             })
-            .or(Some(cutout)),
+            .or(p.cutout.then_some(cutout)),
         multiview_mask: None,
         cache: None,
     })

@@ -113,7 +113,8 @@ pub struct SelfShadow {
     /// The cascades' key textures (their side, one view per cascade, the array), and the
     /// main passes' group 3 that binds them.
     keys: Option<(u32, Vec<wgpu::TextureView>, wgpu::BindGroup)>,
-    map_pipeline: wgpu::RenderPipeline,
+    /// Depth only: untextured parts, then parts with an alpha test.
+    map_pipelines: (wgpu::RenderPipeline, wgpu::RenderPipeline),
     keyed_pipeline: wgpu::RenderPipeline,
     /// The main passes' pipelines of the reference's trees, per colour format.
     color: HashMap<wgpu::TextureFormat, (wgpu::RenderPipeline, wgpu::RenderPipeline)>,
@@ -160,18 +161,18 @@ impl SelfShadow {
                 resource: lights.as_entire_binding(),
             }],
         });
-        let (map_pipeline, keyed_pipeline) =
+        let (map_pipelines, keyed_pipeline) =
             ctx.checked("building the per-tree sun map pipelines", || {
                 // Biased as the cascades are.
                 let base = || LightView {
                     bias: SHADOW_BIAS,
                     ..LightView::shadow_frame(layouts)
                 };
-                (
+                let map = |label, cutout| {
                     light_view_pipeline(
                         device,
                         &LightView {
-                            label: "per-tree sun map",
+                            label,
                             groups: [
                                 None,
                                 Some(&layouts.trees),
@@ -179,8 +180,15 @@ impl SelfShadow {
                                 Some(&lights_layout),
                             ],
                             vertex: "vs_self_shadow",
+                            cutout,
                             ..base()
                         },
+                    )
+                };
+                (
+                    (
+                        map("per-tree sun map", false),
+                        map("per-tree sun map, cut out", true),
                     ),
                     light_view_pipeline(
                         device,
@@ -206,7 +214,7 @@ impl SelfShadow {
             lights_group,
             reference_layout,
             keys: None,
-            map_pipeline,
+            map_pipelines,
             keyed_pipeline,
             color: HashMap::new(),
         })
@@ -338,11 +346,17 @@ impl SelfShadow {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(&self.map_pipeline);
             pass.set_bind_group(1, &world.trees_bind_group, &[]);
             pass.set_bind_group(3, &self.lights_group, &[]);
+            let (plain, cutout) = &self.map_pipelines;
             tris += world
-                .draw(&mut pass, &[run], None, false, &super::world_gpu::ALL_PARTS)
+                .draw_depth(
+                    &mut pass,
+                    &[run],
+                    (plain, cutout),
+                    false,
+                    &super::world_gpu::ALL_PARTS,
+                )
                 .0;
         }
         tris

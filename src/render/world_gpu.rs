@@ -112,6 +112,9 @@ pub struct PartSet {
     pub bind_group: wgpu::BindGroup,
     /// Leaves, needles and double-sided imported materials: drawn two-sided, after the rest.
     pub foliage: bool,
+    /// Its fragments are alpha-tested against a texture (an imported tree's cards): the
+    /// depth-only passes need a fragment stage for it.
+    pub cutout: bool,
 }
 
 impl PartSet {
@@ -176,6 +179,7 @@ impl PartSet {
             count: parts.len() as u32,
             bind_group,
             foliage: look.two_sided,
+            cutout: look.textured && look.alpha_cutoff > 0.0,
         })
     }
 
@@ -427,12 +431,55 @@ impl WorldGpu {
         terrain: bool,
         kinds: &[PartKind],
     ) -> (u64, u32, u32) {
+        self.draw_by(pass, runs, terrain, kinds, |foliage, _| {
+            pipes.map(|p| if foliage { p.foliage } else { p.opaque })
+        })
+    }
+
+    /// [`Self::draw`] into a depth-only pass from the sun: each part set with `plain` (no
+    /// fragment stage) or, where it is alpha-tested, `cutout`.
+    pub(crate) fn draw_depth(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        runs: &[TreeRun],
+        (plain, cutout): (&wgpu::RenderPipeline, &wgpu::RenderPipeline),
+        terrain: bool,
+        kinds: &[PartKind],
+    ) -> (u64, u32, u32) {
+        self.draw_by(pass, runs, terrain, kinds, |_, set| {
+            Some(if set.is_some_and(|s| s.cutout) {
+                cutout
+            } else {
+                plain
+            })
+        })
+    }
+
+    /// The draws of [`Self::draw`], each part set (None: the terrain) with the pipeline
+    /// `pipeline_of(foliage, set)` gives (None: the one already set), set only when it
+    /// changes.
+    fn draw_by<'p>(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        runs: &[TreeRun],
+        terrain: bool,
+        kinds: &[PartKind],
+        mut pipeline_of: impl FnMut(bool, Option<&PartSet>) -> Option<&'p wgpu::RenderPipeline>,
+    ) -> (u64, u32, u32) {
         let mut tris = 0u64;
         let mut calls = 0u32;
         let mut trees = 0u32;
-        if let Some(p) = pipes {
-            pass.set_pipeline(p.opaque);
-        }
+        let mut current: Option<&wgpu::RenderPipeline> = None;
+        let mut use_pipeline =
+            |pass: &mut wgpu::RenderPass<'_>, p: Option<&'p wgpu::RenderPipeline>| {
+                if let Some(p) = p
+                    && !current.is_some_and(|c| std::ptr::eq(c, p))
+                {
+                    pass.set_pipeline(p);
+                    current = Some(p);
+                }
+            };
+        use_pipeline(pass, pipeline_of(false, None));
         if terrain {
             self.bind_terrain(pass);
             let full = self.terrain_layout.full.clone();
@@ -451,15 +498,13 @@ impl WorldGpu {
         };
         // Opaque parts of every species first, then foliage, to switch pipelines twice only.
         for foliage in [false, true] {
-            if let Some(p) = pipes {
-                pass.set_pipeline(if foliage { p.foliage } else { p.opaque });
-            }
             for run in runs {
                 for set in self.species[run.species]
                     .parts
                     .iter()
                     .filter(|s| s.foliage == foliage && kinds.contains(&s.kind))
                 {
+                    use_pipeline(pass, pipeline_of(foliage, Some(set)));
                     draw(pass, set, run.first, run.count);
                 }
             }
