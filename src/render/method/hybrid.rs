@@ -38,14 +38,19 @@ static IMPOSTOR_PX: Knob = Knob::number(
 .slider(0.0, 4.0, false);
 
 /// `btf`'s knobs, `impostor_px`, and the impostor's knobs its impostors read (out of
-/// `tune`'s grid, which stays `btf`'s for `hybrid`).
+/// `tune`'s grid, which stays `btf`'s for `hybrid`; offered in the panel while
+/// `impostor_px` is on).
 static KNOBS: LazyLock<Vec<Knob>> = LazyLock::new(|| {
     let mut knobs: Vec<Knob> = super::btf::knobs::KNOBS.to_vec();
     knobs.push(IMPOSTOR_PX);
     let shared = ["alpha_cutoff", "parallax", "parallax_depth", "self_shadow"];
     for k in super::impostor::knobs::KNOBS {
         if shared.contains(&k.name) {
-            knobs.push(Knob { tune: &[], ..*k });
+            knobs.push(Knob {
+                tune: &[],
+                enabled: |d| d.btf.impostor_px > 0.0,
+                ..*k
+            });
         }
     }
     knobs
