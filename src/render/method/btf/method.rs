@@ -145,45 +145,39 @@ pub(crate) fn plan_geometry(
     sun: SunWork,
 ) -> (Vec<Vec<TreeRun>>, Plan) {
     let t0 = Instant::now();
-    let whole: Vec<Vec<(u32, f32)>> = bf
+    // The trees drawn wholly as geometry, trunk and limbs at opacity 1: `hybrid`'s, and
+    // imported trees at the finer levels (their trunk part is the whole tree), moved out
+    // of the trunk lists.
+    let (mut trunk_only, mut trunk_and_limbs) = (bf.trunk_only.clone(), bf.trunk_and_limbs.clone());
+    let mut whole: Vec<Vec<(u32, f32)>> = bf
         .twigs
         .iter()
         .map(|l| l.iter().map(|&(t, _)| (t, 1.0)).collect())
         .collect();
-    // Imported trees at the finer levels: their trunk is the whole tree. Uploaded once
-    // more as a list of their own, for the cascades.
-    let imported: Vec<Vec<(u32, f32)>> = bf
-        .trunk_only
-        .iter()
-        .zip(&bf.trunk_and_limbs)
+    for (sp, ((list, a), b)) in whole
+        .iter_mut()
+        .zip(&mut trunk_only)
+        .zip(&mut trunk_and_limbs)
         .enumerate()
-        .map(|(sp, (a, b))| {
-            if world.species.get(sp).is_some_and(|s| s.whole_trunk) {
-                a.iter().chain(b).map(|&t| (t, 1.0)).collect()
-            } else {
-                Vec::new()
-            }
-        })
-        .collect();
+    {
+        if world.species.get(sp).is_some_and(|s| s.whole_trunk) {
+            list.extend(a.drain(..).chain(b.drain(..)).map(|t| (t, 1.0)));
+        }
+    }
+    let counts = [&trunk_only, &trunk_and_limbs].map(|l| l.iter().map(Vec::len).sum::<usize>());
     let runs = world.upload_lists_faded(
         ctx,
-        &[bf.trunk_only.clone(), bf.trunk_and_limbs.clone()],
-        &[&whole, &bf.twigs, &imported],
+        &[trunk_only, trunk_and_limbs],
+        &[&whole, &bf.twigs],
         frame.btf.show_lod.then_some(GEOMETRY_COLOR),
     );
     log::debug!(
         "btf prepare: the trunks' and limbs' lists ({} and {} trees) in {:.2} ms",
-        bf.trunk_only.iter().map(Vec::len).sum::<usize>(),
-        bf.trunk_and_limbs.iter().map(Vec::len).sum::<usize>(),
+        counts[0],
+        counts[1],
         t0.elapsed().as_secs_f64() * 1e3
     );
-    let mut trees = bf.twigs.clone();
-    for (list, more) in trees.iter_mut().zip(&imported) {
-        list.extend_from_slice(more);
-    }
-    let mut casters = runs[2].clone();
-    casters.extend_from_slice(&runs[4]);
-    let plan = geometry_tree_plan(world, frame, &trees, &casters, sun);
+    let plan = geometry_tree_plan(world, frame, &whole, &runs[2], sun);
     (runs, plan)
 }
 

@@ -604,7 +604,8 @@ impl BtfAssets {
 
     /// The frame's draws in the main pass: the trunks (and limbs) of the trees drawn at the
     /// finer levels as geometry (`runs`: trunk only, then trunk and limbs; the terrain with
-    /// the first when asked), `hybrid`'s geometry trees (`runs[2]` whole, `runs[3]` fading),
+    /// the first when asked), the trees drawn wholly as geometry (`runs[2]` trunk and limbs:
+    /// `hybrid`'s and imported trees at the finer levels; `runs[3]` `hybrid`'s twigs fading),
     /// `between` (what is opaque and not geometry: `hybrid`'s impostors), then every
     /// billboard in one instanced draw, back to front.
     #[allow(clippy::too_many_arguments)]
