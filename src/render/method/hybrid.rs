@@ -13,8 +13,7 @@ use std::sync::LazyLock;
 
 use super::btf::method::{BtfMethod, billboard_casters};
 use super::btf::settings::LOD_COLORS;
-use super::impostor::prepare::ImpostorGpu;
-use super::impostor::{ImpostorSettings, ImpostorStats};
+use super::impostor::{ImpostorAssets, ImpostorSettings, ImpostorStats};
 use super::interface::{Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod};
 use super::kind::Method;
 use crate::Result;
@@ -124,7 +123,6 @@ impl RenderMethod for HybridMethod {
         }
         let s = impostor_settings(cx.frame);
         let scene = b.scene();
-        let limit = cx.ctx.device.limits().max_storage_buffer_binding_size as usize;
         let records = super::impostor::prepare::records(
             &imp.species,
             &cx.world.tree_data,
@@ -132,20 +130,16 @@ impl RenderMethod for HybridMethod {
             &cx.view,
             &s,
             s.show_lod.then_some(LOD_COLORS[Level::Tree]),
-            limit / std::mem::size_of::<ImpostorGpu>(),
+            ImpostorAssets::max_records(&cx.ctx.device),
             &mut |t, sp, m| scene.tree_shade(t, sp, m),
         );
         imp.upload(cx.ctx, &records, &s);
         self.impostors = records.len() as u32;
         self.parallax_depth = s.parallax_depth;
-        let (frames, frame_px) = imp.grid();
-        self.stats = Some(ImpostorStats {
+        self.stats = Some(imp.with_atlas(ImpostorStats {
             impostors: self.impostors,
-            geometry_trees: 0,
-            frames,
-            frame_px,
-            atlas_bytes: imp.bytes,
-        });
+            ..Default::default()
+        }));
         Ok(plan)
     }
 

@@ -5,7 +5,7 @@
 use glam::{UVec3, Vec3};
 
 use super::prepare::{ImpostorGpu, ImpostorParams, SpeciesImpostor};
-use super::settings::ImpostorSettings;
+use super::settings::{ImpostorSettings, ImpostorStats};
 use crate::format::{Baked, Impostor};
 use crate::model::World;
 use crate::render::GpuContext;
@@ -213,6 +213,23 @@ impl ImpostorAssets {
     /// Frames per side and pixels a frame side.
     pub fn grid(&self) -> (u32, u32) {
         (self.params.frames, self.params.resolution)
+    }
+
+    /// `stats` with the atlases' layout and bytes filled in.
+    pub fn with_atlas(&self, stats: ImpostorStats) -> ImpostorStats {
+        let (frames, frame_px) = self.grid();
+        ImpostorStats {
+            frames,
+            frame_px,
+            atlas_bytes: self.bytes,
+            ..stats
+        }
+    }
+
+    /// Most records one frame can hold (`device`'s storage-buffer limit).
+    pub fn max_records(device: &wgpu::Device) -> usize {
+        device.limits().max_storage_buffer_binding_size as usize
+            / std::mem::size_of::<ImpostorGpu>()
     }
 
     /// Uploads the frame's records and the knobs the shader reads.

@@ -74,23 +74,18 @@ impl RenderMethod for ImpostorMethod {
             }
         }
         let scene = btf.scene();
-        let limit = cx.ctx.device.limits().max_storage_buffer_binding_size as usize;
-        let max = limit / std::mem::size_of::<super::prepare::ImpostorGpu>();
         let f = prepare(
             &imp.species,
             &cx.world.tree_data,
             &cx.visible,
             &cx.view,
             &settings,
-            max,
+            ImpostorAssets::max_records(&cx.ctx.device),
             &mut |t, sp, m| scene.tree_shade(t, sp, m),
         );
         imp.upload(cx.ctx, &f.records, &settings);
-        let mut stats = f.stats;
-        (stats.frames, stats.frame_px) = imp.grid();
-        stats.atlas_bytes = imp.bytes;
         self.count = f.records.len() as u32;
-        self.stats = stats;
+        self.stats = imp.with_atlas(f.stats);
         self.whole = f
             .geometry
             .iter()
