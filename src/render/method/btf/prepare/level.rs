@@ -32,15 +32,7 @@ pub fn geometry_fade(
     settings: &BtfSettings,
 ) -> f32 {
     let px = lod::projected_px(texels[Level::Twig] * scale, focal_px, z);
-    let bound = settings.lod_scale;
-    let start = bound * (1.0 - settings.lod_fade.clamp(0.0, 1.0));
-    if px >= bound {
-        1.0
-    } else if settings.lod_fade > 0.0 && px > start {
-        ((px - start) / (bound - start).max(1e-6)).clamp(0.0, 1.0)
-    } else {
-        0.0
-    }
+    band(px, settings.lod_scale, settings.lod_fade)
 }
 
 /// How much of a tree's tree level `hybrid` draws as its impostor (0 = none, 1 = all):
@@ -63,13 +55,20 @@ pub fn impostor_share(
         return 1.0;
     }
     let px = lod::projected_px(texels[Level::Tree] * scale, focal_px, z);
-    let start = bound * (1.0 - settings.lod_fade.clamp(0.0, 1.0));
+    1.0 - band(px, bound, settings.lod_fade)
+}
+
+/// Where `px` stands in the band before `bound` (its last `lod_fade` fraction): 1 at the
+/// bound and above, 0 at the band's start and below (and for NaN), linear between; a step
+/// at the bound without a band.
+fn band(px: f32, bound: f32, lod_fade: f32) -> f32 {
+    let start = bound * (1.0 - lod_fade.clamp(0.0, 1.0));
     if px >= bound {
-        0.0
-    } else if px <= start {
         1.0
+    } else if px > start {
+        ((px - start) / (bound - start).max(1e-6)).clamp(0.0, 1.0)
     } else {
-        ((bound - px) / (bound - start).max(1e-6)).clamp(0.0, 1.0)
+        0.0
     }
 }
 
@@ -85,13 +84,11 @@ pub fn choose_level(
 ) -> LevelChoice {
     let level = lod::choose(texels, scale, focal_px, z, settings.lod_scale);
     let px = lod::projected_px(texels[level] * scale, focal_px, z);
-    let start = settings.lod_scale * (1.0 - settings.lod_fade.clamp(0.0, 1.0));
-    let fading_in = match level.finer() {
-        Some(finer) if settings.lod_fade > 0.0 && px > start => {
-            let fade = ((px - start) / (settings.lod_scale - start).max(1e-6)).clamp(0.0, 1.0);
-            (fade > 0.0).then_some((finer, fade))
-        }
-        _ => None,
-    };
+    // The band's value is the finer level's share.
+    let fade = band(px, settings.lod_scale, settings.lod_fade);
+    let fading_in = level
+        .finer()
+        .filter(|_| settings.lod_fade > 0.0 && fade > 0.0)
+        .map(|finer| (finer, fade));
     LevelChoice { level, fading_in }
 }
