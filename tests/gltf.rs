@@ -341,6 +341,10 @@ fn a_scene_mixing_a_gltf_species_with_a_preset_parses_and_builds() {
     let pine = &world.species[0];
     assert_eq!(pine.name, "pine5");
     assert!(!pine.has_hierarchy() && world.species[1].has_hierarchy());
+    // Pine_5 is one mesh placed once: why it has no finer levels is said.
+    let note = pine.levels_note.as_deref().unwrap_or_default();
+    assert!(note.starts_with("tree only: no mesh is placed"), "{note}");
+    assert!(world.species[1].levels_note.is_none());
     assert_eq!(pine.triangle_counts().tree, 1646);
     assert_eq!(pine.surfaces.as_ref().unwrap().materials.len(), 2);
     let used = world.forest.species_histogram(2);
@@ -647,8 +651,9 @@ fn a_preset_exported_to_glb_reads_back_and_renders_the_same() {
     let back = &world.species[0];
     assert_eq!(back.triangle_counts().tree, fir.triangle_counts().tree);
     assert!(
-        !back.has_hierarchy(),
-        "an imported tree has its tree level only"
+        back.has_hierarchy(),
+        "the export's nodes give the preset's levels back ({:?})",
+        back.levels_note
     );
     let tree = preset_world.forest.instances[0].position;
     assert_eq!(world.forest.instances[0].position, tree);

@@ -31,6 +31,9 @@ pub struct PrototypeInfo {
     /// Side-view crown coverage (share of the crown's silhouette hull covered, mean of four
     /// azimuths; [`crate::model::silhouette`]).
     pub crown_coverage: f32,
+    /// An imported tree's levels: where its file gives them, or why it has the tree level
+    /// only.
+    pub levels_note: Option<String>,
 }
 
 impl PrototypeInfo {
@@ -63,6 +66,7 @@ impl PrototypeInfo {
                     trees,
                     baked_bytes: btf + objects * vcm,
                     crown_coverage: crate::model::silhouette::crown_coverage(t).mean,
+                    levels_note: t.levels_note.clone(),
                 }
             })
             .collect()
@@ -184,6 +188,9 @@ impl Gallery {
                         ui.label(format!("{:.0} %", 100.0 * p.crown_coverage));
                         ui.end_row();
                     });
+                if let Some(note) = &p.levels_note {
+                    ui.label(format!("levels (imported): {note}"));
+                }
             });
         self.open = open;
         self.distance = Some(distance);

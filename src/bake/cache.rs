@@ -9,6 +9,9 @@ use crate::scene::Scene;
 
 /// Bumped whenever the generator or the bake changes what it makes: old caches are rebaked.
 pub const BAKE_REVISION: u32 = 9;
+/// Bumped whenever the glTF reader changes what it makes of a file (its levels): only
+/// scenes with imported trees are rebaked.
+pub const IMPORT_REVISION: u32 = 2;
 
 /// The bake settings a scene asks for.
 pub fn settings_of(scene: &Scene) -> BakeSettings {
@@ -47,6 +50,7 @@ pub fn scene_hash(scene: &Scene) -> u64 {
     h = fnv1a(species.as_bytes(), h);
     // An imported tree is baked from its files: their bytes are part of the key.
     for path in scene.species.iter().flat_map(|s| s.gltf_paths()) {
+        h = fnv1a(&IMPORT_REVISION.to_le_bytes(), h);
         for file in crate::model::gltf::files_of(&path) {
             h = fnv1a(file.to_string_lossy().as_bytes(), h);
             h = fnv1a(

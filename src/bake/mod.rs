@@ -54,10 +54,19 @@ pub fn level_object(tree: &TreeModel, level: Level) -> TreeModel {
         }
         Level::Tree => {}
     }
-    if level != Level::Tree {
-        // An imported tree's materials cover its trunk's triangles, which these levels
-        // replace.
-        o.surfaces = None;
+    // An imported tree's materials follow its parts: at the twig level the trunk is empty
+    // (the twig is the level's one twig), at the main-branch level it is the limb.
+    if let Some(surf) = &tree.surfaces {
+        let mut level_surfaces = (**surf).clone();
+        match level {
+            Level::Twig => level_surfaces.trunk.clear(),
+            Level::Branch => level_surfaces.trunk = surf.limb.clone(),
+            Level::Tree => {}
+        }
+        if level != Level::Tree {
+            level_surfaces.limb.clear();
+        }
+        o.surfaces = Some(std::sync::Arc::new(level_surfaces));
     }
     o
 }

@@ -138,12 +138,26 @@ pub fn info(args: InfoArgs) -> anyhow::Result<()> {
             );
         }
         for s in &r.species {
-            if s.levels.len() == 1 {
+            if let Some(found) = &s.levels_found {
+                let levels = if s.levels.len() == 1 {
+                    format!(
+                        "{} triangles; levels: {found} (drawn whole as geometry where its tree billboard is too coarse)",
+                        s.triangles.tree
+                    )
+                } else {
+                    format!(
+                        "triangles: twig {}, main branch {}, tree {}; {} main branches, {} twigs; levels: {found}",
+                        s.triangles.twig,
+                        s.triangles.main_branch,
+                        s.triangles.tree,
+                        s.main_branches,
+                        s.twigs
+                    )
+                };
                 println!(
-                    "  {:<10} {} trees; imported: {} triangles, {} materials, {:.1} m tall, crown {:.0} % covered from the side; levels: tree only (no twig or main-branch hierarchy: drawn whole as geometry where its tree billboard is too coarse)",
+                    "  {:<10} {} trees; imported, {} materials, {:.1} m tall, crown {:.0} % covered from the side; {levels}",
                     s.name,
                     s.trees,
-                    s.triangles.tree,
                     s.materials,
                     s.height_m,
                     100.0 * s.crown_coverage

@@ -48,9 +48,12 @@ pub struct SpeciesSummary {
     /// Side-view crown coverage: the share of the crown's silhouette hull its triangles
     /// cover, the mean of four azimuths ([`super::silhouette`]).
     pub crown_coverage: f32,
-    /// The levels the species has: `twig`, `main branch`, `tree` for a grown one; `tree`
-    /// alone for an imported one (its file gives no hierarchy).
+    /// The levels the species has: `twig`, `main branch`, `tree` for a grown one and for an
+    /// imported one whose file gives them; `tree` alone otherwise.
     pub levels: Vec<&'static str>,
+    /// An imported tree's levels: where its file gives them, or why it has the tree level
+    /// only. `None` for a grown species.
+    pub levels_found: Option<String>,
     /// Materials of an imported tree (0 for a grown one: vertex colours).
     pub materials: usize,
 }
@@ -101,6 +104,7 @@ impl WorldSummary {
                         vec![super::Level::Tree.name()]
                     },
                     materials: t.surfaces.as_ref().map_or(0, |s| s.materials.len()),
+                    levels_found: t.levels_note.clone(),
                 }
             })
             .collect();

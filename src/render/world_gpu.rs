@@ -270,14 +270,38 @@ impl WorldGpu {
         .ok_or_else(|| Error::BadInput("the terrain has no triangles".into()))?;
         let mut mesh_bytes = terrain.mesh.bytes();
         let mut species = Vec::with_capacity(world.species.len());
+        let mut uploaded = Vec::new();
         for tree in &world.species {
             let twigs = tree.twigs_in_tree_frame();
             let limbs = &tree.tree_branches;
-            // An imported tree's trunk is drawn once per material, with its texture.
-            let surfaces = tree.surfaces.as_deref().map(|surf| {
-                let (meshes, textures) = split_surfaces(ctx, &tree.trunk, surf);
-                surf.ranges
-                    .iter()
+            // A procedural part is one set; an imported tree's parts are one set per material,
+            // each with its texture.
+            let mut part_sets = |kind: PartKind,
+                                 what: &str,
+                                 mesh: &Mesh,
+                                 instances: &[Mat4],
+                                 look: PartLook|
+             -> Vec<PartSet> {
+                let Some(surf) = tree.surfaces.as_deref() else {
+                    return PartSet::new(
+                        ctx,
+                        parts_layout,
+                        kind,
+                        &format!("{} {what}", tree.name),
+                        mesh,
+                        instances,
+                        look,
+                    )
+                    .into_iter()
+                    .collect();
+                };
+                let runs = match kind {
+                    PartKind::Trunk => &surf.trunk,
+                    PartKind::Limbs => &surf.limb,
+                    PartKind::Twigs => &surf.twig,
+                };
+                let (meshes, textures) = split_surfaces(ctx, mesh, runs, surf, &mut uploaded);
+                runs.iter()
                     .zip(meshes)
                     .zip(textures)
                     .filter_map(|((range, mesh), texture)| {
@@ -285,10 +309,10 @@ impl WorldGpu {
                         PartSet::new(
                             ctx,
                             parts_layout,
-                            PartKind::Trunk,
-                            &format!("{} {}", tree.name, m.name),
+                            kind,
+                            &format!("{} {what} {}", tree.name, m.name),
                             &mesh,
-                            &[Mat4::IDENTITY],
+                            instances,
                             PartLook {
                                 two_sided: m.double_sided,
                                 texture: texture.as_ref().unwrap_or(&white),
@@ -298,46 +322,32 @@ impl WorldGpu {
                             },
                         )
                     })
-                    .collect::<Vec<_>>()
-            });
-            let trunk = match surfaces {
-                Some(_) => None,
-                None => PartSet::new(
-                    ctx,
-                    parts_layout,
-                    PartKind::Trunk,
-                    &format!("{} trunk", tree.name),
-                    &tree.trunk,
-                    &[Mat4::IDENTITY],
-                    plain,
-                ),
+                    .collect()
             };
-            let sets = [
-                trunk,
-                PartSet::new(
-                    ctx,
-                    parts_layout,
-                    PartKind::Limbs,
-                    &format!("{} limbs", tree.name),
-                    &tree.branch_limb,
-                    limbs,
-                    plain,
-                ),
-                PartSet::new(
-                    ctx,
-                    parts_layout,
-                    PartKind::Twigs,
-                    &format!("{} twigs", tree.name),
-                    &tree.twig,
-                    &twigs,
-                    PartLook {
-                        two_sided: true,
-                        ..plain
-                    },
-                ),
-            ];
-            let mut parts: Vec<PartSet> = sets.into_iter().flatten().collect();
-            parts.extend(surfaces.into_iter().flatten());
+            let mut parts = part_sets(
+                PartKind::Trunk,
+                "trunk",
+                &tree.trunk,
+                &[Mat4::IDENTITY],
+                plain,
+            );
+            parts.extend(part_sets(
+                PartKind::Limbs,
+                "limbs",
+                &tree.branch_limb,
+                limbs,
+                plain,
+            ));
+            parts.extend(part_sets(
+                PartKind::Twigs,
+                "twigs",
+                &tree.twig,
+                &twigs,
+                PartLook {
+                    two_sided: true,
+                    ..plain
+                },
+            ));
             mesh_bytes += parts
                 .iter()
                 .map(|p| p.mesh.bytes() + 64 * u64::from(p.count))
@@ -616,26 +626,28 @@ impl WorldGpu {
     }
 }
 
-/// The trunk of an imported tree cut into one mesh per surface range (each with only the
-/// vertices it uses), and each range's material texture uploaded (each image once).
+/// A part of an imported tree cut into one mesh per surface range (each with only the
+/// vertices it uses), and each range's material texture uploaded (each image once over
+/// `uploaded`).
 fn split_surfaces(
     ctx: &GpuContext,
-    trunk: &Mesh,
+    part: &Mesh,
+    runs: &[crate::model::tree::SurfaceRange],
     surfaces: &crate::model::tree::Surfaces,
+    uploaded: &mut Vec<(*const crate::model::gltf::Rgba8Image, wgpu::TextureView)>,
 ) -> (Vec<Mesh>, Vec<Option<wgpu::TextureView>>) {
-    let mut meshes = Vec::with_capacity(surfaces.ranges.len());
-    let mut textures = Vec::with_capacity(surfaces.ranges.len());
-    let mut uploaded: Vec<(*const crate::model::gltf::Rgba8Image, wgpu::TextureView)> = Vec::new();
-    for r in &surfaces.ranges {
+    let mut meshes = Vec::with_capacity(runs.len());
+    let mut textures = Vec::with_capacity(runs.len());
+    for r in runs {
         let first = r.first as usize;
-        let indices = trunk
+        let indices = part
             .indices
             .get(first..first + r.count as usize)
             .unwrap_or(&[]);
         let mut remap = std::collections::HashMap::new();
         let mut mesh = Mesh::default();
         for &i in indices {
-            let Some(v) = trunk.vertices.get(i as usize) else {
+            let Some(v) = part.vertices.get(i as usize) else {
                 continue;
             };
             let j = *remap.entry(i).or_insert_with(|| mesh.push_vertex(*v));

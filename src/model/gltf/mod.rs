@@ -20,6 +20,7 @@ use super::mesh::Mesh;
 
 pub mod embedded;
 pub mod export;
+pub mod levels;
 mod read;
 use read::{load_buffers, percent_decode, read_file, read_image, read_primitive};
 
@@ -141,6 +142,9 @@ pub struct ImportedTree {
     pub materials: Vec<Material>,
     /// What was read but is not drawn, one line each.
     pub warnings: Vec<String>,
+    /// Its twig and main-branch levels as the file gives them, or why it gives none
+    /// ([`levels::find`]).
+    pub levels: Result<levels::ImportedLevels, String>,
 }
 
 impl ImportedTree {
@@ -249,17 +253,19 @@ pub fn import_slice(bytes: &[u8], dir: &Path, options: ImportOptions) -> Res<Imp
         .or_else(|| doc.scenes().next())
         .ok_or_else(|| "the file has no scene".to_string())?;
 
-    // Which node instances draw which mesh, with their transforms in the tree frame.
+    // The file's frame (scale, up axis) turned into the tree frame.
     let frame = Mat4::from_scale(Vec3::splat(options.scale))
         * match options.up {
             UpAxis::Y => Mat4::IDENTITY,
             UpAxis::Z => Mat4::from_rotation_x(-std::f32::consts::FRAC_PI_2),
         };
-    let mut instances: Vec<(::gltf::Node<'_>, ::gltf::Mesh<'_>, Mat4)> = Vec::new();
-    let mut stack: Vec<(::gltf::Node<'_>, Mat4, usize)> =
-        scene.nodes().map(|n| (n, frame, 0)).collect();
+    // Which node instances draw which mesh, with their transforms in the tree frame and the
+    // nearest ancestor instance that draws one.
+    let mut found: Vec<(::gltf::Node<'_>, ::gltf::Mesh<'_>, Mat4, Option<usize>)> = Vec::new();
+    let mut stack: Vec<(::gltf::Node<'_>, Mat4, usize, Option<usize>)> =
+        scene.nodes().map(|n| (n, frame, 0, None)).collect();
     let mut visits = 0usize;
-    while let Some((node, parent, depth)) = stack.pop() {
+    while let Some((node, parent, depth, holder)) = stack.pop() {
         visits += 1;
         if visits > MAX_NODE_VISITS {
             return Err(format!(
@@ -280,54 +286,88 @@ pub fn import_slice(bytes: &[u8], dir: &Path, options: ImportOptions) -> Res<Imp
             ));
         }
         let world = parent * local;
+        let mut holder = holder;
         if let Some(mesh) = node.mesh() {
-            instances.push((node.clone(), mesh, world));
+            found.push((node.clone(), mesh, world, holder));
+            holder = Some(found.len() - 1);
         }
         for child in node.children() {
-            stack.push((child, world, depth + 1));
+            stack.push((child, world, depth + 1, holder));
         }
     }
     // Instances in file order of their nodes, so that the result does not depend on the
     // traversal.
-    instances.sort_by_key(|(n, _, _)| n.index());
+    let mut order: Vec<usize> = (0..found.len()).collect();
+    order.sort_by_key(|&i| found[i].0.index());
+    let mut rank = vec![0usize; found.len()];
+    for (r, &i) in order.iter().enumerate() {
+        rank[i] = r;
+    }
+    let instances: Vec<_> = order.iter().map(|&i| found[i].clone()).collect();
+    let placements: Vec<levels::Placement> = instances
+        .iter()
+        .map(|(node, mesh, world, holder)| levels::Placement {
+            mesh: mesh.index(),
+            mesh_name: mesh_name(mesh),
+            node_name: node_name(node),
+            world: *world,
+            parent: holder.map(|h| rank[h]),
+        })
+        .collect();
 
     let mut materials = Vec::new();
     let mut material_of = std::collections::HashMap::new();
+    let mut images: std::collections::HashMap<usize, Arc<Rgba8Image>> = Default::default();
+    // Each mesh read once: its primitives in its own frame, with their materials.
+    let mut meshes: std::collections::HashMap<usize, Vec<(usize, Mesh)>> = Default::default();
     let mut per_material: Vec<Mesh> = Vec::new();
     let mut triangles = 0u64;
     let mut vertices = 0u64;
-    let mut images: std::collections::HashMap<usize, Arc<Rgba8Image>> = Default::default();
-    for (node, mesh, transform) in &instances {
-        for prim in mesh.primitives() {
-            let at = format!(
-                "{} mesh {} primitive {}",
-                node_name(node),
-                mesh_name(mesh),
-                prim.index()
-            );
-            let key = prim.material().index();
-            let m = match material_of.get(&key) {
-                Some(&m) => m,
-                None => {
-                    let mat = read_material(&doc, &prim.material(), &buffers, dir, &mut images)?;
-                    materials.push(mat);
-                    per_material.push(Mesh::default());
-                    material_of.insert(key, materials.len() - 1);
-                    materials.len() - 1
+    for (node, mesh, transform, _) in &instances {
+        if !meshes.contains_key(&mesh.index()) {
+            let mut parts = Vec::new();
+            for prim in mesh.primitives() {
+                let at = format!(
+                    "{} mesh {} primitive {}",
+                    node_name(node),
+                    mesh_name(mesh),
+                    prim.index()
+                );
+                let key = prim.material().index();
+                let m = match material_of.get(&key) {
+                    Some(&m) => m,
+                    None => {
+                        let mat =
+                            read_material(&doc, &prim.material(), &buffers, dir, &mut images)?;
+                        materials.push(mat);
+                        per_material.push(Mesh::default());
+                        material_of.insert(key, materials.len() - 1);
+                        materials.len() - 1
+                    }
+                };
+                let uv_set = prim
+                    .material()
+                    .pbr_metallic_roughness()
+                    .base_color_texture()
+                    .map(|info| {
+                        info.texture_transform()
+                            .and_then(|t| t.tex_coord())
+                            .unwrap_or(info.tex_coord())
+                    })
+                    .unwrap_or(0);
+                let mut part = read_primitive(&prim, &buffers, uv_set, &at, &mut warnings)?;
+                let part_transform = transform_uv(&prim.material());
+                let base = Vec3::from_slice(&materials[m].base_color[..3]);
+                for v in &mut part.vertices {
+                    v.color = (Vec3::from(v.color) * base).to_array();
+                    v.uv = part_transform(Vec2::from(v.uv)).to_array();
                 }
-            };
-            let uv_set = prim
-                .material()
-                .pbr_metallic_roughness()
-                .base_color_texture()
-                .map(|info| {
-                    info.texture_transform()
-                        .and_then(|t| t.tex_coord())
-                        .unwrap_or(info.tex_coord())
-                })
-                .unwrap_or(0);
-            let part = read_primitive(&prim, &buffers, uv_set, &at, &mut warnings)?;
-            let part_transform = transform_uv(&prim.material());
+                parts.push((m, part));
+            }
+            meshes.insert(mesh.index(), parts);
+        }
+        for (p, (m, part)) in meshes[&mesh.index()].iter().enumerate() {
+            let at = format!("{} mesh {} primitive {p}", node_name(node), mesh_name(mesh));
             triangles += part.triangle_count() as u64;
             vertices += part.vertices.len() as u64;
             if vertices > MAX_VERTICES {
@@ -342,15 +382,9 @@ pub fn import_slice(bytes: &[u8], dir: &Path, options: ImportOptions) -> Res<Imp
                      {MAX_TRIANGLES}: decimate it (Blender: Decimate modifier) or use a lower LOD"
                 ));
             }
-            let base = Vec3::from_slice(&materials[m].base_color[..3]);
-            let mut placed = part;
-            for v in &mut placed.vertices {
-                v.color = (Vec3::from(v.color) * base).to_array();
-                v.uv = part_transform(Vec2::from(v.uv)).to_array();
-            }
-            let target = &mut per_material[m];
+            let target = &mut per_material[*m];
             let first = target.vertices.len();
-            target.append(&placed, *transform);
+            target.append(part, *transform);
             for v in &target.vertices[first..] {
                 let p = Vec3::from(v.position);
                 if !p.is_finite() {
@@ -371,23 +405,23 @@ pub fn import_slice(bytes: &[u8], dir: &Path, options: ImportOptions) -> Res<Imp
     if triangles == 0 {
         return Err("the default scene has no triangles".into());
     }
-    // One mesh, sorted by material; foliage flagged.
-    let mut out = Mesh::default();
-    let mut triangle_materials = Vec::with_capacity(triangles as usize);
-    for (m, part) in per_material.iter().enumerate() {
-        let foliage = if materials[m].foliage { 1.0 } else { 0.0 };
-        let first = out.vertices.len();
-        out.append(part, Mat4::IDENTITY);
-        for v in &mut out.vertices[first..] {
-            v.foliage = foliage;
+    // The mesh's triangles in its own frame, by material.
+    let local = |mesh: usize| {
+        let mut out = vec![Mesh::default(); materials.len()];
+        for (m, part) in meshes.get(&mesh).into_iter().flatten() {
+            out[*m].append(part, Mat4::IDENTITY);
         }
-        triangle_materials.extend(std::iter::repeat_n(m as u32, part.triangle_count()));
-    }
+        out
+    };
+    let levels = levels::find(&placements, &local, &materials);
+    // One mesh, sorted by material; foliage flagged.
+    let whole = levels::Part::combine(&per_material, &materials);
     Ok(ImportedTree {
-        mesh: out,
-        triangle_materials,
+        mesh: whole.mesh,
+        triangle_materials: whole.triangle_materials,
         materials,
         warnings,
+        levels,
     })
 }
 

@@ -67,6 +67,7 @@ impl TreeModel {
             branch_bounds,
             tree_bounds,
             surfaces: None,
+            levels_note: None,
         })
     }
 }

@@ -41,7 +41,7 @@ pub struct PartCounts {
 }
 
 /// The bounds given to the twig and main-branch levels of a species that has none (an
-/// imported tree): a centimetre at the origin, so that those levels bake to empty images
+/// imported tree whose file gives no hierarchy): a centimetre at the origin, so that those levels bake to empty images
 /// with tiny texels, the BTF LOD never picks the twig level, and its "main branch" level
 /// (whose trunk, here the whole tree, is drawn as geometry) takes over wherever the tree
 /// level's billboard is too coarse.
@@ -83,17 +83,25 @@ pub struct TreeModel {
     /// An imported tree's materials and which of the trunk's triangles each covers; `None`
     /// for a procedural species (its vertices carry their colours, nothing is textured).
     pub surfaces: Option<Arc<Surfaces>>,
+    /// An imported tree's levels: where they were found in its file, or why it has the tree
+    /// level only. `None` for a procedural species.
+    pub levels_note: Option<String>,
 }
 
-/// The look of an imported tree: its materials, and the trunk's triangles drawn with each.
+/// The look of an imported tree: its materials, and which triangles of each part are drawn
+/// with each.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Surfaces {
     pub materials: Vec<Material>,
     /// Runs of `trunk.indices`, one per material that has triangles, in index order.
-    pub ranges: Vec<SurfaceRange>,
+    pub trunk: Vec<SurfaceRange>,
+    /// Runs of `branch_limb.indices`.
+    pub limb: Vec<SurfaceRange>,
+    /// Runs of `twig.indices`.
+    pub twig: Vec<SurfaceRange>,
 }
 
-/// The indices `first .. first + count` of the trunk, drawn with `material`.
+/// The indices `first .. first + count` of a part, drawn with `material`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SurfaceRange {
     pub material: u32,
@@ -101,49 +109,92 @@ pub struct SurfaceRange {
     pub count: u32,
 }
 
-impl TreeModel {
-    /// An imported tree as a species prototype of the tree level only: the whole mesh is
-    /// the trunk, with no main branches or twigs (the file gives no hierarchy).
-    pub fn from_imported(name: &str, imported: ImportedTree) -> TreeModel {
-        let mut ranges: Vec<SurfaceRange> = Vec::new();
-        for (t, &m) in imported.triangle_materials.iter().enumerate() {
-            match ranges.last_mut() {
-                Some(r) if r.material == m => r.count += 3,
-                _ => ranges.push(SurfaceRange {
-                    material: m,
-                    first: 3 * t as u32,
-                    count: 3,
-                }),
-            }
+/// The runs of equal materials in a part whose triangles have `triangle_materials`.
+fn ranges(triangle_materials: &[u32]) -> Vec<SurfaceRange> {
+    let mut ranges: Vec<SurfaceRange> = Vec::new();
+    for (t, &m) in triangle_materials.iter().enumerate() {
+        match ranges.last_mut() {
+            Some(r) if r.material == m => r.count += 3,
+            _ => ranges.push(SurfaceRange {
+                material: m,
+                first: 3 * t as u32,
+                count: 3,
+            }),
         }
+    }
+    ranges
+}
+
+impl TreeModel {
+    /// An imported tree as a species prototype: with the twig and main-branch levels its
+    /// file gives ([`crate::model::gltf::levels`]), or of the tree level only, its whole mesh
+    /// the trunk.
+    pub fn from_imported(name: &str, imported: ImportedTree) -> TreeModel {
         let bounds = imported.mesh.bounds();
         let foliage = if imported.materials.iter().any(|m| m.cards) {
             FoliageKind::Needles
         } else {
             FoliageKind::Leaves
         };
+        let (levels, note) = match imported.levels {
+            Ok(l) => {
+                let note = l.found.clone();
+                (Some(l), note)
+            }
+            Err(why) => (None, format!("tree only: {why}")),
+        };
+        let Some(l) = levels else {
+            return TreeModel {
+                name: name.to_owned(),
+                foliage,
+                foliage_per_twig: 0,
+                twig: Mesh::default(),
+                branch_limb: Mesh::default(),
+                branch_twigs: Vec::new(),
+                trunk: imported.mesh,
+                tree_branches: Vec::new(),
+                tree_twigs: Vec::new(),
+                twig_bounds: ABSENT_LEVEL_BOUNDS,
+                branch_bounds: ABSENT_LEVEL_BOUNDS,
+                tree_bounds: bounds,
+                surfaces: Some(Arc::new(Surfaces {
+                    materials: imported.materials,
+                    trunk: ranges(&imported.triangle_materials),
+                    limb: Vec::new(),
+                    twig: Vec::new(),
+                })),
+                levels_note: Some(note),
+            };
+        };
+        let twig_bounds = l.twig.mesh.bounds();
+        let branch_bounds = l.branch_twigs.iter().fold(l.limb.mesh.bounds(), |b, m| {
+            b.union(l.twig.mesh.bounds_transformed(*m))
+        });
         TreeModel {
             name: name.to_owned(),
             foliage,
             foliage_per_twig: 0,
-            twig: Mesh::default(),
-            branch_limb: Mesh::default(),
-            branch_twigs: Vec::new(),
-            trunk: imported.mesh,
-            tree_branches: Vec::new(),
-            tree_twigs: Vec::new(),
-            twig_bounds: ABSENT_LEVEL_BOUNDS,
-            branch_bounds: ABSENT_LEVEL_BOUNDS,
+            twig: l.twig.mesh,
+            branch_limb: l.limb.mesh,
+            branch_twigs: l.branch_twigs,
+            trunk: l.trunk.mesh,
+            tree_branches: l.tree_branches,
+            tree_twigs: l.tree_twigs,
+            twig_bounds,
+            branch_bounds,
             tree_bounds: bounds,
             surfaces: Some(Arc::new(Surfaces {
                 materials: imported.materials,
-                ranges,
+                trunk: ranges(&l.trunk.triangle_materials),
+                limb: ranges(&l.limb.triangle_materials),
+                twig: ranges(&l.twig.triangle_materials),
             })),
+            levels_note: Some(note),
         }
     }
 
-    /// Whether the species has main-branch and twig levels of its own (a procedural one);
-    /// an imported tree has the tree level only.
+    /// Whether the species has main-branch and twig levels of its own (a procedural one, or
+    /// an imported tree whose file gives them).
     pub fn has_hierarchy(&self) -> bool {
         !self.twig.indices.is_empty()
     }
