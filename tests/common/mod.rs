@@ -202,3 +202,61 @@ pub fn crown_shadow(scene: &Scene, world: &World, w: u32, h: u32) -> CrownShadow
         lit_px: to_px(lit_at),
     }
 }
+
+/// Mean FLIP of each of `methods` against the reference (2x2 supersampled) from each of
+/// `views` (a name and a distance in metres from `centre` along `away`), at 160x120; the
+/// pictures written to `dir`. Returned (and printed) as (view, method, FLIP, the frame's
+/// btf levels).
+pub fn against_reference(
+    ctx: &GpuContext,
+    scene: &Scene,
+    world: &World,
+    baked: &Baked,
+    (centre, away): (Vec3, Vec3),
+    views: &[(&str, f32)],
+    methods: &[canopy::render::Method],
+    dir: &Path,
+) -> Vec<(String, canopy::render::Method, f32)> {
+    use canopy::render::{Method, Reference};
+    let mut renderer = Renderer::new(ctx, world).unwrap();
+    renderer.attach_btf(ctx, baked, world).unwrap();
+    renderer
+        .prepare_reference(
+            ctx,
+            world,
+            canopy::render::sky_visibility::SKY_DIRECTIONS,
+            true,
+        )
+        .unwrap();
+    let (w, h) = (160, 120);
+    let mut out = Vec::new();
+    for &(name, distance) in views {
+        let mut frame = FrameDesc::from_scene(scene);
+        frame.camera = Camera::look_at(centre + away * distance, centre, 50.0);
+        let truth = FrameDesc {
+            method: Method::Geometry,
+            reference: Some(Reference::default()),
+            ..frame
+        };
+        let (truth, _) = renderer.render_image(ctx, &truth, w, h, 2).unwrap();
+        let _ = canopy::imageio::save_png(&dir.join(format!("{name}-truth.png")), &truth);
+        for &method in methods {
+            let (img, stats) = renderer
+                .render_image(ctx, &FrameDesc { method, ..frame }, w, h, 1)
+                .unwrap();
+            let flip = canopy::metrics::flip(&rgb(&truth), &rgb(&img))
+                .unwrap()
+                .stats
+                .mean;
+            let _ =
+                canopy::imageio::save_png(&dir.join(format!("{name}-{}.png", method.name())), &img);
+            eprintln!(
+                "{name} ({distance} m) {:9} against the reference {flip:.4}; btf levels {:?}",
+                method.name(),
+                stats.btf.map(|s| s.trees_per_level)
+            );
+            out.push((name.to_string(), method, flip));
+        }
+    }
+    out
+}
