@@ -18,6 +18,8 @@ pub(super) struct BakeJob {
     /// What the bake costs, estimated before it starts (shown under its progress bar).
     estimate: Option<String>,
     started: Instant,
+    /// The tree levels of a bake being made, as soon as they are (taken when shown).
+    early: Arc<Mutex<Option<crate::format::Baked>>>,
     handle: std::thread::JoinHandle<Result<(crate::format::Baked, crate::bake::Source)>>,
 }
 
@@ -41,20 +43,34 @@ impl BakeJob {
             what: "starting".into(),
         }));
         let sink = progress.clone();
+        let early = Arc::new(Mutex::new(None));
+        let early_sink = early.clone();
         let scene = scene.clone();
         let world = world.clone();
         let handle = std::thread::spawn(move || {
             let ctx = GpuContext::headless(AdapterPreference::Default)?;
-            crate::bake::load_or_bake(&ctx, &scene, &world, &mut |p| {
-                if let Ok(mut slot) = sink.lock() {
-                    *slot = p.clone();
-                }
-            })
+            crate::bake::stages::load_or_bake_progressive(
+                &crate::bake::cache::cache_path(&scene),
+                &ctx,
+                &scene,
+                &world,
+                &mut |p| {
+                    if let Ok(mut slot) = sink.lock() {
+                        *slot = p.clone();
+                    }
+                },
+                &mut |tree_levels| {
+                    if let Ok(mut slot) = early_sink.lock() {
+                        *slot = Some(tree_levels.clone());
+                    }
+                },
+            )
         });
         Self {
             progress,
             estimate,
             started: Instant::now(),
+            early,
             handle,
         }
     }
@@ -83,7 +99,10 @@ impl App {
         let Some(r) = &mut self.running else { return };
         if let Some((baked, path)) = self.preloaded.take() {
             self.message = Some(match r.renderer.attach_btf(&r.ctx, &baked, &self.world) {
-                Ok(()) => (format!("BTF images from {}", path.display()), false),
+                Ok(()) => {
+                    self.timeline.bake_done(self.frames);
+                    (format!("BTF images from {}", path.display()), false)
+                }
                 Err(e) => {
                     self.bake_failed = true;
                     (format!("cannot use {}: {e}", path.display()), true)
@@ -94,6 +113,28 @@ impl App {
         // The bake starts with the viewer (from the cache when it can), whatever the method.
         if !r.renderer.has_btf() && self.bake_job.is_none() && !self.bake_failed {
             self.bake_job = Some(BakeJob::start(&self.scene, &self.world));
+        }
+        // A bake being made hands its tree levels over first: the forest is drawn from
+        // them (finer levels as geometry) while the rest is made.
+        let early = self
+            .bake_job
+            .as_ref()
+            .and_then(|j| j.early.lock().ok().and_then(|mut slot| slot.take()));
+        if let Some(tree_levels) = early {
+            match r.renderer.attach_btf(&r.ctx, &tree_levels, &self.world) {
+                Ok(()) => {
+                    log::info!(
+                        "timeline: the bake's tree levels attached, {:.1} s after the viewer started",
+                        self.timeline.seconds()
+                    );
+                    self.stats.bake_partial = true;
+                    self.message = Some((
+                        "trees drawn from their tree level (nearer ones as geometry) while the bake goes on".into(),
+                        false,
+                    ));
+                }
+                Err(e) => log::warn!("the bake's tree levels cannot be drawn yet: {e}"),
+            }
         }
         self.stats.bake_progress = self
             .bake_job
@@ -119,6 +160,7 @@ impl App {
                 return;
             };
             self.stats.bake_progress = None;
+            self.stats.bake_partial = false;
             let result = job
                 .handle
                 .join()
@@ -127,6 +169,9 @@ impl App {
                     r.renderer.attach_btf(&r.ctx, &baked, &self.world)?;
                     Ok(source)
                 });
+            if result.is_ok() {
+                self.timeline.bake_done(self.frames);
+            }
             self.message = Some(match result {
                 Ok(crate::bake::Source::Cache) => {
                     ("BTF images loaded from the cache".into(), false)

@@ -124,10 +124,10 @@ impl ApplicationHandler for App {
 
     fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
         let Some(r) = &self.running else { return };
-        // While the first bake runs there are no trees to show: the view is drawn less
-        // often, leaving the cores to the bake.
+        // While the first bake runs the view is drawn less often, leaving the cores to the
+        // bake: terrain and sky at first, then the trees of the tree levels it hands over.
         let baking = self.bake_job.is_some() && self.frame.method.needs_bake();
-        self.paused_for_bake = baking && !r.renderer.has_btf();
+        self.paused_for_bake = baking;
         if self.paused_for_bake {
             let next = self.last_frame + pause_while_baking(self.frame_cost);
             if Instant::now() < next {

@@ -53,6 +53,8 @@ pub struct ViewOptions {
     /// (for scripts and CI).
     pub screenshot: Option<PathBuf>,
     pub after_frames: u32,
+    /// Count `after_frames` from the end of the bake.
+    pub wait_bake: bool,
     /// The method the viewer starts with.
     pub method: Method,
     /// A baked file to use instead of the cache (checked before the window opens).
@@ -68,6 +70,7 @@ impl Default for ViewOptions {
         Self {
             screenshot: None,
             after_frames: 3,
+            wait_bake: false,
             method: Method::Btf,
             baked: None,
             script: None,
@@ -134,6 +137,7 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
         frame_cost: Duration::ZERO,
         paused_for_bake: false,
         frames: 0,
+        timeline: Timeline::new(),
         fatal: None,
         sun_slider_held: false,
         bench: BenchWindow::default(),
@@ -154,6 +158,52 @@ pub fn run_with(scene_path: Option<&Path>, options: ViewOptions) -> Result<()> {
     match app.fatal {
         Some(e) => Err(e),
         None => Ok(()),
+    }
+}
+
+/// The viewer's first start, as it happens: logged (`RUST_LOG=canopy=info`) so that a
+/// script can tell when the first trees were drawn and when the bake was done.
+struct Timeline {
+    started: Instant,
+    /// A frame with trees has been drawn.
+    trees_seen: bool,
+    /// The frame count when the bake was attached (made, read from the cache or named).
+    bake_done_at: Option<u64>,
+}
+
+impl Timeline {
+    fn new() -> Self {
+        Timeline {
+            started: Instant::now(),
+            trees_seen: false,
+            bake_done_at: None,
+        }
+    }
+
+    fn seconds(&self) -> f64 {
+        self.started.elapsed().as_secs_f64()
+    }
+
+    /// Notes a drawn frame that had `trees` trees in it.
+    fn frame_drawn(&mut self, trees: u32) {
+        if trees > 0 && !self.trees_seen {
+            self.trees_seen = true;
+            log::info!(
+                "timeline: the first frame with trees, {:.1} s after the viewer started",
+                self.seconds()
+            );
+        }
+    }
+
+    /// Notes that the whole bake is attached, at frame `frames`.
+    fn bake_done(&mut self, frames: u64) {
+        if self.bake_done_at.is_none() {
+            self.bake_done_at = Some(frames);
+            log::info!(
+                "timeline: the bake is done and attached, {:.1} s after the viewer started",
+                self.seconds()
+            );
+        }
     }
 }
 
@@ -182,6 +232,8 @@ struct App {
     /// The view is drawn less often while the first bake runs (`events::pause_while_baking`).
     paused_for_bake: bool,
     frames: u64,
+    /// When the first trees and the bake came, logged for scripts and measurements.
+    timeline: Timeline,
     fatal: Option<Error>,
     /// A sun slider was being dragged in the last frame's panel.
     sun_slider_held: bool,

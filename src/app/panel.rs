@@ -40,6 +40,8 @@ pub struct PanelStats {
     pub bake_progress: Option<(u64, u64, String, Option<f64>)>,
     /// That bake's estimated cost, in words.
     pub bake_estimate: Option<String>,
+    /// The trees are drawn from that bake's tree levels while it makes the rest.
+    pub bake_partial: bool,
     /// The view is drawn less often until the bake is done, to leave it the cores.
     pub paused_for_bake: bool,
     /// The last frames' CPU and GPU times, for the plot.
@@ -135,6 +137,12 @@ pub fn controls(
         ui.add(egui::ProgressBar::new(f).show_percentage());
         if let Some(e) = &stats.bake_estimate {
             ui.small(e);
+        }
+        if stats.bake_partial {
+            ui.small(format!(
+                "drawn from the tree levels baked so far (nearer trees as geometry); still coming: {}; texel and impostor draw when it is done",
+                crate::bake::stages::BakeStage::TreeLevels.still_coming()
+            ));
         }
         if stats.paused_for_bake {
             ui.small("until it is done, the view is drawn less often, to leave the bake the cores");

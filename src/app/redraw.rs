@@ -100,6 +100,7 @@ impl App {
         match result {
             Ok(s) => {
                 self.stats.trees_drawn = s.trees_drawn;
+                self.timeline.frame_drawn(s.trees_drawn);
                 self.stats.triangles = s.triangles;
                 self.stats.shadow_triangles = s.shadow_triangles;
                 self.stats.draw_calls = s.draw_calls;

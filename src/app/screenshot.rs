@@ -42,8 +42,18 @@ impl App {
     /// With `--screenshot`: once `--after-frames` frames are drawn, saves the view and quits
     /// (with the error when it could not be saved).
     pub(super) fn take_scripted_screenshot(&mut self, event_loop: &ActiveEventLoop) {
+        let from = if self.options.wait_bake {
+            // Counted from the bake's end (or a failed bake, which ends the wait too).
+            match self.timeline.bake_done_at {
+                Some(f) => f,
+                None if self.bake_failed => 0,
+                None => return,
+            }
+        } else {
+            0
+        };
         if let Some(path) = self.options.screenshot.clone()
-            && self.frames >= u64::from(self.options.after_frames.max(1))
+            && self.frames >= from + u64::from(self.options.after_frames.max(1))
         {
             self.screenshot(&path);
             match self.message.take() {

@@ -14,6 +14,7 @@ pub mod compress;
 pub mod estimate;
 pub mod impostor;
 pub mod report;
+pub mod stages;
 pub mod texel;
 pub mod vcm;
 
@@ -166,78 +167,14 @@ pub fn bake(
     scene_hash: u64,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<(Baked, BakeTimes)> {
-    // Refused here, before any work, if the file or this machine cannot hold it.
-    estimate::check(settings, world)?;
-    let total = step_count(settings, world);
-    let t0 = std::time::Instant::now();
-    let mut clock = StageClock::new();
-    let mut baked = bake_btf(ctx, world, settings, scene_hash, &mut |p| {
-        clock.step(&p.what);
-        progress(&Progress { total, ..p.clone() })
-    })?;
-    let btf_seconds = t0.elapsed().as_secs_f64();
-    let images = image_count(settings, world.species.len());
-    let t1 = std::time::Instant::now();
-    baked.vcm = vcm::bake_vcm(
-        world,
-        &baked.btf,
-        settings.vcm_resolution,
-        &mut |done, what| {
-            clock.step(what);
-            progress(&Progress {
-                done: images + done,
-                total,
-                what: what.to_owned(),
-            })
-        },
-    )?;
-    let vcm_seconds = t1.elapsed().as_secs_f64();
-    let t2 = std::time::Instant::now();
-    let before_texels = images + vcm::object_count(world);
-    baked.texels = texel::bake_texels(
+    stages::bake_resumable(
         ctx,
         world,
-        settings.texel_resolution,
-        settings.lights,
-        settings.supersample,
-        texel_params,
-        &mut |done, what| {
-            clock.step(what);
-            progress(&Progress {
-                done: before_texels + done,
-                total,
-                what: what.to_owned(),
-            })
-        },
-    )?;
-    let texel_seconds = t2.elapsed().as_secs_f64();
-    let t3 = std::time::Instant::now();
-    let before_impostors =
-        before_texels + texel::step_count(world, settings.texel_resolution, settings.lights);
-    baked.impostors = impostor::bake_impostors(ctx, world, settings, &mut |done, what| {
-        clock.step(what);
-        progress(&Progress {
-            done: before_impostors + done,
-            total,
-            what: what.to_owned(),
-        })
-    })?;
-    let impostor_seconds = t3.elapsed().as_secs_f64();
-    let compress = if settings.compress {
-        compress::compress(&mut baked)
-    } else {
-        compress::CompressTimes::default()
-    };
-    let times = BakeTimes {
-        seconds: t0.elapsed().as_secs_f64(),
-        btf_seconds,
-        vcm_seconds,
-        texel_seconds,
-        impostor_seconds,
-        compress,
-        stages: clock.stages,
-    };
-    Ok((baked, times))
+        (settings, texel_params, scene_hash),
+        None,
+        progress,
+        &mut |_, _| {},
+    )
 }
 
 /// Bakes the BTF image sets of every species and level of `world`.
@@ -248,107 +185,7 @@ pub fn bake_btf(
     scene_hash: u64,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Baked> {
-    let view_sets = crate::model::PerLevel::try_from_fn(|l| {
-        DirectionSet::with_count(settings.views_of(l) as usize)
-            .map_err(|e| Error::BadInput(e.to_string()))
-    })?;
-    let lights = DirectionSet::with_count(settings.lights as usize)
-        .map_err(|e| Error::BadInput(e.to_string()))?;
-    let total = image_count(settings, world.species.len());
-    let mut done = 0u64;
-    let mut btf = Vec::new();
-    for (s, tree) in world.species.iter().enumerate() {
-        for level in Level::ALL {
-            let views = &view_sets[level];
-            let object = level_object(tree, level);
-            let (center, radius) = bounding_sphere(&object.tree_bounds);
-            let studio = studio_world(object);
-            let mut renderer = Renderer::new(ctx, &studio)?;
-            // The images are reference frames of the object alone: its own leaves hide
-            // part of the sky from its inner leaves, as in the world's reference.
-            renderer.prepare_reference(ctx, &studio, SKY_DIRECTIONS, false)?;
-            let res = settings.resolution;
-            let shadow_map = studio_shadow_map(res * settings.supersample);
-            let image_bytes = (res * res * 4) as usize;
-            let cameras: Vec<Camera> = views
-                .directions()
-                .iter()
-                .map(|&v| {
-                    let (_, up) = billboard_axes(v);
-                    Camera::orthographic(center + v * (2.0 * radius), -v, up, radius)
-                })
-                .collect();
-            // The frames light by light, each through every view: a light's shadow map is
-            // the same from every view, and the renderer draws it once for them all. The
-            // images are stored view-major: the direct image (v, l) at v * lights + l.
-            let shots = studio_shots(&lights);
-            let (suns, ambient_shots) = shots.split_at(lights.len());
-            let mut direct = vec![0u8; views.len() * lights.len() * image_bytes];
-            for (l, &(sun, sky)) in suns.iter().enumerate() {
-                for (v, &camera) in cameras.iter().enumerate() {
-                    let frame = studio_frame(camera, sun, sky, shadow_map);
-                    let (img, _) =
-                        renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
-                    let at = (v * lights.len() + l) * image_bytes;
-                    let wrong_size =
-                        || Error::Gpu(format!("image ({v}, {l}) came back the wrong size"));
-                    let src = img.as_raw().get(..image_bytes).ok_or_else(wrong_size)?;
-                    direct
-                        .get_mut(at..at + image_bytes)
-                        .ok_or_else(wrong_size)?
-                        .copy_from_slice(src);
-                    done += 1;
-                    progress(&Progress {
-                        done,
-                        total,
-                        what: format!("{} {}", tree.name, level.name()),
-                    });
-                }
-            }
-            // Each view's sky-lit image (the sky alone), then its ground-lit one (the light
-            // the ground sends up, which the renderer's hemispherical ambient adds to the
-            // sky's).
-            let mut ambient = Vec::with_capacity(2 * views.len() * image_bytes);
-            let mut ground = Vec::with_capacity(views.len() * image_bytes);
-            for &camera in &cameras {
-                let frames = ambient_shots
-                    .iter()
-                    .map(|&(sun, sky)| studio_frame(camera, sun, sky, shadow_map))
-                    .chain(std::iter::once(studio_ground_frame(camera, shadow_map)));
-                for (k, frame) in frames.enumerate() {
-                    let (img, _) =
-                        renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
-                    let dest = if k < ambient_shots.len() {
-                        &mut ambient
-                    } else {
-                        &mut ground
-                    };
-                    dest.extend_from_slice(img.as_raw());
-                    done += 1;
-                    progress(&Progress {
-                        done,
-                        total,
-                        what: format!("{} {}", tree.name, level.name()),
-                    });
-                }
-            }
-            // Each view's sky-lit image, then each view's ground-lit image.
-            ambient.extend_from_slice(&ground);
-            btf.push(BtfImageSet {
-                encoding: crate::format::ImageEncoding::Rgba8,
-                species: s as u32,
-                level,
-                views: views.len() as u32,
-                lights: settings.lights,
-                resolution: res,
-                center: center.to_array(),
-                radius,
-                texel_size: 2.0 * radius / res as f32,
-                direct,
-                ambient,
-            });
-        }
-    }
+    let btf = bake_btf_sets(ctx, world, settings, Vec::new(), progress, &mut |_| {})?;
     Ok(Baked {
         scene_hash,
         settings: *settings,
@@ -356,6 +193,159 @@ pub fn bake_btf(
         vcm: Vec::new(),
         texels: Vec::new(),
         impostors: Vec::new(),
+    })
+}
+
+/// Bakes the BTF image sets of `world`: every species' tree level first (then
+/// `tree_levels` sees all of them: what a viewer can draw a forest with), then the finer
+/// levels. The sets in `done` are kept, not baked again. The sets come out species by
+/// species, each species' levels in [`Level::ALL`] order, whatever order they were made
+/// in.
+pub fn bake_btf_sets(
+    ctx: &GpuContext,
+    world: &World,
+    settings: &BakeSettings,
+    done_sets: Vec<BtfImageSet>,
+    progress: &mut dyn FnMut(&Progress),
+    tree_levels: &mut dyn FnMut(&[BtfImageSet]),
+) -> Result<Vec<BtfImageSet>> {
+    let view_sets = crate::model::PerLevel::try_from_fn(|l| {
+        DirectionSet::with_count(settings.views_of(l) as usize)
+            .map_err(|e| Error::BadInput(e.to_string()))
+    })?;
+    let lights = DirectionSet::with_count(settings.lights as usize)
+        .map_err(|e| Error::BadInput(e.to_string()))?;
+    let total = image_count(settings, world.species.len());
+    let per_view = u64::from(settings.lights) + u64::from(crate::format::AMBIENT_IMAGES_PER_VIEW);
+    let mut btf: Vec<BtfImageSet> = done_sets
+        .into_iter()
+        .filter(|set| {
+            (set.species as usize) < world.species.len()
+                && set.views == settings.views_of(set.level)
+                && set.lights == settings.lights
+                && set.resolution == settings.resolution
+        })
+        .collect();
+    let mut done: u64 = btf.iter().map(|set| u64::from(set.views) * per_view).sum();
+    let order = [Level::Tree, Level::Branch, Level::Twig];
+    for (k, &level) in order.iter().enumerate() {
+        for (s, tree) in world.species.iter().enumerate() {
+            if btf
+                .iter()
+                .any(|set| set.species == s as u32 && set.level == level)
+            {
+                continue;
+            }
+            btf.push(bake_btf_set(
+                ctx,
+                (s, tree, level),
+                (&view_sets[level], &lights),
+                settings,
+                (&mut done, total),
+                progress,
+            )?);
+        }
+        if k == 0 {
+            tree_levels(&btf);
+        }
+    }
+    btf.sort_by_key(|set| (set.species, Level::ALL.iter().position(|&l| l == set.level)));
+    Ok(btf)
+}
+
+/// Bakes the image set of `level` of species `s` (`tree`), counting its images into
+/// `done` out of `total`.
+fn bake_btf_set(
+    ctx: &GpuContext,
+    (s, tree, level): (usize, &TreeModel, Level),
+    (views, lights): (&DirectionSet, &DirectionSet),
+    settings: &BakeSettings,
+    (done, total): (&mut u64, u64),
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<BtfImageSet> {
+    let object = level_object(tree, level);
+    let (center, radius) = bounding_sphere(&object.tree_bounds);
+    let studio = studio_world(object);
+    let mut renderer = Renderer::new(ctx, &studio)?;
+    // The images are reference frames of the object alone: its own leaves hide
+    // part of the sky from its inner leaves, as in the world's reference.
+    renderer.prepare_reference(ctx, &studio, SKY_DIRECTIONS, false)?;
+    let res = settings.resolution;
+    let shadow_map = studio_shadow_map(res * settings.supersample);
+    let image_bytes = (res * res * 4) as usize;
+    let cameras: Vec<Camera> = views
+        .directions()
+        .iter()
+        .map(|&v| {
+            let (_, up) = billboard_axes(v);
+            Camera::orthographic(center + v * (2.0 * radius), -v, up, radius)
+        })
+        .collect();
+    // The frames light by light, each through every view: a light's shadow map is
+    // the same from every view, and the renderer draws it once for them all. The
+    // images are stored view-major: the direct image (v, l) at v * lights + l.
+    let shots = studio_shots(lights);
+    let (suns, ambient_shots) = shots.split_at(lights.len());
+    let mut direct = vec![0u8; views.len() * lights.len() * image_bytes];
+    for (l, &(sun, sky)) in suns.iter().enumerate() {
+        for (v, &camera) in cameras.iter().enumerate() {
+            let frame = studio_frame(camera, sun, sky, shadow_map);
+            let (img, _) = renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
+            let at = (v * lights.len() + l) * image_bytes;
+            let wrong_size = || Error::Gpu(format!("image ({v}, {l}) came back the wrong size"));
+            let src = img.as_raw().get(..image_bytes).ok_or_else(wrong_size)?;
+            direct
+                .get_mut(at..at + image_bytes)
+                .ok_or_else(wrong_size)?
+                .copy_from_slice(src);
+            *done += 1;
+            progress(&Progress {
+                done: *done,
+                total,
+                what: format!("{} {}", tree.name, level.name()),
+            });
+        }
+    }
+    // Each view's sky-lit image (the sky alone), then its ground-lit one (the light
+    // the ground sends up, which the renderer's hemispherical ambient adds to the
+    // sky's).
+    let mut ambient = Vec::with_capacity(2 * views.len() * image_bytes);
+    let mut ground = Vec::with_capacity(views.len() * image_bytes);
+    for &camera in &cameras {
+        let frames = ambient_shots
+            .iter()
+            .map(|&(sun, sky)| studio_frame(camera, sun, sky, shadow_map))
+            .chain(std::iter::once(studio_ground_frame(camera, shadow_map)));
+        for (k, frame) in frames.enumerate() {
+            let (img, _) = renderer.render_image(ctx, &frame, res, res, settings.supersample)?;
+            let dest = if k < ambient_shots.len() {
+                &mut ambient
+            } else {
+                &mut ground
+            };
+            dest.extend_from_slice(img.as_raw());
+            *done += 1;
+            progress(&Progress {
+                done: *done,
+                total,
+                what: format!("{} {}", tree.name, level.name()),
+            });
+        }
+    }
+    // Each view's sky-lit image, then each view's ground-lit image.
+    ambient.extend_from_slice(&ground);
+    Ok(BtfImageSet {
+        encoding: crate::format::ImageEncoding::Rgba8,
+        species: s as u32,
+        level,
+        views: views.len() as u32,
+        lights: settings.lights,
+        resolution: res,
+        center: center.to_array(),
+        radius,
+        texel_size: 2.0 * radius / res as f32,
+        direct,
+        ambient,
     })
 }
 
@@ -479,7 +469,8 @@ pub fn open_baked(path: &std::path::Path, scene: &crate::scene::Scene) -> Result
     })
 }
 
-/// [`load_or_bake`] with the cache file at `path`.
+/// [`load_or_bake`] with the cache file at `path` (a partial bake beside it is resumed:
+/// [`stages::load_or_bake_progressive`]).
 pub fn load_or_bake_at(
     path: &std::path::Path,
     ctx: &GpuContext,
@@ -487,32 +478,7 @@ pub fn load_or_bake_at(
     world: &World,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<(Baked, Source)> {
-    let path = path.to_path_buf();
-    let mut replaced = None;
-    match cache::load(&path, scene) {
-        Some(Ok(b)) => return Ok((b, Source::Cache)),
-        Some(Err(e)) => {
-            log::warn!(
-                "re-baking: the cached bake {} cannot be used: {e}",
-                path.display()
-            );
-            replaced = Some(e.to_string());
-        }
-        None => {}
-    }
-    let (baked, _) = bake_scene(ctx, scene, world, progress)?;
-    // A cache that cannot be written costs a re-bake next time, not this run.
-    let not_cached = store(&path, &baked).err().map(|e| {
-        log::warn!("could not cache the bake at {}: {e}", path.display());
-        e.to_string()
-    });
-    Ok((
-        baked,
-        Source::Baked {
-            replaced,
-            not_cached,
-        },
-    ))
+    stages::load_or_bake_progressive(path, ctx, scene, world, progress, &mut |_| {})
 }
 
 /// Bakes `scene` now, whatever the cache holds, and writes it to `path` as
@@ -547,17 +513,7 @@ fn bake_scene(
     )
 }
 
-/// Writes `baked` to `path` atomically, creating its folder first.
-fn store(path: &std::path::Path, baked: &Baked) -> Result<()> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|source| Error::Io {
-            path: dir.to_path_buf(),
-            source,
-        })?;
-    }
-    crate::format::write_atomic(path, baked)?;
-    Ok(())
-}
+use stages::store;
 
 #[cfg(test)]
 mod tests {

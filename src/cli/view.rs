@@ -19,6 +19,10 @@ pub struct ViewArgs {
     /// Frames to render before the --screenshot is taken.
     #[arg(long, default_value_t = 3, requires = "screenshot")]
     after_frames: u32,
+    /// With --screenshot: count the frames from the end of the bake (made or read from
+    /// the cache), so that the screenshot shows the finished bake's trees.
+    #[arg(long, requires = "screenshot")]
+    wait_bake: bool,
     /// Method to start with (btf shows terrain and sky until its bake is ready).
     #[arg(long, value_enum, default_value_t = Method::Btf)]
     method: Method,
@@ -41,6 +45,7 @@ pub fn view(args: ViewArgs) -> anyhow::Result<()> {
     let options = ViewOptions {
         screenshot: args.screenshot,
         after_frames: args.after_frames,
+        wait_bake: args.wait_bake,
         method: args.method,
         baked: args.baked,
         script: args.script,

@@ -34,6 +34,10 @@ struct SpeciesParts {
     bounds: Aabb,
     /// The sets' bounds and billboard centres, for the VCM shading.
     frames: PerLevel<ObjectFrame>,
+    /// The bake holds its twig and main-branch sets. Without them (a bake still running,
+    /// which hands its tree levels over first) a tree is drawn whole as geometry where its
+    /// tree level is too coarse, cross-faded over the tree level's band.
+    finer: bool,
 }
 
 /// What the `btf` method knows of a scene on the CPU.
@@ -138,10 +142,23 @@ impl BtfScene {
                 bounds,
             });
             let mut texels = LevelTexels::default();
+            // The tree level is needed; the finer two come together or not at all.
+            let has = |level: Level| index.contains_key(&(sp as u32, level));
+            if !has(Level::Tree) {
+                return Err(bad(format!("species {sp} has no tree-level images")));
+            }
+            let finer = has(Level::Twig) && has(Level::Branch);
+            if !finer && (has(Level::Twig) || has(Level::Branch)) {
+                return Err(bad(format!(
+                    "species {sp} has one of its twig and main-branch levels but not the other"
+                )));
+            }
             for level in Level::ALL {
-                let i = index.get(&(sp as u32, level)).copied().ok_or_else(|| {
-                    bad(format!("species {sp} level {} is missing", level.index()))
-                })?;
+                let Some(i) = index.get(&(sp as u32, level)).copied() else {
+                    // Not baked yet: never chosen over geometry (texel 0).
+                    texels[level] = 0.0;
+                    continue;
+                };
                 let set = &baked.btf[i];
                 sets[level] = SetInfo {
                     layer_base: layers,
@@ -166,6 +183,7 @@ impl BtfScene {
                 sets,
                 texels,
                 bounds: tree.tree_bounds,
+                finer,
             });
         }
         Ok(Self {
@@ -648,9 +666,20 @@ impl BtfScene {
         let m = Mat4::from_cols_array_2d(&data.model);
         let scale = m.x_axis.truncate().length();
         let z = (m.transform_point3(parts.bounds.center()) - cam).length();
-        let choice = choose_level(&parts.texels, scale, view.focal_px, z, settings);
+        let mut choice = choose_level(&parts.texels, scale, view.focal_px, z, settings);
         // Only a tree at the twig level alone can be past it.
-        let geometry = if hybrid && choice.level == Level::Twig {
+        let geometry = if !parts.finer {
+            // Finer levels not baked yet: geometry instead, over the tree level's band.
+            let fade = match choice {
+                LevelChoice {
+                    level: Level::Tree,
+                    fading_in,
+                } => fading_in.map_or(0.0, |(_, f)| f),
+                _ => 1.0,
+            };
+            choice.fading_in = None;
+            fade
+        } else if hybrid && choice.level == Level::Twig {
             geometry_fade(&parts.texels, scale, view.focal_px, z, settings)
         } else {
             0.0
