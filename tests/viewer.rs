@@ -253,3 +253,47 @@ fn the_viewer_applies_scene_edits_live() {
         seen.join("\n")
     );
 }
+
+/// A first bake (an empty cache) hands its tree levels to the viewer, which draws trees
+/// before the bake has ended; the finished cache is left whole, nothing beside it.
+#[test]
+fn a_first_bake_draws_trees_before_it_ends() {
+    if !display_or_skip() {
+        return;
+    }
+    let dir = common::scratch_dir("first-bake");
+    let cache = dir.join("cache");
+    let out = dir.join("shot.png");
+    let o = Command::new(env!("CARGO_BIN_EXE_canopy"))
+        .env("RUST_LOG", "canopy=info")
+        .env("CANOPY_CACHE_DIR", &cache)
+        .arg("view")
+        .arg(common::data("lone_tree.toml"))
+        .arg("--screenshot")
+        .arg(&out)
+        .args(["--after-frames", "2", "--wait-bake", "--method", "btf"])
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{log}");
+    // "timeline: ..., 9.1 s after the viewer started"
+    let at = |what: &str| -> Option<f64> {
+        let line = log.lines().find(|l| l.contains(what))?;
+        let (_, rest) = line.split_once(", ")?;
+        rest.split_whitespace().next()?.parse().ok()
+    };
+    let trees = at("timeline: the first frame with trees");
+    let done = at("timeline: the bake is done");
+    eprintln!("first trees at {trees:?} s, the bake done at {done:?} s");
+    let (Some(trees), Some(done)) = (trees, done) else {
+        panic!("the timeline lines are missing:\n{log}");
+    };
+    assert!(trees < done, "trees at {trees} s, the bake done at {done} s");
+    let files: Vec<_> = std::fs::read_dir(&cache)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    assert!(files[0].ends_with(".canopy") && !files[0].contains("partial"));
+    assert!(out.exists());
+}
