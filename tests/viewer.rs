@@ -288,7 +288,10 @@ fn a_first_bake_draws_trees_before_it_ends() {
     let (Some(trees), Some(done)) = (trees, done) else {
         panic!("the timeline lines are missing:\n{log}");
     };
-    assert!(trees < done, "trees at {trees} s, the bake done at {done} s");
+    assert!(
+        trees < done,
+        "trees at {trees} s, the bake done at {done} s"
+    );
     let files: Vec<_> = std::fs::read_dir(&cache)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())

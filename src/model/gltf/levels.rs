@@ -338,7 +338,7 @@ mod tests {
     fn branches_carrying_different_twigs_are_refused_as_levels() {
         let mut p = tree(3);
         // Move one twig of the second branch.
-        p[6].world = p[6].world * Mat4::from_translation(Vec3::X * 0.2);
+        p[6].world *= Mat4::from_translation(Vec3::X * 0.2);
         let why = find_in(&p).unwrap_err();
         assert!(why.contains("do not all carry the same twigs"), "{why}");
         // One twig fewer on the last branch.
@@ -351,7 +351,7 @@ mod tests {
     #[test]
     fn stretched_or_mirrored_placements_are_refused_as_levels() {
         let mut p = tree(2);
-        p[1].world = p[1].world * Mat4::from_scale(Vec3::new(1.0, 2.0, 1.0));
+        p[1].world *= Mat4::from_scale(Vec3::new(1.0, 2.0, 1.0));
         assert!(find_in(&p).unwrap_err().contains("stretched or mirrored"));
         let mut p = tree(2);
         let last = p.len() - 1;

@@ -324,7 +324,7 @@ pub fn import_slice(bytes: &[u8], dir: &Path, options: ImportOptions) -> Res<Imp
     let mut triangles = 0u64;
     let mut vertices = 0u64;
     for (node, mesh, transform, _) in &instances {
-        if !meshes.contains_key(&mesh.index()) {
+        if let std::collections::hash_map::Entry::Vacant(slot) = meshes.entry(mesh.index()) {
             let mut parts = Vec::new();
             for prim in mesh.primitives() {
                 let at = format!(
@@ -364,7 +364,7 @@ pub fn import_slice(bytes: &[u8], dir: &Path, options: ImportOptions) -> Res<Imp
                 }
                 parts.push((m, part));
             }
-            meshes.insert(mesh.index(), parts);
+            slot.insert(parts);
         }
         for (p, (m, part)) in meshes[&mesh.index()].iter().enumerate() {
             let at = format!("{} mesh {} primitive {p}", node_name(node), mesh_name(mesh));

@@ -64,6 +64,7 @@ pub(crate) fn scene() -> BtfScene {
             sets,
             texels: TEXELS,
             bounds: bounds.tree,
+            finer: true,
         }],
         views: PerLevel::from_fn(|_| DirectionSet::with_count(18).unwrap()),
         lights: DirectionSet::with_count(18).unwrap(),
@@ -622,4 +623,49 @@ fn hybrid_impostors_begin_below_impostor_px_cross_faded_with_the_tree_billboard(
     assert!(o > 0.2 && o < 0.8, "{o}");
     assert_eq!(band.records.len(), 1);
     assert!((band.records[0].opacity + o - 1.0).abs() < 1e-4);
+}
+
+/// A species whose finer levels are not baked yet is drawn whole as geometry where its
+/// tree level is too coarse, cross-faded with the tree billboard over the band; never at a
+/// finer level.
+#[test]
+fn without_finer_levels_a_tree_is_geometry_where_its_tree_level_is_too_coarse() {
+    let s = BtfSettings {
+        lod_scale: 1.0,
+        lod_fade: 0.2,
+        ..BtfSettings::default()
+    };
+    let mut partial = scene();
+    partial.species[0].finer = false;
+    partial.species[0].texels = PerLevel {
+        twig: 0.0,
+        branch: 0.0,
+        tree: TEXELS.tree,
+    };
+    let trees = [tree_at(0.0, 0.0, 0.3)];
+    let at = |z: f32| {
+        let camera = Camera::look_at(Vec3::new(0.0, 5.0, z), Vec3::new(0.0, 5.0, 0.0), 60.0);
+        let frustum = camera.frustum(16.0 / 9.0);
+        let view = PrepareView {
+            camera: &camera,
+            focal_px: FOCAL,
+            to_sun: Vec3::new(0.3, 0.8, 0.2).normalize(),
+            frustum: &frustum,
+        };
+        partial.prepare(&trees, &[vec![0]], &view, &s, usize::MAX, false)
+    };
+    // The tree level's texel is a pixel at 0.1 · 500 = 50 m; the band starts at 62.5 m.
+    let near = at(20.0);
+    assert_eq!(near.twigs[0], vec![(0, 1.0)]);
+    assert_eq!(near.stats.geometry_trees, 1);
+    assert!(near.records.is_empty());
+    let band = at(0.1 * FOCAL / 0.9);
+    let (t, g) = band.twigs[0][0];
+    assert!(t == 0 && (g - 0.5).abs() < 1e-3, "{g}");
+    assert_eq!(band.stats.trees_per_level.tree, 1);
+    assert_eq!(band.records.len(), 1, "the tree billboard alone");
+    assert!((band.records[0].opacity - 0.5).abs() < 1e-3);
+    let far = at(100.0);
+    assert!(far.twigs[0].is_empty() && far.records.len() == 1);
+    assert!((far.records[0].opacity - 1.0).abs() < 1e-6);
 }
