@@ -153,6 +153,15 @@ fn tree_levels_alone_draw_the_forest(
     let flip = |a: &image::RgbaImage, b: &image::RgbaImage| {
         canopy::metrics::flip(&rgb(a), &rgb(b)).unwrap().stats.mean
     };
+    // The methods that need what is still coming say so.
+    for method in [Method::Texel, Method::Impostor] {
+        let frame = FrameDesc {
+            method,
+            ..FrameDesc::from_scene(scene)
+        };
+        let e = partial.render_image(&ctx, &frame, 64, 64, 1).unwrap_err();
+        assert!(e.to_string().contains("still being baked"), "{e}");
+    }
     let mut figures = Vec::new();
     for (view, distance) in [("near", 14.0), ("far", 200.0)] {
         let mut frame = FrameDesc::from_scene(scene);

@@ -66,6 +66,15 @@ impl Bake {
             btf: Some(BtfAssets::new(ctx, baked, world)?),
             ..Default::default()
         };
+        // A bake handed over before it is done (its tree levels) lacks what its settings ask
+        // for: the methods that draw it say it is still coming.
+        const COMING: &str = "still being baked: it draws when the bake is done";
+        if baked.texels.is_empty() && baked.settings.texel_resolution > 0 {
+            bake.texel_problem = Some(format!("the texel volumes are {COMING}"));
+        }
+        if baked.impostors.is_empty() && baked.settings.impostor_frames > 0 {
+            bake.impostor_problem = Some(format!("the impostors are {COMING}"));
+        }
         if !baked.texels.is_empty() {
             let max_dim = ctx.device.limits().max_texture_dimension_3d;
             match PendingTexel::new(baked, world, max_dim) {

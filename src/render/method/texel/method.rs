@@ -33,7 +33,7 @@ impl RenderMethod for TexelMethod {
             return Ok(());
         }
         Err(Error::BadInput(match &bake.texel_problem {
-            Some(p) => format!("the texel method cannot draw this bake's volumes: {p}"),
+            Some(p) => format!("the texel method cannot draw: {p}"),
             None => "the texel method needs baked texel volumes, and this bake has none: set texel_resolution above 0 in the scene's [bake] table and bake again".into(),
         }))
     }
