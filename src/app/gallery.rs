@@ -40,17 +40,6 @@ impl PrototypeInfo {
     /// The list for `world`, with the bake's sampling from `settings`.
     pub fn of_world(world: &World, settings: &crate::format::BakeSettings) -> Vec<PrototypeInfo> {
         let counts = world.forest.species_histogram(world.species.len());
-        let btf: u64 = crate::model::Level::ALL
-            .iter()
-            .map(|&l| {
-                crate::format::btf_record_bytes(
-                    settings.views_of(l),
-                    settings.lights,
-                    settings.resolution,
-                    settings.compress,
-                )
-            })
-            .sum();
         let vcm = crate::format::vcm_record_bytes(settings.vcm_resolution, settings.compress);
         world
             .species
@@ -58,6 +47,17 @@ impl PrototypeInfo {
             .zip(counts)
             .map(|(t, trees)| {
                 let c = t.triangle_counts();
+                let btf: u64 = crate::bake::baked_levels(t)
+                    .iter()
+                    .map(|&l| {
+                        crate::format::btf_record_bytes(
+                            settings.views_of(l),
+                            settings.lights,
+                            settings.resolution,
+                            settings.compress,
+                        )
+                    })
+                    .sum();
                 let objects =
                     (t.tree_branches.len() + t.branch_twigs.len() + t.tree_twigs.len()) as u64;
                 PrototypeInfo {

@@ -141,8 +141,10 @@ fn too_large(what: &str, bytes: u64, key: &str) -> Error {
 /// The cost of baking `world` with `settings`.
 pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
     let species = world.species.len();
-    let btf: Vec<u64> = (0..species)
-        .flat_map(|_| Level::ALL)
+    let btf: Vec<u64> = world
+        .species
+        .iter()
+        .flat_map(|t| super::baked_levels(t).iter().copied())
         .map(|level| {
             format::btf_record_bytes(
                 settings.views_of(level),
@@ -209,7 +211,7 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
         .iter()
         .flat_map(|t| {
             let tris = t.triangle_counts();
-            Level::ALL.map(|l| {
+            super::baked_levels(t).iter().map(move |&l| {
                 let tris = match l {
                     Level::Twig => tris.twig,
                     Level::Branch => tris.branch,

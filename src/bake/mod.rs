@@ -85,20 +85,33 @@ fn studio_world(object: TreeModel) -> World {
 /// What a bake step reports to a progress bar (defined beside the bars that show it).
 pub use crate::progress::Progress;
 
-/// Number of images the bake renders for `species` species.
-pub fn image_count(settings: &BakeSettings, species: usize) -> u64 {
+/// The levels the bake makes images of for `tree`: all three, or the tree level alone for
+/// an imported tree whose file gives no finer levels (drawn as geometry where its tree
+/// level is too coarse).
+pub fn baked_levels(tree: &TreeModel) -> &'static [Level] {
+    if tree.has_hierarchy() {
+        &Level::ALL
+    } else {
+        &[Level::Tree]
+    }
+}
+
+/// Number of images the bake renders for `world`'s species.
+pub fn image_count(settings: &BakeSettings, world: &World) -> u64 {
     let per_view = u64::from(settings.lights) + u64::from(crate::format::AMBIENT_IMAGES_PER_VIEW);
-    let views: u64 = Level::ALL
+    let views: u64 = world
+        .species
         .iter()
+        .flat_map(|t| baked_levels(t).iter())
         .map(|&l| u64::from(settings.views_of(l)))
         .sum();
-    per_view * views * species as u64
+    per_view * views
 }
 
 /// Steps of a whole bake of `world` (what [`Progress::total`] counts): one per BTF image and
 /// one per object whose 8 cube maps are baked.
 pub fn step_count(settings: &BakeSettings, world: &World) -> u64 {
-    image_count(settings, world.species.len())
+    image_count(settings, world)
         + vcm::object_count(world)
         + texel::step_count(world, settings.texel_resolution, settings.lights)
         + impostor::step_count(settings, world)
@@ -215,7 +228,7 @@ pub fn bake_btf_sets(
     })?;
     let lights = DirectionSet::with_count(settings.lights as usize)
         .map_err(|e| Error::BadInput(e.to_string()))?;
-    let total = image_count(settings, world.species.len());
+    let total = image_count(settings, world);
     let per_view = u64::from(settings.lights) + u64::from(crate::format::AMBIENT_IMAGES_PER_VIEW);
     let mut btf: Vec<BtfImageSet> = done_sets
         .into_iter()
@@ -230,10 +243,10 @@ pub fn bake_btf_sets(
     let order = [Level::Tree, Level::Branch, Level::Twig];
     for (k, &level) in order.iter().enumerate() {
         for (s, tree) in world.species.iter().enumerate() {
-            if btf
+            let made = btf
                 .iter()
-                .any(|set| set.species == s as u32 && set.level == level)
-            {
+                .any(|set| set.species == s as u32 && set.level == level);
+            if made || !baked_levels(tree).contains(&level) {
                 continue;
             }
             btf.push(bake_btf_set(

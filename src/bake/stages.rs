@@ -97,7 +97,7 @@ pub fn bake_resumable(
         staged(BakeStage::Images, &baked);
     }
     let btf_seconds = t0.elapsed().as_secs_f64();
-    let images = super::image_count(settings, world.species.len());
+    let images = super::image_count(settings, world);
 
     let t1 = std::time::Instant::now();
     if baked.vcm.is_empty() && vcm::object_count(world) > 0 {

@@ -138,8 +138,8 @@ fn bake_corners(
     (opacity, mean)
 }
 
-/// Bakes every VCM of `world` from its BTF image sets (`btf` must hold every species' three
-/// levels). Species data first (per species: main branches, then twigs: the reference
+/// Bakes every VCM of `world` from its BTF image sets (`btf` must hold every species' baked
+/// levels: [`super::baked_levels`]). Species data first (per species: main branches, then twigs: the reference
 /// branch's, then the trunk's leader twigs), then one set per tree instance, in order.
 pub fn bake_vcm(
     world: &World,
@@ -160,10 +160,19 @@ pub fn bake_vcm(
         AlphaSet::new(set)
     };
     let mut alpha: Vec<PerLevel<AlphaSet>> = Vec::new();
-    for s in 0..world.species.len() {
+    for (s, tree) in world.species.iter().enumerate() {
+        // A species without finer levels (an imported tree whose file gives none) has no
+        // parts that read them: its tree level stands in.
+        let finer = |level: Level| {
+            if tree.has_hierarchy() {
+                find(s, level)
+            } else {
+                find(s, Level::Tree)
+            }
+        };
         alpha.push(PerLevel {
-            twig: find(s, Level::Twig)?,
-            branch: find(s, Level::Branch)?,
+            twig: finer(Level::Twig)?,
+            branch: finer(Level::Branch)?,
             tree: find(s, Level::Tree)?,
         });
     }
