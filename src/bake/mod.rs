@@ -209,11 +209,12 @@ pub fn bake_btf(
     })
 }
 
-/// Bakes the BTF image sets of `world`: every species' tree level first (then
-/// `tree_levels` sees all of them: what a viewer can draw a forest with), then the finer
-/// levels. The sets in `done` are kept, not baked again. The sets come out species by
-/// species, each species' levels in [`Level::ALL`] order, whatever order they were made
-/// in.
+/// Bakes the BTF image sets of `world`: the tree levels first, of each scene entry's first
+/// variant, then of the other variants (after each of the two, `tree_levels` sees the sets
+/// made so far: what a viewer can draw a forest with, a variant standing in for its
+/// siblings until they come), then the finer levels. The sets in `done_sets` are kept, not
+/// baked again. The sets come out species by species, each species' levels in
+/// [`Level::ALL`] order, whatever order they were made in.
 pub fn bake_btf_sets(
     ctx: &GpuContext,
     world: &World,
@@ -240,13 +241,21 @@ pub fn bake_btf_sets(
         })
         .collect();
     let mut done: u64 = btf.iter().map(|set| u64::from(set.views) * per_view).sum();
-    let order = [Level::Tree, Level::Branch, Level::Twig];
-    for (k, &level) in order.iter().enumerate() {
+    // (level, whether the batch is the first variants' or the others'), in the order made.
+    let batches = [
+        (Level::Tree, Some(true)),
+        (Level::Tree, Some(false)),
+        (Level::Branch, None),
+        (Level::Twig, None),
+    ];
+    for (level, first_variants) in batches {
+        let mut made_any = false;
         for (s, tree) in world.species.iter().enumerate() {
             let made = btf
                 .iter()
                 .any(|set| set.species == s as u32 && set.level == level);
-            if made || !baked_levels(tree).contains(&level) {
+            let in_batch = first_variants.is_none_or(|first| (tree.variant == 0) == first);
+            if made || !in_batch || !baked_levels(tree).contains(&level) {
                 continue;
             }
             btf.push(bake_btf_set(
@@ -257,8 +266,9 @@ pub fn bake_btf_sets(
                 (&mut done, total),
                 progress,
             )?);
+            made_any = true;
         }
-        if k == 0 {
+        if level == Level::Tree && made_any {
             tree_levels(&btf);
         }
     }

@@ -1,10 +1,11 @@
 //! The bake stage by stage, so that a viewer can draw a forest before it ends and an
-//! interrupted bake loses nothing already made: every prototype's tree level first (handed
-//! over at once: what draws nearly all of a forest), then the finer levels, the visibility
-//! cube maps, the texel volumes and the impostors. After each stage but the last, what is
-//! made so far is written beside the cache file (`<key>.partial.canopy`, uncompressed, the
-//! same format); a bake that finds one for its scene starts from it. The finished bake is
-//! the same file whichever way it was made.
+//! interrupted bake loses nothing already made: the tree levels first (what draws nearly
+//! all of a forest), those of each scene entry's first variant, handed over at once (a
+//! first variant stands in for its siblings), then the other variants' (handed over again),
+//! then the finer levels, the visibility cube maps, the texel volumes and the impostors.
+//! After each stage but the last, what is made so far is written beside the cache file
+//! (`<key>.partial.canopy`, uncompressed, the same format); a bake that finds one for its
+//! scene starts from it. The finished bake is the same file whichever way it was made.
 
 use std::path::{Path, PathBuf};
 
@@ -67,12 +68,6 @@ pub fn bake_resumable(
         .filter(|r| r.scene_hash == scene_hash && r.settings == *settings)
         .unwrap_or_else(|| baked_header(scene_hash, settings));
     let sets_before = baked.btf.len();
-    let had_tree_levels = world.species.len()
-        == baked
-            .btf
-            .iter()
-            .filter(|s| s.level == crate::model::Level::Tree)
-            .count();
     let resumed = std::mem::take(&mut baked.btf);
     baked.btf = super::bake_btf_sets(
         ctx,
@@ -84,13 +79,11 @@ pub fn bake_resumable(
             progress(&Progress { total, ..p.clone() })
         },
         &mut |sets| {
-            if !had_tree_levels {
-                let so_far = Baked {
-                    btf: sets.to_vec(),
-                    ..baked_header(scene_hash, settings)
-                };
-                staged(BakeStage::TreeLevels, &so_far);
-            }
+            let so_far = Baked {
+                btf: sets.to_vec(),
+                ..baked_header(scene_hash, settings)
+            };
+            staged(BakeStage::TreeLevels, &so_far);
         },
     )?;
     if baked.btf.len() > sets_before {
@@ -170,6 +163,22 @@ pub fn bake_resumable(
     Ok((baked, times))
 }
 
+/// Whether `baked` can draw `world`'s forest: every prototype has its tree level, or its
+/// scene entry's first variant has (which stands in for it).
+pub fn drawable(baked: &Baked, world: &World) -> bool {
+    let has = |sp: usize| {
+        baked
+            .btf
+            .iter()
+            .any(|s| s.species as usize == sp && s.level == crate::model::Level::Tree)
+    };
+    world
+        .species
+        .iter()
+        .enumerate()
+        .all(|(sp, t)| has(sp) || has(sp.saturating_sub(t.variant as usize)))
+}
+
 /// A bake of nothing yet.
 fn baked_header(scene_hash: u64, settings: &BakeSettings) -> Baked {
     Baked {
@@ -232,15 +241,10 @@ pub fn load_or_bake_progressive(
         None
     };
     let settings = cache::settings_of(scene);
-    if let Some(r) = &resume {
-        let trees = r
-            .btf
-            .iter()
-            .filter(|s| s.level == crate::model::Level::Tree)
-            .count();
-        if trees == world.species.len() && r.settings == settings {
-            early(r);
-        }
+    if let Some(r) = resume.as_ref().filter(|r| r.settings == settings)
+        && drawable(r, world)
+    {
+        early(r);
     }
     let mut write_failed = false;
     let (baked, _) = bake_resumable(

@@ -67,6 +67,7 @@ impl World {
                     entries.push((
                         e.name.as_str(),
                         name,
+                        v as u32,
                         Source::Gltf(path, e.import_options()),
                     ));
                 }
@@ -79,7 +80,7 @@ impl World {
                 } else {
                     e.name.clone()
                 };
-                entries.push((e.name.as_str(), name, Source::Grown(params, seed)));
+                entries.push((e.name.as_str(), name, v, Source::Grown(params, seed)));
             }
         }
         let variants: Vec<u32> = species.iter().map(SpeciesEntry::prototypes).collect();
@@ -88,7 +89,7 @@ impl World {
             || {
                 entries
                     .par_iter()
-                    .map(|(entry, name, source)| {
+                    .map(|(entry, name, variant, source)| {
                         let (params, seed) = match source {
                             Source::Grown(params, seed) => (params, *seed),
                             Source::Gltf(path, options) => {
@@ -100,7 +101,9 @@ impl World {
                                 for w in &tree.warnings {
                                     log::warn!("species `{entry}` ({}): {w}", path.display());
                                 }
-                                return Ok(TreeModel::from_imported(name, tree));
+                                let mut model = TreeModel::from_imported(name, tree);
+                                model.variant = *variant;
+                                return Ok(model);
                             }
                         };
                         let mut model = TreeModel::generate(params, seed).map_err(|e| match e {
@@ -110,6 +113,7 @@ impl World {
                             other => other,
                         })?;
                         model.name = name.clone();
+                        model.variant = *variant;
                         Ok(model)
                     })
                     .collect::<Result<Vec<_>, ModelError>>()

@@ -68,6 +68,7 @@ impl TreeModel {
             tree_bounds,
             surfaces: None,
             levels_note: None,
+            variant: 0,
         })
     }
 }

@@ -86,6 +86,9 @@ pub struct TreeModel {
     /// An imported tree's levels: where they were found in its file, or why it has the tree
     /// level only. `None` for a procedural species.
     pub levels_note: Option<String>,
+    /// Which variant of its scene entry it is (0: the first; the others follow it in the
+    /// world's prototypes).
+    pub variant: u32,
 }
 
 /// The look of an imported tree: its materials, and which triangles of each part are drawn
@@ -164,6 +167,7 @@ impl TreeModel {
                     twig: Vec::new(),
                 })),
                 levels_note: Some(note),
+                variant: 0,
             };
         };
         let twig_bounds = l.twig.mesh.bounds();
@@ -190,6 +194,7 @@ impl TreeModel {
                 twig: ranges(&l.twig.triangle_materials),
             })),
             levels_note: Some(note),
+            variant: 0,
         }
     }
 

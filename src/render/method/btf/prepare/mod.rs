@@ -142,11 +142,16 @@ impl BtfScene {
                 bounds,
             });
             let mut texels = LevelTexels::default();
-            // The tree level is needed; the finer two come together or not at all.
+            // The tree level is needed: the prototype's own, or (a bake still running, which
+            // hands over its first variants' tree levels first) its entry's first variant's.
+            // The finer two come together or not at all.
             let has = |level: Level| index.contains_key(&(sp as u32, level));
-            if !has(Level::Tree) {
-                return Err(bad(format!("species {sp} has no tree-level images")));
-            }
+            let stand_in = sp.saturating_sub(tree.variant as usize) as u32;
+            let tree_set = index
+                .get(&(sp as u32, Level::Tree))
+                .or_else(|| index.get(&(stand_in, Level::Tree)))
+                .copied()
+                .ok_or_else(|| bad(format!("species {sp} has no tree-level images")))?;
             let finer = has(Level::Twig) && has(Level::Branch);
             if !finer && (has(Level::Twig) || has(Level::Branch)) {
                 return Err(bad(format!(
@@ -154,7 +159,11 @@ impl BtfScene {
                 )));
             }
             for level in Level::ALL {
-                let Some(i) = index.get(&(sp as u32, level)).copied() else {
+                let found = match level {
+                    Level::Tree => Some(tree_set),
+                    _ => index.get(&(sp as u32, level)).copied(),
+                };
+                let Some(i) = found else {
                     // Not baked yet: never chosen over geometry (texel 0).
                     texels[level] = 0.0;
                     continue;
