@@ -34,11 +34,19 @@ struct SpeciesParts {
     bounds: Aabb,
     /// The sets' bounds and billboard centres, for the VCM shading.
     frames: PerLevel<ObjectFrame>,
-    /// The bake holds its twig and main-branch sets. Without them (a bake still running,
-    /// which hands its tree levels over first) a tree is drawn whole as geometry where its
-    /// tree level is too coarse, cross-faded over the tree level's band.
+    /// The bake holds its twig and main-branch sets. Without them a tree is drawn whole as
+    /// geometry where its tree level is too coarse, cross-faded over the tree level's band.
     finer: bool,
+    /// Its finer levels are still coming (a bake still running, which hands its tree levels
+    /// over first; an imported tree without a hierarchy has none to come): until then its
+    /// tree level is drawn down to [`PENDING_LOD_SCALE`] times the LOD scale, so that far
+    /// fewer trees are geometry.
+    pending: bool,
 }
+
+/// How much coarser than the LOD scale a tree level is drawn while its species' finer
+/// levels are still being baked.
+pub const PENDING_LOD_SCALE: f32 = 4.0;
 
 /// What the `btf` method knows of a scene on the CPU.
 pub struct BtfScene {
@@ -193,6 +201,7 @@ impl BtfScene {
                 texels,
                 bounds: tree.tree_bounds,
                 finer,
+                pending: !finer && tree.has_hierarchy(),
             });
         }
         Ok(Self {
@@ -675,7 +684,12 @@ impl BtfScene {
         let m = Mat4::from_cols_array_2d(&data.model);
         let scale = m.x_axis.truncate().length();
         let z = (m.transform_point3(parts.bounds.center()) - cam).length();
-        let mut choice = choose_level(&parts.texels, scale, view.focal_px, z, settings);
+        let pending = BtfSettings {
+            lod_scale: settings.lod_scale * PENDING_LOD_SCALE,
+            ..*settings
+        };
+        let chosen_by = if parts.pending { &pending } else { settings };
+        let mut choice = choose_level(&parts.texels, scale, view.focal_px, z, chosen_by);
         // Only a tree at the twig level alone can be past it.
         let geometry = if !parts.finer {
             // Finer levels not baked yet: geometry instead, over the tree level's band.

@@ -65,6 +65,7 @@ pub(crate) fn scene() -> BtfScene {
             texels: TEXELS,
             bounds: bounds.tree,
             finer: true,
+            pending: false,
         }],
         views: PerLevel::from_fn(|_| DirectionSet::with_count(18).unwrap()),
         lights: DirectionSet::with_count(18).unwrap(),
@@ -668,4 +669,22 @@ fn without_finer_levels_a_tree_is_geometry_where_its_tree_level_is_too_coarse() 
     let far = at(100.0);
     assert!(far.twigs[0].is_empty() && far.records.len() == 1);
     assert!((far.records[0].opacity - 1.0).abs() < 1e-6);
+
+    // Finer levels still being baked: the tree level down to 4 times the LOD scale.
+    partial.species[0].pending = true;
+    let prepared = |z: f32| {
+        let camera = Camera::look_at(Vec3::new(0.0, 5.0, z), Vec3::new(0.0, 5.0, 0.0), 60.0);
+        let frustum = camera.frustum(16.0 / 9.0);
+        let view = PrepareView {
+            camera: &camera,
+            focal_px: FOCAL,
+            to_sun: Vec3::new(0.3, 0.8, 0.2).normalize(),
+            frustum: &frustum,
+        };
+        partial.prepare(&trees, &[vec![0]], &view, &s, usize::MAX, false)
+    };
+    let before = prepared(20.0);
+    assert!(before.twigs[0].is_empty() && before.records.len() == 1, "20 m: a billboard");
+    let close = prepared(5.0);
+    assert_eq!(close.twigs[0], vec![(0, 1.0)], "5 m: geometry");
 }
