@@ -51,7 +51,7 @@ fn run(scene: &Scene, cache: &Path) -> Run {
         scene,
         &world,
         &mut |p| steps_cell.borrow_mut().push(p.done),
-        &mut |b| early.push((b.clone(), steps_cell.borrow().len())),
+        Some(&mut |b| early.push((b.clone(), steps_cell.borrow().len()))),
     )
     .unwrap();
     Run {
@@ -216,4 +216,50 @@ fn tree_levels_alone_draw_the_forest(
     let (_, far_geometry, _, far_flip) = figures[1];
     assert_eq!(far_geometry, 0);
     assert!(far_flip < 0.01, "{far_flip}");
+}
+
+/// A viewer's bake of a scene whose tree level has more than 18 views first hands over a
+/// preview: the first variants' tree levels at 18 views, drawable, never kept.
+#[test]
+fn a_viewer_bake_first_hands_over_a_preview_at_18_views() {
+    let dir = scratch_dir("progressive-preview");
+    let text = std::fs::read_to_string(data("lone_tree.toml"))
+        .unwrap()
+        .replace("tree_views = 6", "tree_views = 66");
+    let path = dir.join("fir66.toml");
+    std::fs::write(&path, text).unwrap();
+    let scene = Scene::load(&path).unwrap();
+    let cache = cache_in(&dir, "cache");
+    let r = run(&scene, &cache);
+    assert_eq!(r.early.len(), 2, "the preview, then the tree level");
+    let (preview, at) = &r.early[0];
+    assert!(
+        r.steps[..*at].iter().all(|&d| d == 0),
+        "before any step of the bake itself"
+    );
+    assert_eq!(preview.settings.tree_views, 18);
+    assert_eq!(preview.btf.len(), 1);
+    assert_eq!(
+        (preview.btf[0].level, preview.btf[0].views),
+        (Level::Tree, 18)
+    );
+    assert_eq!(r.early[1].0.btf[0].views, 66);
+    assert!(
+        r.baked
+            .btf
+            .iter()
+            .all(|s| s.level != Level::Tree || s.views == 66)
+    );
+    assert!(!partial_path(&cache).exists());
+    // It draws the tree.
+    let ctx = gpu();
+    let world = scene.build_world().unwrap();
+    let mut renderer = Renderer::new(&ctx, &world).unwrap();
+    renderer.attach_btf(&ctx, preview, &world).unwrap();
+    let frame = FrameDesc {
+        method: Method::Btf,
+        ..FrameDesc::from_scene(&scene)
+    };
+    let (_, stats) = renderer.render_image(&ctx, &frame, 64, 64, 1).unwrap();
+    assert_eq!(stats.trees_drawn, 1);
 }

@@ -59,11 +59,11 @@ impl BakeJob {
                         *slot = p.clone();
                     }
                 },
-                &mut |tree_levels| {
+                Some(&mut |tree_levels| {
                     if let Ok(mut slot) = early_sink.lock() {
                         *slot = Some(tree_levels.clone());
                     }
-                },
+                }),
             )
         });
         Self {

@@ -185,6 +185,7 @@ pub fn bake(
         world,
         (settings, texel_params, scene_hash),
         None,
+        false,
         progress,
         &mut |_, _| {},
     )
@@ -501,7 +502,7 @@ pub fn load_or_bake_at(
     world: &World,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<(Baked, Source)> {
-    stages::load_or_bake_progressive(path, ctx, scene, world, progress, &mut |_| {})
+    stages::load_or_bake_progressive(path, ctx, scene, world, progress, None)
 }
 
 /// Bakes `scene` now, whatever the cache holds, and writes it to `path` as

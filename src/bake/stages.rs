@@ -16,9 +16,16 @@ use crate::model::params::TexelParams;
 use crate::render::GpuContext;
 use crate::{Error, Result};
 
+/// View directions of the preview tree levels (when the scene's tree level has more).
+pub const PREVIEW_VIEWS: u32 = 18;
+
 /// A stage of the bake that has just finished.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BakeStage {
+    /// The first variants' tree levels at [`PREVIEW_VIEWS`] views, for a viewer to draw
+    /// the forest sooner (the bake's settings say so: its `tree_views`); not part of the
+    /// bake, never kept.
+    Preview,
     /// Every prototype's tree-level images: a forest can be drawn.
     TreeLevels,
     /// Every BTF image set.
@@ -33,7 +40,7 @@ impl BakeStage {
     /// What is still to come after it, for the viewer's panel.
     pub fn still_coming(self) -> &'static str {
         match self {
-            BakeStage::TreeLevels => {
+            BakeStage::Preview | BakeStage::TreeLevels => {
                 "the twig and main-branch levels, cube maps, texel volumes and impostors"
             }
             BakeStage::Images => "cube maps, texel volumes and impostors",
@@ -50,12 +57,16 @@ pub fn partial_path(path: &Path) -> PathBuf {
 
 /// The whole bake of `world` with `settings`, the texel parameters and the scene's hash,
 /// starting from `resume` (a partial bake of the same scene, whose finished parts are kept);
-/// `staged` sees the bake after each stage that made something, uncompressed.
+/// `staged` sees the bake after each stage that made something, uncompressed, and first,
+/// with `preview`, the first variants' tree levels at [`PREVIEW_VIEWS`] views (when the
+/// scene's tree level has more and none were resumed).
+#[allow(clippy::too_many_arguments)]
 pub fn bake_resumable(
     ctx: &GpuContext,
     world: &World,
     (settings, texel_params, scene_hash): (&BakeSettings, &TexelParams, u64),
     resume: Option<Baked>,
+    preview: bool,
     progress: &mut dyn FnMut(&Progress),
     staged: &mut dyn FnMut(BakeStage, &Baked),
 ) -> Result<(Baked, BakeTimes)> {
@@ -68,6 +79,13 @@ pub fn bake_resumable(
         .filter(|r| r.scene_hash == scene_hash && r.settings == *settings)
         .unwrap_or_else(|| baked_header(scene_hash, settings));
     let sets_before = baked.btf.len();
+    if preview && settings.tree_views > PREVIEW_VIEWS && sets_before == 0 {
+        let preview = preview_tree_levels(ctx, world, (settings, scene_hash), &mut |p| {
+            clock.step(&p.what);
+            progress(&Progress { total, ..p.clone() })
+        })?;
+        staged(BakeStage::Preview, &preview);
+    }
     let resumed = std::mem::take(&mut baked.btf);
     baked.btf = super::bake_btf_sets(
         ctx,
@@ -163,6 +181,49 @@ pub fn bake_resumable(
     Ok((baked, times))
 }
 
+/// The tree levels of each scene entry's first variant at [`PREVIEW_VIEWS`] views, as a bake
+/// of its own (its `tree_views` saying so). Its progress does not count towards the bake's.
+fn preview_tree_levels(
+    ctx: &GpuContext,
+    world: &World,
+    (settings, scene_hash): (&BakeSettings, u64),
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<Baked> {
+    let views = crate::sphere::DirectionSet::with_count(PREVIEW_VIEWS as usize)
+        .map_err(|e| Error::BadInput(e.to_string()))?;
+    let lights = crate::sphere::DirectionSet::with_count(settings.lights as usize)
+        .map_err(|e| Error::BadInput(e.to_string()))?;
+    let preview_settings = BakeSettings {
+        tree_views: PREVIEW_VIEWS,
+        ..*settings
+    };
+    let mut done = 0u64;
+    let mut btf = Vec::new();
+    for (s, tree) in world.species.iter().enumerate() {
+        if tree.variant != 0 {
+            continue;
+        }
+        btf.push(super::bake_btf_set(
+            ctx,
+            (s, tree, crate::model::Level::Tree),
+            (&views, &lights),
+            &preview_settings,
+            (&mut done, 0),
+            &mut |p| {
+                progress(&Progress {
+                    done: 0,
+                    total: p.total,
+                    what: format!("{} (a first look)", p.what),
+                })
+            },
+        )?);
+    }
+    Ok(Baked {
+        btf,
+        ..baked_header(scene_hash, &preview_settings)
+    })
+}
+
 /// Whether `baked` can draw `world`'s forest: every prototype has its tree level, or its
 /// scene entry's first variant has (which stands in for it).
 pub fn drawable(baked: &Baked, world: &World) -> bool {
@@ -201,8 +262,11 @@ pub fn load_or_bake_progressive(
     scene: &crate::scene::Scene,
     world: &World,
     progress: &mut dyn FnMut(&Progress),
-    early: &mut dyn FnMut(&Baked),
+    early: Option<&mut dyn FnMut(&Baked)>,
 ) -> Result<(Baked, Source)> {
+    let mut no_one = |_: &Baked| {};
+    let preview = early.is_some();
+    let early = early.unwrap_or(&mut no_one);
     let mut replaced = None;
     match cache::load(path, scene) {
         Some(Ok(b)) => return Ok((b, Source::Cache)),
@@ -252,10 +316,14 @@ pub fn load_or_bake_progressive(
         world,
         (&settings, &scene.texel, hash),
         resume,
+        preview,
         progress,
         &mut |stage, so_far| {
-            if stage == BakeStage::TreeLevels {
+            if matches!(stage, BakeStage::Preview | BakeStage::TreeLevels) {
                 early(so_far);
+            }
+            if stage == BakeStage::Preview {
+                return;
             }
             if !write_failed && let Err(e) = store(&partial, so_far) {
                 // The bake goes on; an interruption then costs what was made.

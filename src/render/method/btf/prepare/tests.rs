@@ -684,7 +684,10 @@ fn without_finer_levels_a_tree_is_geometry_where_its_tree_level_is_too_coarse() 
         partial.prepare(&trees, &[vec![0]], &view, &s, usize::MAX, false)
     };
     let before = prepared(20.0);
-    assert!(before.twigs[0].is_empty() && before.records.len() == 1, "20 m: a billboard");
+    assert!(
+        before.twigs[0].is_empty() && before.records.len() == 1,
+        "20 m: a billboard"
+    );
     let close = prepared(5.0);
     assert_eq!(close.twigs[0], vec![(0, 1.0)], "5 m: geometry");
 }
