@@ -98,6 +98,17 @@ fn run_as(
     settings: &BtfSettings,
     hybrid: bool,
 ) -> (BtfFrame, Camera) {
+    run_in(&scene(), trees, eye, settings, hybrid)
+}
+
+/// [`run_as`] with the scene `scene`.
+fn run_in(
+    scene: &BtfScene,
+    trees: &[TreeGpu],
+    eye: Vec3,
+    settings: &BtfSettings,
+    hybrid: bool,
+) -> (BtfFrame, Camera) {
     let camera = Camera::look_at(eye, Vec3::new(0.0, 5.0, 0.0), 60.0);
     let frustum = camera.frustum(16.0 / 9.0);
     let view = PrepareView {
@@ -107,7 +118,7 @@ fn run_as(
         frustum: &frustum,
     };
     let visible = vec![(0..trees.len() as u32).collect::<Vec<_>>()];
-    let frame = scene().prepare(trees, &visible, &view, settings, usize::MAX, hybrid);
+    let frame = scene.prepare(trees, &visible, &view, settings, usize::MAX, hybrid);
     (frame, camera)
 }
 
@@ -644,50 +655,29 @@ fn without_finer_levels_a_tree_is_geometry_where_its_tree_level_is_too_coarse() 
         tree: TEXELS.tree,
     };
     let trees = [tree_at(0.0, 0.0, 0.3)];
-    let at = |z: f32| {
-        let camera = Camera::look_at(Vec3::new(0.0, 5.0, z), Vec3::new(0.0, 5.0, 0.0), 60.0);
-        let frustum = camera.frustum(16.0 / 9.0);
-        let view = PrepareView {
-            camera: &camera,
-            focal_px: FOCAL,
-            to_sun: Vec3::new(0.3, 0.8, 0.2).normalize(),
-            frustum: &frustum,
-        };
-        partial.prepare(&trees, &[vec![0]], &view, &s, usize::MAX, false)
-    };
+    let at = |scene: &BtfScene, z: f32| run_in(scene, &trees, Vec3::new(0.0, 5.0, z), &s, false).0;
     // The tree level's texel is a pixel at 0.1 · 500 = 50 m; the band starts at 62.5 m.
-    let near = at(20.0);
+    let near = at(&partial, 20.0);
     assert_eq!(near.twigs[0], vec![(0, 1.0)]);
     assert_eq!(near.stats.geometry_trees, 1);
     assert!(near.records.is_empty());
-    let band = at(0.1 * FOCAL / 0.9);
+    let band = at(&partial, 0.1 * FOCAL / 0.9);
     let (t, g) = band.twigs[0][0];
     assert!(t == 0 && (g - 0.5).abs() < 1e-3, "{g}");
     assert_eq!(band.stats.trees_per_level.tree, 1);
     assert_eq!(band.records.len(), 1, "the tree billboard alone");
     assert!((band.records[0].opacity - 0.5).abs() < 1e-3);
-    let far = at(100.0);
+    let far = at(&partial, 100.0);
     assert!(far.twigs[0].is_empty() && far.records.len() == 1);
     assert!((far.records[0].opacity - 1.0).abs() < 1e-6);
 
     // Finer levels still being baked: the tree level down to 4 times the LOD scale.
     partial.species[0].pending = true;
-    let prepared = |z: f32| {
-        let camera = Camera::look_at(Vec3::new(0.0, 5.0, z), Vec3::new(0.0, 5.0, 0.0), 60.0);
-        let frustum = camera.frustum(16.0 / 9.0);
-        let view = PrepareView {
-            camera: &camera,
-            focal_px: FOCAL,
-            to_sun: Vec3::new(0.3, 0.8, 0.2).normalize(),
-            frustum: &frustum,
-        };
-        partial.prepare(&trees, &[vec![0]], &view, &s, usize::MAX, false)
-    };
-    let before = prepared(20.0);
+    let before = at(&partial, 20.0);
     assert!(
         before.twigs[0].is_empty() && before.records.len() == 1,
         "20 m: a billboard"
     );
-    let close = prepared(5.0);
+    let close = at(&partial, 5.0);
     assert_eq!(close.twigs[0], vec![(0, 1.0)], "5 m: geometry");
 }
