@@ -141,7 +141,7 @@ pub fn controls(
         if stats.bake_partial {
             ui.small(format!(
                 "drawn from the tree levels baked so far (nearer trees as geometry); still coming: {}; texel and impostor draw when it is done",
-                crate::bake::stages::BakeStage::TreeLevels.still_coming()
+                crate::bake::stages::STILL_COMING
             ));
         }
         if stats.paused_for_bake {

@@ -201,12 +201,8 @@ pub fn bake_btf(
 ) -> Result<Baked> {
     let btf = bake_btf_sets(ctx, world, settings, Vec::new(), progress, &mut |_| {})?;
     Ok(Baked {
-        scene_hash,
-        settings: *settings,
         btf,
-        vcm: Vec::new(),
-        texels: Vec::new(),
-        impostors: Vec::new(),
+        ..Baked::empty(scene_hash, *settings)
     })
 }
 
@@ -224,12 +220,8 @@ pub fn bake_btf_sets(
     progress: &mut dyn FnMut(&Progress),
     tree_levels: &mut dyn FnMut(&[BtfImageSet]),
 ) -> Result<Vec<BtfImageSet>> {
-    let view_sets = crate::model::PerLevel::try_from_fn(|l| {
-        DirectionSet::with_count(settings.views_of(l) as usize)
-            .map_err(|e| Error::BadInput(e.to_string()))
-    })?;
-    let lights = DirectionSet::with_count(settings.lights as usize)
-        .map_err(|e| Error::BadInput(e.to_string()))?;
+    let view_sets = crate::model::PerLevel::try_from_fn(|l| directions(settings.views_of(l)))?;
+    let lights = directions(settings.lights)?;
     let total = image_count(settings, world);
     let per_view = u64::from(settings.lights) + u64::from(crate::format::AMBIENT_IMAGES_PER_VIEW);
     let mut btf: Vec<BtfImageSet> = done_sets
@@ -275,6 +267,11 @@ pub fn bake_btf_sets(
     }
     btf.sort_by_key(|set| (set.species, Level::ALL.iter().position(|&l| l == set.level)));
     Ok(btf)
+}
+
+/// The sampled direction set of `count` directions (one of the format's counts).
+fn directions(count: u32) -> Result<DirectionSet> {
+    DirectionSet::with_count(count as usize).map_err(|e| Error::BadInput(e.to_string()))
 }
 
 /// Bakes the image set of `level` of species `s` (`tree`), counting its images into

@@ -1,11 +1,13 @@
 //! The bake stage by stage, so that a viewer can draw a forest before it ends and an
-//! interrupted bake loses nothing already made: the tree levels first (what draws nearly
-//! all of a forest), those of each scene entry's first variant, handed over at once (a
-//! first variant stands in for its siblings), then the other variants' (handed over again),
-//! then the finer levels, the visibility cube maps, the texel volumes and the impostors.
-//! After each stage but the last, what is made so far is written beside the cache file
-//! (`<key>.partial.canopy`, uncompressed, the same format); a bake that finds one for its
-//! scene starts from it. The finished bake is the same file whichever way it was made.
+//! interrupted bake loses nothing already made. A viewer's bake first makes a first look
+//! (each scene entry's first variant's tree level at [`PREVIEW_VIEWS`] views, handed over and
+//! never kept); then the tree levels (what draws nearly all of a forest): the first
+//! variants' (handed over, a first variant standing in for its siblings), then the other
+//! variants' (handed over again); then the finer levels, the visibility cube maps, the
+//! texel volumes and the impostors. After each stage but the last, what is made so far is
+//! written beside the cache file (`<key>.partial.canopy`, uncompressed, the same format); a
+//! bake that finds one for its scene starts from it. The finished bake is the same file
+//! whichever way it was made.
 
 use std::path::{Path, PathBuf};
 
@@ -36,19 +38,9 @@ pub enum BakeStage {
     Texels,
 }
 
-impl BakeStage {
-    /// What is still to come after it, for the viewer's panel.
-    pub fn still_coming(self) -> &'static str {
-        match self {
-            BakeStage::Preview | BakeStage::TreeLevels => {
-                "the twig and main-branch levels, cube maps, texel volumes and impostors"
-            }
-            BakeStage::Images => "cube maps, texel volumes and impostors",
-            BakeStage::CubeMaps => "texel volumes and impostors",
-            BakeStage::Texels => "impostors",
-        }
-    }
-}
+/// What a bake that has handed over its tree levels still makes, for the viewer's panel.
+pub const STILL_COMING: &str =
+    "the twig and main-branch levels, cube maps, texel volumes and impostors";
 
 /// Where a bake cached at `path` keeps what it has made so far.
 pub fn partial_path(path: &Path) -> PathBuf {
@@ -77,7 +69,7 @@ pub fn bake_resumable(
     let mut clock = StageClock::new();
     let mut baked = resume
         .filter(|r| r.scene_hash == scene_hash && r.settings == *settings)
-        .unwrap_or_else(|| baked_header(scene_hash, settings));
+        .unwrap_or_else(|| Baked::empty(scene_hash, *settings));
     let sets_before = baked.btf.len();
     if preview && settings.tree_views > PREVIEW_VIEWS && sets_before == 0 {
         let preview = preview_tree_levels(ctx, world, (settings, scene_hash), &mut |p| {
@@ -99,7 +91,7 @@ pub fn bake_resumable(
         &mut |sets| {
             let so_far = Baked {
                 btf: sets.to_vec(),
-                ..baked_header(scene_hash, settings)
+                ..Baked::empty(scene_hash, *settings)
             };
             staged(BakeStage::TreeLevels, &so_far);
         },
@@ -189,10 +181,8 @@ fn preview_tree_levels(
     (settings, scene_hash): (&BakeSettings, u64),
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Baked> {
-    let views = crate::sphere::DirectionSet::with_count(PREVIEW_VIEWS as usize)
-        .map_err(|e| Error::BadInput(e.to_string()))?;
-    let lights = crate::sphere::DirectionSet::with_count(settings.lights as usize)
-        .map_err(|e| Error::BadInput(e.to_string()))?;
+    let views = super::directions(PREVIEW_VIEWS)?;
+    let lights = super::directions(settings.lights)?;
     let preview_settings = BakeSettings {
         tree_views: PREVIEW_VIEWS,
         ..*settings
@@ -220,7 +210,7 @@ fn preview_tree_levels(
     }
     Ok(Baked {
         btf,
-        ..baked_header(scene_hash, &preview_settings)
+        ..Baked::empty(scene_hash, preview_settings)
     })
 }
 
@@ -233,23 +223,7 @@ pub fn drawable(baked: &Baked, world: &World) -> bool {
             .iter()
             .any(|s| s.species as usize == sp && s.level == crate::model::Level::Tree)
     };
-    world
-        .species
-        .iter()
-        .enumerate()
-        .all(|(sp, t)| has(sp) || has(sp.saturating_sub(t.variant as usize)))
-}
-
-/// A bake of nothing yet.
-fn baked_header(scene_hash: u64, settings: &BakeSettings) -> Baked {
-    Baked {
-        scene_hash,
-        settings: *settings,
-        btf: Vec::new(),
-        vcm: Vec::new(),
-        texels: Vec::new(),
-        impostors: Vec::new(),
-    }
+    (0..world.species.len()).all(|sp| has(sp) || has(world.first_variant(sp)))
 }
 
 /// [`super::load_or_bake_at`] for a viewer: a bake made now hands its tree levels to

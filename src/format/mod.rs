@@ -875,6 +875,18 @@ pub fn impostor_mip_levels(resolution: u32) -> u32 {
 }
 
 impl Baked {
+    /// A bake of `scene_hash` with `settings` that holds nothing yet.
+    pub fn empty(scene_hash: u64, settings: BakeSettings) -> Baked {
+        Baked {
+            scene_hash,
+            settings,
+            btf: Vec::new(),
+            vcm: Vec::new(),
+            texels: Vec::new(),
+            impostors: Vec::new(),
+        }
+    }
+
     /// Bytes of BTF image data (direct + ambient) over all sets.
     pub fn btf_bytes(&self) -> u64 {
         self.btf

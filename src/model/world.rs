@@ -153,6 +153,14 @@ impl World {
         }
     }
 
+    /// The first variant of prototype `sp`'s scene entry (`sp` itself for a first variant):
+    /// an entry's variants follow one another in `species`.
+    pub fn first_variant(&self, sp: usize) -> usize {
+        self.species
+            .get(sp)
+            .map_or(sp, |t| sp.saturating_sub(t.variant as usize))
+    }
+
     /// Triangles of the whole scene drawn as full geometry (terrain and every tree).
     pub fn total_triangles(&self) -> u64 {
         let trees: u64 = self

@@ -154,7 +154,7 @@ impl BtfScene {
             // hands over its first variants' tree levels first) its entry's first variant's.
             // The finer two come together or not at all.
             let has = |level: Level| index.contains_key(&(sp as u32, level));
-            let stand_in = sp.saturating_sub(tree.variant as usize) as u32;
+            let stand_in = world.first_variant(sp) as u32;
             let tree_set = index
                 .get(&(sp as u32, Level::Tree))
                 .or_else(|| index.get(&(stand_in, Level::Tree)))
