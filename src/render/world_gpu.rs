@@ -193,9 +193,6 @@ impl PartSet {
 pub struct SpeciesGpu {
     pub name: String,
     pub parts: Vec<PartSet>,
-    /// Its trunk part is the whole tree (an imported tree, which has the tree level only):
-    /// drawn at a finer level, it is all geometry.
-    pub whole_trunk: bool,
 }
 
 impl SpeciesGpu {
@@ -355,7 +352,6 @@ impl WorldGpu {
             species.push(SpeciesGpu {
                 name: tree.name.clone(),
                 parts,
-                whole_trunk: !tree.has_hierarchy(),
             });
         }
 

@@ -41,10 +41,9 @@ pub struct PartCounts {
 }
 
 /// The bounds given to the twig and main-branch levels of a species that has none (an
-/// imported tree whose file gives no hierarchy): a centimetre at the origin, so that those levels bake to empty images
-/// with tiny texels, the BTF LOD never picks the twig level, and its "main branch" level
-/// (whose trunk, here the whole tree, is drawn as geometry) takes over wherever the tree
-/// level's billboard is too coarse.
+/// imported tree whose file gives no hierarchy): a centimetre at the origin. Those levels
+/// are not baked (the bake's `baked_levels`); `btf` draws the whole tree as geometry
+/// where its tree level is too coarse.
 pub const ABSENT_LEVEL_BOUNDS: Aabb = Aabb {
     min: glam::Vec3::splat(-0.005),
     max: glam::Vec3::splat(0.005),

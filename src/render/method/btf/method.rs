@@ -132,11 +132,11 @@ impl BtfMethod {
 }
 
 /// Uploads the geometry a BTF frame draws (the trunks of the trees at the main-branch
-/// level, the trunks and limbs of those at the twig level, `hybrid`'s whole trees with their
-/// twigs fading) and plans its sun cascades: fitted to the trees drawn wholly as geometry
-/// (`hybrid`'s, and imported trees at a finer level than their tree level, whose trunk is
-/// the whole tree) alone, which then cast and receive through them and are left out of the
-/// ground alpha map (where their own billboard would shade them).
+/// level, the trunks and limbs of those at the twig level, the trees drawn whole with their
+/// twigs fading: `hybrid`'s, and those of a species without finer levels where its tree
+/// level is too coarse) and plans its sun cascades: fitted to the trees drawn wholly as
+/// geometry alone, which then cast and receive through them and are left out of the ground
+/// alpha map (where their own billboard would shade them).
 pub(crate) fn plan_geometry(
     ctx: &GpuContext,
     world: &WorldGpu,
@@ -145,29 +145,17 @@ pub(crate) fn plan_geometry(
     sun: SunWork,
 ) -> (Vec<Vec<TreeRun>>, Plan) {
     let t0 = Instant::now();
-    // The trees drawn wholly as geometry, trunk and limbs at opacity 1: `hybrid`'s, and
-    // imported trees at the finer levels (their trunk part is the whole tree), moved out
-    // of the trunk lists.
-    let (mut trunk_only, mut trunk_and_limbs) = (bf.trunk_only.clone(), bf.trunk_and_limbs.clone());
-    let mut whole: Vec<Vec<(u32, f32)>> = bf
+    // The trees drawn wholly as geometry, trunk and limbs at opacity 1.
+    let whole: Vec<Vec<(u32, f32)>> = bf
         .twigs
         .iter()
         .map(|l| l.iter().map(|&(t, _)| (t, 1.0)).collect())
         .collect();
-    for (sp, ((list, a), b)) in whole
-        .iter_mut()
-        .zip(&mut trunk_only)
-        .zip(&mut trunk_and_limbs)
-        .enumerate()
-    {
-        if world.species.get(sp).is_some_and(|s| s.whole_trunk) {
-            list.extend(a.drain(..).chain(b.drain(..)).map(|t| (t, 1.0)));
-        }
-    }
-    let counts = [&trunk_only, &trunk_and_limbs].map(|l| l.iter().map(Vec::len).sum::<usize>());
+    let counts =
+        [&bf.trunk_only, &bf.trunk_and_limbs].map(|l| l.iter().map(Vec::len).sum::<usize>());
     let runs = world.upload_lists_faded(
         ctx,
-        &[trunk_only, trunk_and_limbs],
+        &[bf.trunk_only.clone(), bf.trunk_and_limbs.clone()],
         &[&whole, &bf.twigs],
         frame.btf.show_lod.then_some(GEOMETRY_COLOR),
     );

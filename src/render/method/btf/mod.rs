@@ -604,8 +604,8 @@ impl BtfAssets {
 
     /// The frame's draws in the main pass: the trunks (and limbs) of the trees drawn at the
     /// finer levels as geometry (`runs`: trunk only, then trunk and limbs; the terrain with
-    /// the first when asked), the trees drawn wholly as geometry (`runs[2]` trunk and limbs:
-    /// `hybrid`'s and imported trees at the finer levels; `runs[3]` `hybrid`'s twigs fading),
+    /// the first when asked), the trees drawn wholly as geometry (`hybrid`'s, and those of a
+    /// species without finer levels: `runs[2]` trunk and limbs, `runs[3]` twigs fading),
     /// `between` (what is opaque and not geometry: `hybrid`'s impostors), then every
     /// billboard in one instanced draw, back to front.
     #[allow(clippy::too_many_arguments)]
@@ -637,8 +637,8 @@ impl BtfAssets {
             false,
             &[PartKind::Trunk, PartKind::Limbs],
         );
-        // `hybrid`'s trees past the twig level, with their own shadows: trunk and limbs
-        // whole, twigs faded in.
+        // The trees drawn whole (`hybrid`'s past the twig level, a species without finer
+        // levels), with their own shadows: trunk and limbs whole, twigs faded in.
         let mut hybrid = |list: usize, kinds: &[PartKind]| match runs.get(list) {
             Some(r) => world.draw(pass, r, Some(pipes.faded_meshes()), false, kinds),
             None => (0, 0, 0),
