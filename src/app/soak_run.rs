@@ -67,9 +67,11 @@ impl App {
             }
         };
         let Some(started) = run.started else {
-            // The clock starts once the one-off background work is on show: the bake, and
-            // the ground's sky visibility (`tend_sky`), whose allocations are not growth.
-            let baked = r.renderer.has_btf() || self.bake_failed;
+            // The clock starts once the one-off background work is on show: the whole bake
+            // (not the tree levels a running bake hands over first: the rest of it is still
+            // being made, and its memory is not growth), and the ground's sky visibility
+            // (`tend_sky`), whose allocations are not growth either.
+            let baked = (r.renderer.has_btf() && self.bake_job.is_none()) || self.bake_failed;
             if baked && (r.renderer.has_sky() || !self.frame.ground_sky) {
                 run.started = Some(Instant::now());
                 run.samples
