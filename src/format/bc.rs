@@ -171,6 +171,21 @@ pub fn decode_bc4(blocks: &[u8], w: u32, h: u32) -> Option<Vec<u8>> {
     })
 }
 
+/// The 16 texels (row by row) of one BC4 block of [`BC4_BLOCK_BYTES`] bytes.
+///
+/// # Panics
+/// If `block` is shorter than a block.
+pub fn decode_bc4_block(block: &[u8]) -> [u8; 16] {
+    let mut texels = [0u8; 16];
+    bcdec_rs::bc4(
+        &block[..BC4_BLOCK_BYTES],
+        &mut texels,
+        BLOCK_SIDE as usize,
+        false,
+    );
+    texels
+}
+
 /// The levels of one image's BC7 mip chain (see [`bc7_chain_bytes`]): (side, blocks) from
 /// level 0 down, or None when `chain` has not the size of a chain of side `res`.
 pub fn bc7_levels(chain: &[u8], res: u32) -> Option<Vec<(u32, &[u8])>> {

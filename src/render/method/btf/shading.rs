@@ -32,8 +32,24 @@ use crate::{Error, Result};
 
 /// One object's 8 cube maps and the sky visibility at its corners.
 struct ObjectVcm {
-    opacity: Vec<u8>,
+    opacity: Maps,
     sky: [f32; CORNERS],
+}
+
+/// An object's 8 cube maps, corner by corner: a byte a texel, or each face's BC4 blocks as
+/// the bake stored them (the tree level's and the forest cells', read only when the sun
+/// moves: half the bytes, the same values).
+enum Maps {
+    R8(Vec<u8>),
+    Bc4(Vec<u8>),
+}
+
+impl Maps {
+    fn bytes(&self) -> u64 {
+        match self {
+            Maps::R8(b) | Maps::Bc4(b) => b.len() as u64,
+        }
+    }
 }
 
 /// The tree-level cube maps of a forest laid out in cells, and what a tree needs to read
@@ -182,17 +198,38 @@ const SKY_SAMPLES: usize = 66;
 impl ObjectVcm {
     /// Sun visibility (1 − opacity) at the 8 corners for `to_sun` in the cube maps' frame.
     fn direct(&self, res: u32, to_sun: Vec3) -> [f32; CORNERS] {
-        let n = FACES * (res * res) as usize;
-        std::array::from_fn(|k| {
-            self.opacity
-                .get(k * n..(k + 1) * n)
-                .map_or(1.0, |m| 1.0 - vcm::sample(m, res, to_sun))
-        })
+        let read = |maps: &[u8], n: usize, sample: fn(&[u8], u32, Vec3) -> f32| {
+            std::array::from_fn(|k| {
+                maps.get(k * n..(k + 1) * n)
+                    .map_or(1.0, |m| 1.0 - sample(m, res, to_sun))
+            })
+        };
+        match &self.opacity {
+            Maps::R8(m) => read(m, FACES * (res * res) as usize, vcm::sample),
+            Maps::Bc4(b) => read(
+                b,
+                FACES * crate::format::bc::bc4_bytes(res, res) as usize,
+                vcm::sample_bc4,
+            ),
+        }
+    }
+
+    /// The 8 maps a byte a texel.
+    fn r8(&self, res: u32) -> std::borrow::Cow<'_, [u8]> {
+        use crate::format::bc;
+        match &self.opacity {
+            Maps::R8(m) => std::borrow::Cow::Borrowed(m),
+            Maps::Bc4(b) => std::borrow::Cow::Owned(
+                b.chunks_exact(bc::bc4_bytes(res, res).max(1) as usize)
+                    .flat_map(|face| bc::decode_bc4(face, res, res).unwrap_or_default())
+                    .collect(),
+            ),
+        }
     }
 }
 
-/// One object's 8 cube maps' bytes and its sky visibility at its corners.
-pub(super) type ObjectMaps<'a> = (&'a [u8], [f32; CORNERS]);
+/// One object's 8 cube maps' bytes (a byte a texel) and its sky visibility at its corners.
+pub(super) type ObjectMaps<'a> = (std::borrow::Cow<'a, [u8]>, [f32; CORNERS]);
 
 /// The factors one billboard is shaded with.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -297,9 +334,18 @@ impl VcmShading {
             .collect();
         let mut cell_res = None;
         let mut bytes = 0u64;
-        // The shading reads a byte a texel: BC4 sets are decoded here, once.
-        let r8 = |set: &crate::format::VcmSet| {
-            set.opacity_r8().map(|o| o.into_owned()).ok_or_else(|| {
+        // The finer levels' maps are read a byte a texel (per drawn tree, and by the GPU):
+        // their BC4 sets are decoded here, once. The tree level's and the cells' stay as
+        // stored (`keep_blocks`).
+        let maps =
+            |set: &crate::format::VcmSet, keep_blocks: bool| {
+                if keep_blocks
+                    && set.encoding == crate::format::MapEncoding::Bc4
+                    && set.expected_opacity_len() == Some(set.opacity.len() as u64)
+                {
+                    return Ok(Maps::Bc4(set.opacity.clone()));
+                }
+                set.opacity_r8().map(|o| Maps::R8(o.into_owned())).ok_or_else(|| {
                 bad(format!(
                     "the cube maps of {} {} hold {} bytes, not what resolution {} in {:?} has",
                     set.level.name(),
@@ -309,7 +355,7 @@ impl VcmShading {
                     set.encoding
                 ))
             })
-        };
+            };
         for set in &baked.vcm {
             if set.species == VCM_CELL_SPECIES && set.level == Level::Tree {
                 if *cell_res.get_or_insert(set.resolution) != set.resolution {
@@ -329,8 +375,8 @@ impl VcmShading {
                 if slot.is_some() {
                     return Err(bad(format!("forest cell {o} has two sets")));
                 }
-                let opacity = r8(set)?;
-                bytes += opacity.len() as u64;
+                let opacity = maps(set, true)?;
+                bytes += opacity.bytes();
                 *slot = Some(ObjectVcm {
                     opacity,
                     sky: set.mean_opacity.map(|m| 1.0 - m),
@@ -364,8 +410,8 @@ impl VcmShading {
                     set.level.name()
                 )));
             }
-            let opacity = r8(set)?;
-            bytes += opacity.len() as u64;
+            let opacity = maps(set, set.level == Level::Tree)?;
+            bytes += opacity.bytes();
             *slot = Some(ObjectVcm {
                 opacity,
                 sky: set.mean_opacity.map(|m| 1.0 - m),
@@ -462,12 +508,15 @@ impl VcmShading {
     /// branch's, then the trunk's), its 8 maps' bytes (`8 × 6 × res²`, corner by corner)
     /// and its sky visibility at the corners.
     pub(super) fn species_maps(&self, sp: usize) -> [Vec<ObjectMaps<'_>>; 2] {
-        fn objects(v: Option<&Vec<ObjectVcm>>) -> Vec<ObjectMaps<'_>> {
+        fn objects(v: Option<&Vec<ObjectVcm>>, res: u32) -> Vec<ObjectMaps<'_>> {
             v.map_or(Vec::new(), |v| {
-                v.iter().map(|o| (&o.opacity[..], o.sky)).collect()
+                v.iter().map(|o| (o.r8(res), o.sky)).collect()
             })
         }
-        [objects(self.branches.get(sp)), objects(self.twigs.get(sp))]
+        [
+            objects(self.branches.get(sp), self.res),
+            objects(self.twigs.get(sp), self.res),
+        ]
     }
 
     /// Reads every tree instance's cube maps in the direction `to_sun` (world) if the sun
@@ -656,7 +705,10 @@ impl VcmShading {
                 })
                 .collect();
             let sky = std::array::from_fn(|k| 0.3 + 0.08 * k as f32);
-            ObjectVcm { opacity, sky }
+            ObjectVcm {
+                opacity: Maps::R8(opacity),
+                sky,
+            }
         };
         let branches = objects
             .iter()
@@ -702,7 +754,7 @@ mod tests {
         raster.finish(&mut one, false);
         let opacity: Vec<u8> = (0..CORNERS).flat_map(|_| one.iter().copied()).collect();
         let o = ObjectVcm {
-            opacity,
+            opacity: Maps::R8(opacity),
             sky: [0.5; CORNERS],
         };
         assert_eq!(o.direct(res, Vec3::Z), [0.0; CORNERS]);
@@ -762,6 +814,48 @@ mod tests {
             v.extend((0..twigs).map(|i| set(s, i, Level::Twig)));
         }
         v
+    }
+
+    #[test]
+    fn bc4_tree_maps_are_kept_as_stored_and_read_as_their_decoded_bytes() {
+        let world = lone_world();
+        let mut bc4 = complete(&world);
+        for (i, s) in bc4.iter_mut().enumerate() {
+            for (t, o) in s.opacity.iter_mut().enumerate() {
+                *o = ((t * 31 + i * 7 + (t / 64) * 50) % 256) as u8;
+            }
+            crate::format::bc::compress_vcm(s);
+        }
+        let decoded: Vec<crate::format::VcmSet> = bc4
+            .iter()
+            .map(|s| crate::format::VcmSet {
+                encoding: crate::format::MapEncoding::R8,
+                opacity: s.opacity_r8().unwrap().into_owned(),
+                ..s.clone()
+            })
+            .collect();
+        let mut from_bc4 = VcmShading::new(&baked(bc4), &world).unwrap().unwrap();
+        let mut from_r8 = VcmShading::new(&baked(decoded), &world).unwrap().unwrap();
+        // The tree's maps stay BC4: half a byte a texel (a byte for the finer levels').
+        let tree_r8 = (CORNERS * FACES * 64) as u64;
+        assert_eq!(from_r8.bytes - from_bc4.bytes, tree_r8 / 2);
+        assert!(matches!(from_bc4.trees[0].opacity, Maps::Bc4(_)));
+        for sun in [
+            Vec3::Y,
+            Vec3::new(0.3, 0.8, -0.5),
+            Vec3::new(-0.9, 0.2, 0.1),
+        ] {
+            from_bc4.set_sun(sun.normalize());
+            from_r8.set_sun(sun.normalize());
+            let a: Vec<Factors> = from_bc4.tree_factors(1).collect();
+            let b: Vec<Factors> = from_r8.tree_factors(1).collect();
+            assert_eq!(a, b);
+            assert!(a[0].0.iter().any(|&v| v < 0.99), "{a:?}");
+        }
+        for sp in 0..world.species.len() {
+            let (a, b) = (from_bc4.species_maps(sp), from_r8.species_maps(sp));
+            assert_eq!(a, b);
+        }
     }
 
     #[test]
