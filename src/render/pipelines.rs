@@ -326,6 +326,7 @@ pub fn ground_terrain_pipeline(device: &wgpu::Device, layouts: &Layouts) -> wgpu
         &LightView {
             label: "ground terrain",
             compare: wgpu::CompareFunction::Less,
+            depth_format: super::GROUND_DEPTH_FORMAT,
             fragment: Some(LightFragment {
                 entry: "fs_white",
                 source: Some(shaders::ground_map()),
@@ -344,6 +345,8 @@ pub(crate) struct LightView<'a> {
     pub vertex: &'a str,
     pub compare: wgpu::CompareFunction,
     pub bias: wgpu::DepthBiasState,
+    /// The depth target's format.
+    pub depth_format: wgpu::TextureFormat,
     pub fragment: Option<LightFragment<'a>>,
     /// Without `fragment`: the parts' alpha test as the fragment stage (false: none, for
     /// what has no texture to cut out).
@@ -373,6 +376,7 @@ impl<'a> LightView<'a> {
             vertex: "vs_shadow",
             compare: wgpu::CompareFunction::LessEqual,
             bias: Default::default(),
+            depth_format: SHADOW_FORMAT,
             fragment: None,
             cutout: true,
         }
@@ -426,7 +430,7 @@ pub(crate) fn light_view_pipeline(
             ..Default::default()
         },
         depth_stencil: Some(wgpu::DepthStencilState {
-            format: SHADOW_FORMAT,
+            format: p.depth_format,
             depth_write_enabled: Some(true),
             depth_compare: Some(p.compare),
             stencil: Default::default(),

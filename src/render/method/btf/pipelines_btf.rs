@@ -23,7 +23,10 @@ pub(super) fn build_opacity_pipeline(
         "fs_opacity",
         crate::render::GROUND_FORMAT,
         transmit,
-        (crate::render::SHADOW_FORMAT, wgpu::CompareFunction::Less),
+        (
+            crate::render::GROUND_DEPTH_FORMAT,
+            wgpu::CompareFunction::Less,
+        ),
     )
 }
 

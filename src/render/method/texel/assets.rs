@@ -494,7 +494,10 @@ impl TexelAssets {
                     format: crate::render::GROUND_FORMAT,
                     blend: transmit,
                     cull: None,
-                    depth: (crate::render::SHADOW_FORMAT, wgpu::CompareFunction::Less),
+                    depth: (
+                        crate::render::GROUND_DEPTH_FORMAT,
+                        wgpu::CompareFunction::Less,
+                    ),
                     depth_write: false,
                 },
             )
