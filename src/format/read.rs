@@ -240,14 +240,7 @@ fn decode<R: Read>(
         });
     }
 
-    let mut baked = Baked {
-        scene_hash,
-        settings,
-        btf: Vec::new(),
-        vcm: Vec::new(),
-        texels: Vec::new(),
-        impostors: Vec::new(),
-    };
+    let mut baked = Baked::empty(scene_hash, settings);
     for (i, &(kind, stored, len)) in entries.iter().enumerate() {
         let name = format!("section {i} ({})", kind.name());
         let mut section = Section {
