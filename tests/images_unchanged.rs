@@ -22,6 +22,12 @@ use common::*;
 /// measures well above it.
 const MAX_MEAN_FLIP: f32 = 0.005;
 
+/// The same for `texel`, whose ray march through 31 slices a texel adds up more of those
+/// roundings: its references, made on the Xeon, measure 0.0043 / 0.0054 / 0.0019 (near /
+/// mid / far) on a 2-core AMD EPYC (2026-11-28, the same on the code of 2026-11-28's
+/// first-bake work and after it), where `geometry` and `btf` measure 0.0000.
+const MAX_MEAN_FLIP_TEXEL: f32 = 0.008;
+
 const SIZE: (u32, u32) = (320, 180);
 
 /// (name, camera, look-at): near (inside the stand, twig and branch levels), mid (the
@@ -67,11 +73,12 @@ fn every_method_matches_its_references_at_three_distances() {
                     stats.btf.unwrap().trees_per_level
                 );
             }
-            let mean = check_snapshot(
-                &format!("stand_{name}_{}", method.name()),
-                &img,
-                MAX_MEAN_FLIP,
-            );
+            let bound = if method == Method::Texel {
+                MAX_MEAN_FLIP_TEXEL
+            } else {
+                MAX_MEAN_FLIP
+            };
+            let mean = check_snapshot(&format!("stand_{name}_{}", method.name()), &img, bound);
             eprintln!(
                 "{name} {}: mean FLIP {mean:.5} against the reference",
                 method.name()
