@@ -87,35 +87,9 @@ pub fn sample(map: &[u8], res: u32, dir: Vec3) -> f32 {
     sample_with(res, dir, |face, i, j| map[(face * r + j) * r + i])
 }
 
-/// The same as [`sample`] for a cube map stored as each face's BC4 blocks (`6 *
-/// bc4_bytes(res, res)` bytes, as the bake writes them): the texels read are decoded from
-/// their blocks, so the map stays at half a byte a texel.
-pub fn sample_bc4(blocks: &[u8], res: u32, dir: Vec3) -> f32 {
-    use crate::format::bc;
-    let face_bytes = bc::bc4_bytes(res, res) as usize;
-    if blocks.len() < FACES * face_bytes {
-        return 0.0;
-    }
-    let along = bc::blocks_along(res) as usize;
-    // The 4 texels of a bilinear read fall in 1 to 4 blocks: each is decoded once.
-    let mut last: Option<(usize, [u8; 16])> = None;
-    sample_with(res, dir, |face, i, j| {
-        let at = face * face_bytes + ((j / 4) * along + i / 4) * bc::BC4_BLOCK_BYTES;
-        let texels = match last {
-            Some((a, t)) if a == at => t,
-            _ => {
-                let t = bc::decode_bc4_block(&blocks[at..at + bc::BC4_BLOCK_BYTES]);
-                last = Some((at, t));
-                t
-            }
-        };
-        texels[(j % 4) * 4 + i % 4]
-    })
-}
-
 /// Bilinear opacity in direction `dir` of a cube map whose texel `(i, j)` of face `face`
 /// is `texel(face, i, j)`.
-fn sample_with(res: u32, dir: Vec3, mut texel: impl FnMut(usize, usize, usize) -> u8) -> f32 {
+pub fn sample_with(res: u32, dir: Vec3, mut texel: impl FnMut(usize, usize, usize) -> u8) -> f32 {
     let Some((face, x, y)) = face_coords(dir) else {
         return 0.0;
     };
@@ -502,51 +476,6 @@ mod tests {
     use super::*;
 
     const RES: u32 = 32;
-
-    #[test]
-    fn a_bc4_cube_map_reads_as_its_decoded_bytes() {
-        use crate::format::bc;
-        for res in [4u32, 8, 16, 6] {
-            let n = (res * res) as usize;
-            let faces: Vec<Vec<u8>> = (0..FACES)
-                .map(|f| {
-                    (0..n)
-                        .map(|t| ((t * 37 + f * 91 + (t * t) % 17 * 11) % 256) as u8)
-                        .collect()
-                })
-                .collect();
-            let blocks: Vec<u8> = faces
-                .iter()
-                .flat_map(|f| bc::encode_bc4(f, res, res))
-                .collect();
-            let decoded: Vec<u8> = blocks
-                .chunks_exact(bc::bc4_bytes(res, res) as usize)
-                .flat_map(|b| bc::decode_bc4(b, res, res).unwrap())
-                .collect();
-            for k in 0..500 {
-                let t = k as f32 * 0.61;
-                let dir = Vec3::new(t.sin() * 1.3, (t * 0.7).cos(), (t * 1.9).sin() - 0.2);
-                let (a, b) = (sample(&decoded, res, dir), sample_bc4(&blocks, res, dir));
-                assert_eq!(a, b, "res {res}, direction {dir}");
-            }
-            assert_eq!(sample_bc4(&blocks[..10], res, Vec3::X), 0.0);
-        }
-    }
-
-    fn finish(r: &CubeRaster) -> (Vec<u8>, f32) {
-        let mut out = Vec::new();
-        let mean = r.finish(&mut out, false);
-        (out, mean)
-    }
-
-    fn wall(center: Vec3, right: Vec3, up: Vec3) -> PlainQuad {
-        PlainQuad {
-            center,
-            right,
-            up,
-            alpha: 1.0,
-        }
-    }
 
     #[test]
     fn texel_directions_and_face_coords_agree() {

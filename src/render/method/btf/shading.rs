@@ -195,6 +195,32 @@ impl CellShading {
 /// mates' share of the sky (28 of them).
 const SKY_SAMPLES: usize = 66;
 
+/// The same as [`vcm::sample`] for a cube map stored as each face's BC4 blocks (`6 *
+/// bc4_bytes(res, res)` bytes, as the bake writes them): the texels read are decoded from
+/// their blocks, so the map stays at half a byte a texel.
+fn sample_bc4(blocks: &[u8], res: u32, dir: Vec3) -> f32 {
+    use crate::format::bc;
+    let face_bytes = bc::bc4_bytes(res, res) as usize;
+    if blocks.len() < FACES * face_bytes {
+        return 0.0;
+    }
+    let along = bc::blocks_along(res) as usize;
+    // The 4 texels of a bilinear read fall in 1 to 4 blocks: each is decoded once.
+    let mut last: Option<(usize, [u8; 16])> = None;
+    vcm::sample_with(res, dir, |face, i, j| {
+        let at = face * face_bytes + ((j / 4) * along + i / 4) * bc::BC4_BLOCK_BYTES;
+        let texels = match last {
+            Some((a, t)) if a == at => t,
+            _ => {
+                let t = bc::decode_bc4_block(&blocks[at..at + bc::BC4_BLOCK_BYTES]);
+                last = Some((at, t));
+                t
+            }
+        };
+        texels[(j % 4) * 4 + i % 4]
+    })
+}
+
 impl ObjectVcm {
     /// Sun visibility (1 − opacity) at the 8 corners for `to_sun` in the cube maps' frame.
     fn direct(&self, res: u32, to_sun: Vec3) -> [f32; CORNERS] {
@@ -209,7 +235,7 @@ impl ObjectVcm {
             Maps::Bc4(b) => read(
                 b,
                 FACES * crate::format::bc::bc4_bytes(res, res) as usize,
-                vcm::sample_bc4,
+                sample_bc4,
             ),
         }
     }
@@ -736,6 +762,54 @@ impl VcmShading {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_bc4_cube_map_reads_as_its_decoded_bytes() {
+        use crate::format::bc;
+        for res in [4u32, 8, 16, 6] {
+            let n = (res * res) as usize;
+            let faces: Vec<Vec<u8>> = (0..FACES)
+                .map(|f| {
+                    (0..n)
+                        .map(|t| ((t * 37 + f * 91 + (t * t) % 17 * 11) % 256) as u8)
+                        .collect()
+                })
+                .collect();
+            let blocks: Vec<u8> = faces
+                .iter()
+                .flat_map(|f| bc::encode_bc4(f, res, res))
+                .collect();
+            let decoded: Vec<u8> = blocks
+                .chunks_exact(bc::bc4_bytes(res, res) as usize)
+                .flat_map(|b| bc::decode_bc4(b, res, res).unwrap())
+                .collect();
+            for k in 0..500 {
+                let t = k as f32 * 0.61;
+                let dir = Vec3::new(t.sin() * 1.3, (t * 0.7).cos(), (t * 1.9).sin() - 0.2);
+                let (a, b) = (
+                    vcm::sample(&decoded, res, dir),
+                    sample_bc4(&blocks, res, dir),
+                );
+                assert_eq!(a, b, "res {res}, direction {dir}");
+            }
+            assert_eq!(sample_bc4(&blocks[..10], res, Vec3::X), 0.0);
+        }
+    }
+
+    fn finish(r: &CubeRaster) -> (Vec<u8>, f32) {
+        let mut out = Vec::new();
+        let mean = r.finish(&mut out, false);
+        (out, mean)
+    }
+
+    fn wall(center: Vec3, right: Vec3, up: Vec3) -> PlainQuad {
+        PlainQuad {
+            center,
+            right,
+            up,
+            alpha: 1.0,
+        }
+    }
 
     #[test]
     fn an_object_behind_a_wall_reads_dark_towards_it_only() {
