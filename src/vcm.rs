@@ -477,6 +477,21 @@ mod tests {
 
     const RES: u32 = 32;
 
+    fn finish(r: &CubeRaster) -> (Vec<u8>, f32) {
+        let mut out = Vec::new();
+        let mean = r.finish(&mut out, false);
+        (out, mean)
+    }
+
+    fn wall(center: Vec3, right: Vec3, up: Vec3) -> PlainQuad {
+        PlainQuad {
+            center,
+            right,
+            up,
+            alpha: 1.0,
+        }
+    }
+
     #[test]
     fn texel_directions_and_face_coords_agree() {
         for face in 0..FACES {

@@ -796,21 +796,6 @@ mod tests {
         }
     }
 
-    fn finish(r: &CubeRaster) -> (Vec<u8>, f32) {
-        let mut out = Vec::new();
-        let mean = r.finish(&mut out, false);
-        (out, mean)
-    }
-
-    fn wall(center: Vec3, right: Vec3, up: Vec3) -> PlainQuad {
-        PlainQuad {
-            center,
-            right,
-            up,
-            alpha: 1.0,
-        }
-    }
-
     #[test]
     fn an_object_behind_a_wall_reads_dark_towards_it_only() {
         let res = 8;
