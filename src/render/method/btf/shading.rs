@@ -17,7 +17,8 @@
 //! billboards of the trees sharing its cell.
 //!
 //! Over 800 lines, about a third of them its tests: the cube maps' loading and checks,
-//! the per-level reads and the cell variant share one set of types.
+//! their reads (a byte a texel, or BC4 blocks as stored), the per-level reads and the cell
+//! variant share one set of types.
 
 use glam::{Mat3, Mat4, Vec3};
 use rayon::prelude::*;
