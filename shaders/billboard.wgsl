@@ -13,9 +13,48 @@ struct BillboardOut {
     // position on the quad in the object frame, in units of the object's radius
     @location(0) p: vec3<f32>,
     @location(1) world: vec3<f32>,
-    @location(2) @interpolate(flat) instance: u32,
     // the eye in the object frame, in radii (crossed planes)
     @location(3) @interpolate(flat) eye: vec3<f32>,
+    // The record's fields a fragment reads, passed flat: set up once per triangle, where
+    // loading the record from its buffer costs a CPU rasteriser a load per pixel
+    // (`flat_billboard` puts them back together).
+    @location(4) @interpolate(flat) views: vec4<u32>,
+    @location(5) @interpolate(flat) lights: vec4<u32>,
+    @location(6) @interpolate(flat) layers: vec4<u32>,
+    @location(7) @interpolate(flat) view_weight: vec4<f32>,
+    @location(8) @interpolate(flat) light_weight: vec4<f32>,
+    @location(9) @interpolate(flat) tint: vec4<f32>,
+    @location(10) @interpolate(flat) box_origin: vec4<f32>,
+    @location(11) @interpolate(flat) box_scale: vec4<f32>,
+    @location(12) @interpolate(flat) direct_lo: vec4<f32>,
+    @location(13) @interpolate(flat) direct_hi: vec4<f32>,
+    @location(14) @interpolate(flat) sky_lo: vec4<f32>,
+    @location(15) @interpolate(flat) sky_hi: vec4<f32>,
+}
+
+// The record as the vertex stage passed it on: every field a fragment reads (the quad's
+// placement is left zero).
+fn flat_billboard(in: BillboardOut) -> Billboard {
+    var b: Billboard;
+    b.view_index = in.views.xyz;
+    b.planes = in.views.w;
+    b.light_index = in.lights.xyz;
+    b.light_count = in.lights.w;
+    b.layer_base = in.layers.x;
+    b.view_count = in.layers.y;
+    b.light_blend = in.layers.z;
+    b.mode = in.layers.w;
+    b.view_weight = in.view_weight.xyz;
+    b.opacity = in.view_weight.w;
+    b.light_weight = in.light_weight.xyz;
+    b.tint = in.tint.xyz;
+    b.vcm_box_origin = in.box_origin.xyz;
+    b.parent_direct = in.box_origin.w;
+    b.vcm_box_scale = in.box_scale.xyz;
+    b.parent_sky = in.box_scale.w;
+    b.vcm_direct = array<vec4<f32>, 2>(in.direct_lo, in.direct_hi);
+    b.vcm_sky = array<vec4<f32>, 2>(in.sky_lo, in.sky_hi);
+    return b;
 }
 
 // Crossed planes reach sqrt(2) radii from the centre (a square's corner). A quad through
@@ -54,7 +93,18 @@ fn vs_billboard(@builtin(vertex_index) vi: u32, @builtin(instance_index) instanc
             + dot(to_eye, plane_fwd) * obj_fwd;
     }
     out.world = world;
-    out.instance = instance;
+    out.views = vec4<u32>(b.view_index, b.planes);
+    out.lights = vec4<u32>(b.light_index, b.light_count);
+    out.layers = vec4<u32>(b.layer_base, b.view_count, b.light_blend, b.mode);
+    out.view_weight = vec4<f32>(b.view_weight, b.opacity);
+    out.light_weight = vec4<f32>(b.light_weight, 0.0);
+    out.tint = vec4<f32>(b.tint, 0.0);
+    out.box_origin = vec4<f32>(b.vcm_box_origin, b.parent_direct);
+    out.box_scale = vec4<f32>(b.vcm_box_scale, b.parent_sky);
+    out.direct_lo = b.vcm_direct[0];
+    out.direct_hi = b.vcm_direct[1];
+    out.sky_lo = b.vcm_sky[0];
+    out.sky_hi = b.vcm_sky[1];
     return out;
 }
 

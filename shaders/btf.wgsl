@@ -20,7 +20,7 @@ fn vcm_factors(b: Billboard, p: vec3<f32>) -> vec2<f32> {
 
 @fragment
 fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
-    let b = billboards[in.instance];
+    let b = flat_billboard(in);
     let crossed = b.planes == 3u;
     // Each view sample's point under this pixel and its screen derivatives, taken in
     // uniform control flow (the samples below use them explicitly): on a single plane the
@@ -29,7 +29,12 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
     var dxs: array<vec3<f32>, 3>;
     var dys: array<vec3<f32>, 3>;
     for (var k = 0; k < 3; k++) {
-        let q = select(vec4<f32>(in.p, 1.0), view_plane_hit(b.view_index[k], in.eye, in.p), crossed);
+        // A loop of 0 or 1 turns rather than a select, which would find the hit for every
+        // billboard (a CPU rasteriser runs a loop's turns only where some fragment takes them).
+        var q = vec4<f32>(in.p, 1.0);
+        for (var c = select(1u, 0u, crossed); c < 1u; c++) {
+            q = view_plane_hit(b.view_index[k], in.eye, in.p);
+        }
         pts[k] = q;
         dxs[k] = dpdx(q.xyz);
         dys[k] = dpdy(q.xyz);

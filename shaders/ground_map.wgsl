@@ -12,7 +12,7 @@ fn fs_white() -> @location(0) vec4<f32> {
 // holds the transmittance of every tree between the sun and the ground.
 @fragment
 fn fs_opacity(in: BillboardOut) -> @location(0) vec4<f32> {
-    let b = billboards[in.instance];
+    let b = flat_billboard(in);
     let dpx = dpdx(in.p);
     let dpy = dpdy(in.p);
     var alpha = 0.0;
