@@ -13,13 +13,18 @@ struct BillboardOut {
     // position on the quad in the object frame, in units of the object's radius
     @location(0) p: vec3<f32>,
     @location(1) world: vec3<f32>,
+    // On a single plane, where the pixel falls in the images of the 3 views (view 0's
+    // uv, view 1's uv; then view 2's): linear across the quad, so found per vertex.
+    @location(2) uv01: vec4<f32>,
     // the eye in the object frame, in radii (crossed planes)
     @location(3) @interpolate(flat) eye: vec3<f32>,
     // The record's fields a fragment reads, passed flat: set up once per triangle, where
     // loading the record from its buffer costs a CPU rasteriser a load per pixel
-    // (`flat_billboard` puts them back together).
-    @location(4) @interpolate(flat) views: vec4<u32>,
-    @location(5) @interpolate(flat) lights: vec4<u32>,
+    // (`flat_billboard` puts them back together). `indices` holds the view and light
+    // indices two to a word (16 bits each: view_index.x | .y, view_index.z | planes,
+    // light_index.x | .y, light_index.z | light_count).
+    @location(4) @interpolate(flat) indices: vec4<u32>,
+    @location(5) uv2: vec2<f32>,
     @location(6) @interpolate(flat) layers: vec4<u32>,
     @location(7) @interpolate(flat) view_weight: vec4<f32>,
     @location(8) @interpolate(flat) light_weight: vec4<f32>,
@@ -36,10 +41,12 @@ struct BillboardOut {
 // placement is left zero).
 fn flat_billboard(in: BillboardOut) -> Billboard {
     var b: Billboard;
-    b.view_index = in.views.xyz;
-    b.planes = in.views.w;
-    b.light_index = in.lights.xyz;
-    b.light_count = in.lights.w;
+    let lo = in.indices & vec4<u32>(0xffffu);
+    let hi = in.indices >> vec4<u32>(16u);
+    b.view_index = vec3<u32>(lo.x, hi.x, lo.y);
+    b.planes = hi.y;
+    b.light_index = vec3<u32>(lo.z, hi.z, lo.w);
+    b.light_count = hi.w;
     b.layer_base = in.layers.x;
     b.view_count = in.layers.y;
     b.light_blend = in.layers.z;
@@ -93,8 +100,14 @@ fn vs_billboard(@builtin(vertex_index) vi: u32, @builtin(instance_index) instanc
             + dot(to_eye, plane_fwd) * obj_fwd;
     }
     out.world = world;
-    out.views = vec4<u32>(b.view_index, b.planes);
-    out.lights = vec4<u32>(b.light_index, b.light_count);
+    out.indices = vec4<u32>(
+        b.view_index.x | (b.view_index.y << 16u),
+        b.view_index.z | (b.planes << 16u),
+        b.light_index.x | (b.light_index.y << 16u),
+        b.light_index.z | (b.light_count << 16u),
+    );
+    out.uv01 = vec4<f32>(view_uv(b.view_index.x, out.p), view_uv(b.view_index.y, out.p));
+    out.uv2 = view_uv(b.view_index.z, out.p);
     out.layers = vec4<u32>(b.layer_base, b.view_count, b.light_blend, b.mode);
     out.view_weight = vec4<f32>(b.view_weight, b.opacity);
     out.light_weight = vec4<f32>(b.light_weight, 0.0);
@@ -114,6 +127,13 @@ struct ViewTexcoords {
     uv: vec2<f32>,
     gx: vec2<f32>,
     gy: vec2<f32>,
+}
+
+// The image coordinates alone (`view_texcoords`' uv).
+fn view_uv(v: u32, p: vec3<f32>) -> vec2<f32> {
+    let r = view_axes[2u * v].xyz;
+    let u = view_axes[2u * v + 1u].xyz;
+    return vec2<f32>(dot(p, r), -dot(p, u)) * 0.5 + 0.5;
 }
 
 fn view_texcoords(v: u32, p: vec3<f32>, dpx: vec3<f32>, dpy: vec3<f32>) -> ViewTexcoords {

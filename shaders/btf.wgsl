@@ -22,22 +22,30 @@ fn vcm_factors(b: Billboard, p: vec3<f32>) -> vec2<f32> {
 fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
     let b = flat_billboard(in);
     let crossed = b.planes == 3u;
-    // Each view sample's point under this pixel and its screen derivatives, taken in
-    // uniform control flow (the samples below use them explicitly): on a single plane the
-    // quad's own point for every view; on crossed planes the point of that view's plane.
+    // Each view sample's point under this pixel and its image coordinates with their
+    // screen derivatives, taken in uniform control flow (the samples below use them
+    // explicitly): on a single plane the quad's own point for every view, and the image
+    // coordinates the vertex stage found; on crossed planes the point of that view's plane.
+    // Loops of 0 or 1 turns rather than selects, which would do the crossed planes' work
+    // for every billboard (a CPU rasteriser runs a loop's turns only where some fragment
+    // takes them).
     var pts: array<vec4<f32>, 3>;
-    var dxs: array<vec3<f32>, 3>;
-    var dys: array<vec3<f32>, 3>;
+    var texs: array<ViewTexcoords, 3>;
+    let uvs = array<vec2<f32>, 3>(in.uv01.xy, in.uv01.zw, in.uv2);
+    let hit_from = select(1u, 0u, crossed);
     for (var k = 0; k < 3; k++) {
-        // A loop of 0 or 1 turns rather than a select, which would find the hit for every
-        // billboard (a CPU rasteriser runs a loop's turns only where some fragment takes them).
         var q = vec4<f32>(in.p, 1.0);
-        for (var c = select(1u, 0u, crossed); c < 1u; c++) {
+        for (var c = hit_from; c < 1u; c++) {
             q = view_plane_hit(b.view_index[k], in.eye, in.p);
         }
+        let dqx = dpdx(q.xyz);
+        let dqy = dpdy(q.xyz);
+        var t = ViewTexcoords(uvs[k], dpdx(uvs[k]), dpdy(uvs[k]));
+        for (var c = hit_from; c < 1u; c++) {
+            t = view_texcoords(b.view_index[k], q.xyz, dqx, dqy);
+        }
         pts[k] = q;
-        dxs[k] = dpdx(q.xyz);
-        dys[k] = dpdy(q.xyz);
+        texs[k] = t;
     }
     let lights = b.light_count;
     let base = b.layer_base;
@@ -51,7 +59,7 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
             continue;
         }
         let v = b.view_index[k];
-        let t = view_texcoords(v, pts[k].xyz, dxs[k], dys[k]);
+        let t = texs[k];
         let f = vcm_factors(b, pts[k].xyz);
         let amb = btf_sample(base + b.view_count * lights + v, t.uv, t.gx, t.gy);
         // The light the ground sends up, as the geometry's ambient has it: never hidden, so

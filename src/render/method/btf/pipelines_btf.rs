@@ -89,7 +89,7 @@ pub(super) fn btf_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
         label: Some("btf"),
         entries: &[
             storage_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
-            storage_entry(1, wgpu::ShaderStages::FRAGMENT),
+            storage_entry(1, wgpu::ShaderStages::VERTEX_FRAGMENT),
             texture_entry(2, FILTERABLE, wgpu::TextureViewDimension::D2Array),
             sampler_entry(3, wgpu::SamplerBindingType::Filtering),
         ],
