@@ -200,6 +200,10 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let m = m?;
     log_memory(&ctx, "the frames are drawn");
+    // Free heap pages given back before the memory is reported, as the viewer does every
+    // few seconds (`app::heap`), so that the report says what viewing holds.
+    crate::app::heap::trim();
+    log_memory(&ctx, "the heap's free pages are given back");
     crate::imageio::save_png(&args.out, &m.image)?;
     if args.json {
         let mut report = FrameReport::new(&m, &frame, &opts, &renderer, &ctx);
@@ -243,12 +247,33 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
 fn log_memory(ctx: &GpuContext, stage: &str) {
     if log::log_enabled!(log::Level::Debug) {
         let gpu = ctx.device.generate_allocator_report();
+        let (heap_used, heap_free) = crate::app::heap::heap_bytes();
         log::debug!(
-            "{:.1} MB resident once {stage}; GPU allocations {:.1} MB in {:.1} MB of blocks",
+            "{:.1} MB resident once {stage}; GPU allocations {:.1} MB in {:.1} MB of blocks; \
+             C heap {:.1} MB in use, {:.1} MB held free",
             crate::render::memory::resident_bytes() as f64 / 1e6,
             gpu.as_ref().map_or(0, |r| r.total_allocated_bytes) as f64 / 1e6,
             gpu.as_ref().map_or(0, |r| r.total_reserved_bytes) as f64 / 1e6,
+            heap_used as f64 / 1e6,
+            heap_free as f64 / 1e6,
         );
+        if let Some(r) = gpu
+            .as_ref()
+            .filter(|_| log::log_enabled!(log::Level::Trace))
+        {
+            for b in &r.blocks {
+                let parts = &r.allocations[b.allocations.clone()];
+                let used: u64 = parts.iter().map(|a| a.size).sum();
+                let mut names: Vec<&str> = parts.iter().map(|a| a.name.as_str()).collect();
+                names.dedup();
+                log::trace!(
+                    "GPU block of {:.1} MB, {:.1} MB used: {}",
+                    b.size as f64 / 1e6,
+                    used as f64 / 1e6,
+                    names.join(", ")
+                );
+            }
+        }
     }
 }
 
