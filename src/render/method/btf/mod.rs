@@ -185,11 +185,22 @@ impl BtfAssets {
         let mut bytes = 0u64;
         let mut means = vec![[0.0f32; 4]; images as usize];
         let lut = crate::color::srgb_lut();
+        // wgpu holds each write's staging copy until the GPU has done it: submitted every
+        // `FLUSH_BYTES`, the staging copies of the whole array (107 MB for the example
+        // forest's images decoded to RGBA8) are never held at once.
+        const FLUSH_BYTES: u64 = 16 << 20;
+        let mut unflushed = 0u64;
         for (base, set) in scene.image_sets(baked) {
             for (i, img) in set.images().enumerate() {
                 let (b, mean) =
                     upload_image(ctx, &texture, base + i as u32, set, img, format, &lut);
                 bytes += b;
+                unflushed += b;
+                if unflushed >= FLUSH_BYTES {
+                    ctx.queue.submit(std::iter::empty());
+                    let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
+                    unflushed = 0;
+                }
                 if let Some(m) = means.get_mut((base + i as u32) as usize) {
                     *m = mean;
                 }
