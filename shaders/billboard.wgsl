@@ -129,20 +129,24 @@ struct ViewTexcoords {
     gy: vec2<f32>,
 }
 
+// A point or offset `x` of the object frame on the image of the view with right and up
+// axes `r`, `u`, in image units of half the image (y down).
+fn on_image(x: vec3<f32>, r: vec3<f32>, u: vec3<f32>) -> vec2<f32> {
+    return vec2<f32>(dot(x, r), -dot(x, u));
+}
+
 // The image coordinates alone (`view_texcoords`' uv).
 fn view_uv(v: u32, p: vec3<f32>) -> vec2<f32> {
-    let r = view_axes[2u * v].xyz;
-    let u = view_axes[2u * v + 1u].xyz;
-    return vec2<f32>(dot(p, r), -dot(p, u)) * 0.5 + 0.5;
+    return on_image(p, view_axes[2u * v].xyz, view_axes[2u * v + 1u].xyz) * 0.5 + 0.5;
 }
 
 fn view_texcoords(v: u32, p: vec3<f32>, dpx: vec3<f32>, dpy: vec3<f32>) -> ViewTexcoords {
     let r = view_axes[2u * v].xyz;
     let u = view_axes[2u * v + 1u].xyz;
     var t: ViewTexcoords;
-    t.uv = vec2<f32>(dot(p, r), -dot(p, u)) * 0.5 + 0.5;
-    t.gx = vec2<f32>(dot(dpx, r), -dot(dpx, u)) * 0.5;
-    t.gy = vec2<f32>(dot(dpy, r), -dot(dpy, u)) * 0.5;
+    t.uv = on_image(p, r, u) * 0.5 + 0.5;
+    t.gx = on_image(dpx, r, u) * 0.5;
+    t.gy = on_image(dpy, r, u) * 0.5;
     return t;
 }
 
