@@ -101,7 +101,9 @@ struct FarParams {
     // Where each BTF image's mean starts in `tables` (one row an image).
     means_at: u32,
     sky_ambient: vec3<f32>,
-    _canopy_pad0: u32,
+    // Batches the billboards are drawn in, front to back, for the trees' layer (0: one
+    // draw, back to front).
+    layer_batches: u32,
     ground_ambient: vec3<f32>,
     _canopy_pad1: u32,
 }
@@ -130,7 +132,7 @@ struct FarParams {
 // then the image fetches of every billboard made here, and those image-weight culling saved;
 // then the billboards made here that read the light blends; then the trees in view past
 // the far canopy's band (drawn by the canopy alone).
-@group(0) @binding(7) var<storage, read_write> draw_args: array<atomic<u32>, 12>;
+@group(0) @binding(7) var<storage, read_write> draw_args: array<atomic<u32>, 76>;
 @group(0) @binding(8) var<storage, read_write> sorted: array<Billboard>;
 
 // One step of the bitonic sort: block size `k`, partner distance `j`.
@@ -846,15 +848,32 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let slot = ~keys[i].y;
     let cpu_end = params.count + params.near_count;
+    // Back to front, or front to back for the trees' layer.
+    var at = i - skip;
+    if params.layer_batches > 0u {
+        at = total - skip - 1u - at;
+    }
     if slot < cpu_end {
-        sorted[i - skip] = records[slot];
+        sorted[at] = records[slot];
     } else {
-        sorted[i - skip] = near_at(slot - cpu_end);
+        sorted[at] = near_at(slot - cpu_end);
     }
 }
 
-// The draw's instance count.
+// The draw's instance count, and for the trees' layer each batch's draw (words 12 on, 4 a
+// batch: an equal share of the records, front to back).
 @compute @workgroup_size(1)
 fn finish() {
-    atomicStore(&draw_args[1], min(made(), params.limit));
+    let n = min(made(), params.limit);
+    atomicStore(&draw_args[1], n);
+    let batches = params.layer_batches;
+    for (var k = 0u; k < batches; k++) {
+        let first = n * k / batches;
+        let end = n * (k + 1u) / batches;
+        let at = 12u + 4u * k;
+        atomicStore(&draw_args[at], 6u);
+        atomicStore(&draw_args[at + 1u], end - first);
+        atomicStore(&draw_args[at + 2u], 0u);
+        atomicStore(&draw_args[at + 3u], first);
+    }
 }

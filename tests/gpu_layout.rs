@@ -340,7 +340,7 @@ fn far_tree_structs_match_btf_far_wgsl() {
         sun_color,
         means_at,
         sky_ambient,
-        _canopy_pad0,
+        layer_batches,
         ground_ambient,
         _canopy_pad1
     });

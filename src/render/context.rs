@@ -29,6 +29,9 @@ pub struct GpuContext {
     /// Timestamps can be written inside render and compute passes too, so that the draws
     /// of one pass are timed apart ([`super::timing::PassSpans::mark`]).
     pub timestamps_inside_passes: bool,
+    /// Indirect draws may start past instance 0 (the trees' layer then draws the
+    /// billboards in batches from one buffer of draw arguments).
+    pub indirect_first_instance: bool,
     /// Set when the device is lost (driver reset, GPU removed): the owner must recreate
     /// the context and everything made from it.
     pub lost: Arc<AtomicBool>,
@@ -83,6 +86,11 @@ impl GpuContext {
         }
         // Block-compressed textures (the BTF images in BC7) where the adapter has them;
         // without, the images are decoded on load (`btf::atlas`).
+        let first_instance = wgpu::Features::INDIRECT_FIRST_INSTANCE;
+        let indirect_first_instance = adapter.features().contains(first_instance);
+        if indirect_first_instance {
+            required_features |= first_instance;
+        }
         let bc = wgpu::Features::TEXTURE_COMPRESSION_BC;
         if adapter.features().contains(bc) {
             required_features |= bc;
@@ -143,6 +151,7 @@ impl GpuContext {
             queue,
             timestamps,
             timestamps_inside_passes,
+            indirect_first_instance,
             lost,
             last_error,
         })

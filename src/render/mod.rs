@@ -16,6 +16,7 @@ pub mod frame;
 mod frame_bindings;
 pub mod ground;
 pub mod knob;
+pub mod layer;
 pub mod material;
 pub mod measure;
 pub mod memory;
@@ -51,7 +52,7 @@ pub use target::{OFFSCREEN_FORMAT, OffscreenTarget};
 use frame_bindings::{DepthTarget, FrameBindings};
 use ground::{GroundBillboards, GroundMaps, GroundTextures};
 use meshes::{MeshPasses, encode_cascades, studio_cascades_key};
-use method::{Bake, DrawCx, Plan, PrepareCx, PrepareView, RenderMethod, SunWork};
+use method::{AfterCx, Bake, DrawCx, Plan, PrepareCx, PrepareView, RenderMethod, SunWork};
 use pipelines::{ColorPipelines, Layouts};
 use shadow::{CascadeMaps, Cascades};
 use sky_visibility::SkyVisibility;
@@ -85,6 +86,8 @@ pub struct Renderer {
     ground_sampler: wgpu::Sampler,
     bindings: Option<FrameBindings>,
     depth: Option<DepthTarget>,
+    /// The trees' layer, made for the first frame that draws into it.
+    layer: Option<layer::TreeLayer>,
     timer: Option<GpuTimer>,
     /// The sun cascades' pass and the main pass's mesh draws.
     meshes: MeshPasses,
@@ -153,6 +156,7 @@ impl Renderer {
             shadow_sampler,
             bindings: None,
             depth: None,
+            layer: None,
             timer: GpuTimer::new(ctx),
             voxel_pipeline: None,
             self_shadow: None,
@@ -475,6 +479,12 @@ impl Renderer {
             },
         )?;
         method.ensure_pipelines(&mut self.bake, ctx, &self.layouts, format)?;
+        if plan.layer {
+            let layer = self
+                .layer
+                .get_or_insert_with(|| layer::TreeLayer::new(&ctx.device));
+            layer.ensure(ctx, width, height, format)?;
+        }
         let self_batches = self.prepare_self_shadow(ctx, frame, &plan, format)?;
         let prepare_ms = prepare_start.elapsed().as_secs_f64() * 1e3 - plan.sun.ms;
 
@@ -576,7 +586,7 @@ impl Renderer {
                 } else {
                     wgpu::Color::BLACK
                 }),
-                !batches.is_empty(),
+                !batches.is_empty() || plan.layer,
                 spans.render_writes(main, true, true),
             );
             pass.set_bind_group(0, &bindings.bind_group, &[]);
@@ -613,6 +623,19 @@ impl Renderer {
                 spans: &spans,
             };
             method.draw(&self.bake, &mut pass, &cx, &mut stats);
+        }
+        if plan.layer
+            && let Some(layer) = &self.layer
+        {
+            let cx = AfterCx {
+                frame_group: &bindings.bind_group,
+                depth,
+                layer,
+                target,
+                format,
+                spans: &spans,
+            };
+            method.draw_after(&self.bake, &mut encoder, &cx, &mut stats);
         }
         if let Some(ss) = self_shadow.filter(|_| !batches.is_empty()) {
             ss.draw_trees(

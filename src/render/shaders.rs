@@ -43,6 +43,7 @@ const LIGHT_BLEND: &str = include_str!("../../shaders/light_blend.wgsl");
 const BLIT: &str = include_str!("../../shaders/blit.wgsl");
 const IMPOSTOR: &str = include_str!("../../shaders/impostor.wgsl");
 const OVERDRAW: &str = include_str!("../../shaders/overdraw.wgsl");
+const LAYER: &str = include_str!("../../shaders/layer.wgsl");
 
 /// A mesh pass's module: frame uniforms, instancing, then the pass's own file.
 fn with_instancing(pass: &str) -> String {
@@ -89,6 +90,7 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("impostor", impostor()),
         ("blit", blit()),
         ("overdraw", overdraw()),
+        ("layer", layer()),
     ]
 }
 
@@ -132,6 +134,11 @@ pub fn texel() -> String {
 /// The overdraw view's heat map: frame uniforms, the sky's full-screen triangle, its file.
 pub fn overdraw() -> String {
     with_frame(&format!("{SKY}\n{OVERDRAW}"))
+}
+
+/// The trees' layer's full-screen passes (no frame uniforms).
+pub fn layer() -> String {
+    LAYER.to_string()
 }
 
 /// The render scale's upscaling pass (no frame uniforms).

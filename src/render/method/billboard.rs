@@ -147,6 +147,7 @@ pub fn prepare(
         impostors: vec![Vec::new(); scene.species_count()],
         billboards: records.len() as u32,
         far: false,
+        layer_batches: 0,
         records,
         stats,
     }

@@ -105,6 +105,7 @@ impl RenderMethod for Geometry {
                 .then(|| (self.runs[0].clone(), g.lists[0].clone())),
             studio_casters: (studio && g.shadows_on).then(|| g.lists[1..].to_vec()),
             sun: SunWork::default(),
+            layer: false,
         })
     }
 

@@ -14,7 +14,7 @@ use std::sync::LazyLock;
 use super::btf::method::{BtfMethod, billboard_casters};
 use super::btf::settings::LOD_COLORS;
 use super::impostor::{ImpostorAssets, ImpostorSettings, ImpostorStats};
-use super::interface::{Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod};
+use super::interface::{AfterCx, Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod};
 use super::kind::Method;
 use crate::Result;
 use crate::model::Level;
@@ -195,6 +195,16 @@ impl RenderMethod for HybridMethod {
             stats.impostor = self.stats;
         };
         self.btf.draw_with(bake, pass, cx, stats, &mut impostors);
+    }
+
+    fn draw_after(
+        &self,
+        bake: &Bake,
+        encoder: &mut wgpu::CommandEncoder,
+        cx: &AfterCx<'_>,
+        stats: &mut FrameStats,
+    ) {
+        self.btf.draw_after(bake, encoder, cx, stats);
     }
 
     fn finish(&self, bake: &Bake, ctx: &GpuContext, wait: bool, stats: &mut FrameStats) {

@@ -174,6 +174,9 @@ pub struct Plan {
     /// and matrices keeps the maps the last one drew.
     pub studio_casters: Option<Vec<Vec<Vec<u32>>>>,
     pub sun: SunWork,
+    /// The method draws its blended trees front to back into the trees' layer after the
+    /// main pass ([`RenderMethod::draw_after`]).
+    pub layer: bool,
 }
 
 impl Plan {
@@ -189,6 +192,7 @@ impl Plan {
             self_shadowed: None,
             studio_casters: None,
             sun,
+            layer: false,
         }
     }
 }
@@ -215,6 +219,18 @@ pub struct DrawCx<'a> {
     /// The frame's timed passes. The method's draws are timed under its name; to time its
     /// parts apart, `spans.rename` names the first part and `spans.mark(pass, name)`
     /// begins each next one.
+    pub spans: &'a PassSpans,
+}
+
+/// What the core lends a method after the main pass: the frame's depth and the trees'
+/// layer, to draw blended trees front to back into ([`crate::render::layer`]).
+pub struct AfterCx<'a> {
+    pub frame_group: &'a wgpu::BindGroup,
+    pub depth: &'a crate::render::frame_bindings::DepthTarget,
+    pub layer: &'a crate::render::layer::TreeLayer,
+    /// The frame's colour target and its format, which the layer is put over.
+    pub target: &'a wgpu::TextureView,
+    pub format: wgpu::TextureFormat,
     pub spans: &'a PassSpans,
 }
 
@@ -293,6 +309,17 @@ pub trait RenderMethod {
         cx: &DrawCx<'_>,
         stats: &mut FrameStats,
     );
+
+    /// Where the plan asked for the trees' layer ([`Plan::layer`]): its passes after the
+    /// main pass, which end with the layer put over the frame.
+    fn draw_after(
+        &self,
+        _bake: &Bake,
+        _encoder: &mut wgpu::CommandEncoder,
+        _cx: &AfterCx<'_>,
+        _stats: &mut FrameStats,
+    ) {
+    }
 
     /// After the frame's submission: what the GPU counted (this frame's when `wait`).
     fn finish(&self, _bake: &Bake, _ctx: &GpuContext, _wait: bool, _stats: &mut FrameStats) {}

@@ -23,7 +23,7 @@ pub mod kind;
 pub mod texel;
 pub mod view;
 
-pub use interface::{Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork};
+pub use interface::{AfterCx, Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork};
 pub use kind::Method;
 pub use view::PrepareView;
 

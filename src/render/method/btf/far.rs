@@ -140,7 +140,9 @@ pub struct FarParamsGpu {
     /// Where each BTF image's mean starts in the tables (one row an image).
     pub means_at: u32,
     pub sky_ambient: [f32; 3],
-    pub _canopy_pad0: u32,
+    /// Batches the billboards are drawn in, front to back, into the trees' layer (0: one
+    /// draw, back to front).
+    pub layer_batches: u32,
     pub ground_ambient: [f32; 3],
     pub _canopy_pad1: u32,
 }
@@ -164,6 +166,15 @@ const SHADE_WORDS: usize = std::mem::size_of::<FarShadeGpu>() / 4;
 /// the light blends, and 1 unused.
 const DRAW_WORDS: u64 = 12;
 
+/// Most batches the billboards are drawn in for the trees' layer; each has its indirect
+/// draw's 4 words after [`DRAW_WORDS`].
+pub const MAX_LAYER_BATCHES: u32 = 16;
+
+/// Batches the billboards are drawn in for the trees' layer, with the opaque pixels found
+/// between them.
+pub const LAYER_BATCHES: u32 = 8;
+const _: () = assert!(LAYER_BATCHES >= 1 && LAYER_BATCHES <= MAX_LAYER_BATCHES);
+
 /// The far trees' buffers and compute pipelines.
 pub struct FarGpu {
     /// The near trees' billboards expanded by `near_build`, one slot per part: the first
@@ -186,6 +197,8 @@ pub struct FarGpu {
     canopy_colours: wgpu::Buffer,
     params: wgpu::Buffer,
     base: FarParamsGpu,
+    /// The frame's [`FarParamsGpu::layer_batches`].
+    batches: u32,
     /// Each tree's VCM factors (`FarShade`, 16 words; uploaded when the sun moves), one bit
     /// per tree (the near ones), then the frame's near draws.
     frame_words: wgpu::Buffer,
@@ -379,7 +392,7 @@ impl FarGpu {
             sun_color: [0.0; 3],
             means_at,
             sky_ambient: [0.0; 3],
-            _canopy_pad0: 0,
+            layer_batches: 0,
             ground_ambient: [0.0; 3],
             _canopy_pad1: 0,
         };
@@ -413,7 +426,7 @@ impl FarGpu {
                 buffer(
                     ctx,
                     "far draw",
-                    DRAW_WORDS * 4,
+                    (DRAW_WORDS + 4 * u64::from(MAX_LAYER_BATCHES)) * 4,
                     U::STORAGE | U::INDIRECT | U::COPY_DST | U::COPY_SRC,
                 ),
                 // Zeroed: no tree has a colour before its first frame in the canopy.
@@ -548,6 +561,7 @@ impl FarGpu {
             canopy_colours,
             params,
             base,
+            batches: 0,
             frame_words,
             frame_word_slots: words,
             draw_args,
@@ -861,6 +875,7 @@ impl FarGpu {
             sun_color: canopy.map_or([0.0; 3], |c| c.lights[0].to_array()),
             sky_ambient: canopy.map_or([0.0; 3], |c| c.lights[1].to_array()),
             ground_ambient: canopy.map_or([0.0; 3], |c| c.lights[2].to_array()),
+            layer_batches: layer_batches(ctx, settings),
             ..self.base
         });
         self.bits = bits;
@@ -967,6 +982,7 @@ impl FarGpu {
             bytemuck::cast_slice(&[6u32, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]),
         );
         self.frame = Some((keys, total as u32, draw_slots as u32));
+        self.batches = params.layer_batches;
         Ok(true)
     }
 
@@ -1060,7 +1076,27 @@ impl FarGpu {
         let made = u64::from(u32::from_le_bytes([args[4], args[5], args[6], args[7]]));
         let record = std::mem::size_of::<BillboardGpu>() as u64;
         let bytes = read_buffer(ctx, &self.sorted, made * record)?;
-        Ok(bytemuck::pod_collect_to_vec(&bytes))
+        let mut records: Vec<BillboardGpu> = bytemuck::pod_collect_to_vec(&bytes);
+        if self.layer_batches() > 0 {
+            records.reverse();
+        }
+        Ok(records)
+    }
+
+    /// The batches this frame's billboards are drawn in, front to back, into the trees'
+    /// layer (0: one draw, back to front over the frame).
+    pub fn layer_batches(&self) -> u32 {
+        self.batches
+    }
+
+    /// Draws batch `k` of [`Self::layer_batches`] (the btf pipeline for the layer already
+    /// set).
+    pub fn draw_batch(&self, pass: &mut wgpu::RenderPass<'_>, k: u32) {
+        if self.frame.is_none() || k >= self.layer_batches() {
+            return;
+        }
+        pass.set_bind_group(1, &self.draw_bind_group, &[]);
+        pass.draw_indirect(&self.draw_args, (DRAW_WORDS + 4 * u64::from(k)) * 4);
     }
 }
 
@@ -1328,6 +1364,17 @@ impl CountReadback {
             *last = Some(n);
         }
         *last
+    }
+}
+
+/// The batches the billboards are drawn in for the trees' layer: [`LAYER_BATCHES`] front to
+/// back; one where indirect draws cannot start past instance 0; 0 (back to front) without
+/// `front_to_back`.
+pub fn layer_batches(ctx: &GpuContext, settings: &BtfSettings) -> u32 {
+    match (settings.front_to_back, ctx.indirect_first_instance) {
+        (false, _) => 0,
+        (true, true) => LAYER_BATCHES,
+        (true, false) => 1,
     }
 }
 

@@ -105,6 +105,13 @@ pub static KNOBS: &[Knob] = &[
         |d, v| d.btf.light_blend = v,
     ),
     Knob::toggle(
+        "front_to_back",
+        "billboards front to back",
+        "draw the billboards nearest first into a layer of their own and skip those behind where it is already opaque; off: back to front over the frame",
+        |d| d.btf.front_to_back,
+        |d, v| d.btf.front_to_back = v,
+    ),
+    Knob::toggle(
         "far_canopy",
         "far canopy",
         "past the distance where a typical crown is narrower than canopy_px pixels, draw the forest as one layer over the ground (its trees' colours, seen from above) instead of a billboard per tree",

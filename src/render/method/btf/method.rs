@@ -11,7 +11,7 @@ use crate::model::mesh::Aabb;
 use crate::render::GpuContext;
 use crate::render::frame::{FrameDesc, FrameStats};
 use crate::render::method::interface::{
-    Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork,
+    AfterCx, Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork,
 };
 use crate::render::method::kind::Method;
 use crate::render::pipelines::Layouts;
@@ -25,6 +25,8 @@ pub struct BtfMethod {
     frame: Option<BtfFrame>,
     runs: Vec<Vec<TreeRun>>,
     pipeline: Option<wgpu::RenderPipeline>,
+    /// The billboards' pipeline into the trees' layer.
+    layer_pipeline: Option<wgpu::RenderPipeline>,
 }
 
 impl BtfMethod {
@@ -35,6 +37,7 @@ impl BtfMethod {
             frame: None,
             runs: Vec::new(),
             pipeline: None,
+            layer_pipeline: None,
         }
     }
 
@@ -103,7 +106,8 @@ impl BtfMethod {
         );
         // The far trees' VCM factors, uploaded after the sun moved.
         sun.ms += shade_ms;
-        let (runs, plan) = plan_geometry(cx.ctx, cx.world, frame, &bf, sun);
+        let (runs, mut plan) = plan_geometry(cx.ctx, cx.world, frame, &bf, sun);
+        plan.layer = bf.layer_batches > 0;
         self.runs = runs;
         self.frame = Some(bf);
         Ok(plan)
@@ -198,6 +202,7 @@ pub(crate) fn geometry_tree_plan(
         self_shadowed: None,
         studio_casters: None,
         sun,
+        layer: false,
     }
 }
 
@@ -269,6 +274,16 @@ pub(crate) fn billboard_pipeline(
     Some(b.pipeline(&ctx.device, &layouts.frame, format).clone())
 }
 
+/// The billboards' pipeline into the trees' layer; None without BTF images.
+pub(crate) fn layer_pipeline(
+    bake: &mut Bake,
+    ctx: &GpuContext,
+    layouts: &Layouts,
+) -> Option<wgpu::RenderPipeline> {
+    let b = bake.btf.as_mut()?;
+    Some(b.layer_pipeline(&ctx.device, &layouts.frame).clone())
+}
+
 /// A prepared BTF frame's draws in the main pass: its geometry `runs`, then its billboards.
 pub(crate) fn draw_frame(
     bake: &Bake,
@@ -335,6 +350,7 @@ impl RenderMethod for BtfMethod {
         format: wgpu::TextureFormat,
     ) -> Result<()> {
         self.pipeline = billboard_pipeline(bake, ctx, layouts, format);
+        self.layer_pipeline = layer_pipeline(bake, ctx, layouts);
         if let Some(b) = bake.btf.as_mut() {
             b.ensure_canopy_pipeline(&ctx.device, &layouts.frame, format);
         }
@@ -360,6 +376,18 @@ impl RenderMethod for BtfMethod {
         stats: &mut FrameStats,
     ) {
         self.draw_with(bake, pass, cx, stats, &mut |_, _| {});
+    }
+
+    fn draw_after(
+        &self,
+        bake: &Bake,
+        encoder: &mut wgpu::CommandEncoder,
+        cx: &AfterCx<'_>,
+        stats: &mut FrameStats,
+    ) {
+        if let (Some(bf), Some(b)) = (&self.frame, &bake.btf) {
+            b.draw_layer(encoder, cx, self.layer_pipeline.as_ref(), bf, stats);
+        }
     }
 
     fn finish(&self, bake: &Bake, ctx: &GpuContext, wait: bool, stats: &mut FrameStats) {

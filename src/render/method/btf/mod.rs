@@ -38,7 +38,7 @@ use crate::model::World;
 use crate::render::GpuContext;
 use crate::render::camera::Frustum;
 use crate::render::frame::FrameStats;
-use crate::render::method::interface::DrawCx;
+use crate::render::method::interface::{AfterCx, DrawCx};
 use crate::render::pipelines::storage_buffer_of;
 use crate::render::timing::PassSpans;
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
@@ -62,6 +62,8 @@ pub struct BtfAssets {
     bind_group: wgpu::BindGroup,
     pipelines: HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
     opacity_pipeline: Option<wgpu::RenderPipeline>,
+    /// The billboards' pipeline into the trees' layer.
+    layer_pipeline: Option<wgpu::RenderPipeline>,
     sun_billboards: wgpu::Buffer,
     sun_capacity: usize,
     sun_bind_group: wgpu::BindGroup,
@@ -85,6 +87,7 @@ impl BtfAssets {
     pub fn forget_pipelines(&mut self) {
         self.pipelines.clear();
         self.opacity_pipeline = None;
+        self.layer_pipeline = None;
         if let Some(c) = self.canopy.as_mut() {
             c.forget_pipeline();
         }
@@ -279,6 +282,7 @@ impl BtfAssets {
             bind_group,
             pipelines: HashMap::new(),
             opacity_pipeline: None,
+            layer_pipeline: None,
             sun_billboards,
             sun_capacity,
             sun_bind_group,
@@ -464,6 +468,7 @@ impl BtfAssets {
             match uploaded {
                 Ok(true) => {
                     out.far = true;
+                    out.layer_batches = f.layer_batches();
                     out.stats.canopy_tiles = canopy_tiles;
                     return (out, shade_ms);
                 }
@@ -476,7 +481,7 @@ impl BtfAssets {
             // Too many near billboards for one binding (or one dispatch) with the trees'
             // slots: this frame is the CPU's alone, which keeps the nearest.
             let all = world.cull(frustum);
-            let (out, sorted) = self.scene.prepare_sorted(
+            let (mut out, sorted) = self.scene.prepare_sorted(
                 &world.tree_data,
                 &all,
                 &view,
@@ -484,7 +489,8 @@ impl BtfAssets {
                 self.max_capacity,
                 hybrid,
             );
-            self.upload_sorted(ctx, &sorted);
+            out.layer_batches = cpu_layer_batches(settings, sorted.len());
+            self.upload_sorted(ctx, &sorted, out.layer_batches > 0);
             return (out, shade_ms);
         }
         if let Some(Some(f)) = self.far.as_mut() {
@@ -502,7 +508,7 @@ impl BtfAssets {
                 &culled[..]
             }
         };
-        let (out, sorted) = self.scene.prepare_sorted(
+        let (mut out, sorted) = self.scene.prepare_sorted(
             &world.tree_data,
             visible,
             &view,
@@ -510,7 +516,8 @@ impl BtfAssets {
             self.max_capacity,
             hybrid,
         );
-        self.upload_sorted(ctx, &sorted);
+        out.layer_batches = cpu_layer_batches(settings, sorted.len());
+        self.upload_sorted(ctx, &sorted, out.layer_batches > 0);
         (out, 0.0)
     }
 
@@ -583,7 +590,7 @@ impl BtfAssets {
 
     /// Uploads a frame's billboards, copied from their chunks straight into the upload
     /// (growing the buffer if needed).
-    fn upload_sorted(&mut self, ctx: &GpuContext, sorted: &SortedBillboards) {
+    fn upload_sorted(&mut self, ctx: &GpuContext, sorted: &SortedBillboards, front_to_back: bool) {
         self.reserve(ctx, sorted.len());
         let n = sorted.len().min(self.capacity);
         let size = (n * std::mem::size_of::<BillboardGpu>()) as u64;
@@ -593,7 +600,7 @@ impl BtfAssets {
         // None only where the write is invalid, which wgpu reports to the device's error
         // handler (as `write_buffer` would).
         if let Some(mut view) = ctx.queue.write_buffer_with(&self.billboards, 0, size) {
-            sorted.write(view.slice(..));
+            sorted.write(view.slice(..), front_to_back);
         }
     }
 
@@ -671,6 +678,11 @@ impl BtfAssets {
                 stats.draw_calls += 1;
             }
         }
+        stats.btf = Some(bf.stats);
+        if bf.layer_batches > 0 {
+            // Drawn front to back after the main pass (`draw_layer`).
+            return;
+        }
         cx.spans.mark(pass, "billboards");
         // Sorted on the GPU with the far trees' billboards, or on the CPU.
         if let Some(pipeline) = pipeline
@@ -689,7 +701,64 @@ impl BtfAssets {
             pass.draw(0..6, 0..bf.billboards);
             stats.draw_calls += 1;
         }
-        stats.btf = Some(bf.stats);
+    }
+
+    /// A frame's billboards drawn front to back into the trees' layer in
+    /// `bf.layer_batches` batches (sorted on the GPU with the far trees' billboards, or on
+    /// the CPU), the pixels it has made opaque marked between batches, then the layer put
+    /// over the frame; all timed as `billboards`.
+    pub(crate) fn draw_layer(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        cx: &AfterCx<'_>,
+        pipeline: Option<&wgpu::RenderPipeline>,
+        bf: &BtfFrame,
+        stats: &mut FrameStats,
+    ) {
+        let batches = bf.layer_batches;
+        let far = self
+            .far
+            .as_ref()
+            .and_then(Option::as_ref)
+            .filter(|_| bf.far);
+        let span = cx.spans.open("billboards");
+        for k in 0..batches {
+            let Some(mut pass) = cx.layer.batch_pass(
+                encoder,
+                cx.depth,
+                k == 0,
+                cx.spans.render_writes(span, k == 0, false),
+            ) else {
+                return;
+            };
+            pass.set_bind_group(0, cx.frame_group, &[]);
+            if let Some(pipeline) = pipeline {
+                pass.set_pipeline(pipeline);
+                match far {
+                    Some(f) => f.draw_batch(&mut pass, k),
+                    None => {
+                        let n = bf.billboards;
+                        let (first, end) =
+                            (batch_start(n, k, batches), batch_start(n, k + 1, batches));
+                        if end > first {
+                            pass.set_bind_group(1, &self.bind_group, &[]);
+                            pass.draw(0..6, first..end);
+                        }
+                    }
+                }
+                stats.draw_calls += 1;
+            }
+            drop(pass);
+            if k + 1 < batches {
+                cx.layer.mark_opaque(encoder, cx.depth);
+            }
+        }
+        cx.layer.composite(
+            encoder,
+            cx.target,
+            cx.format,
+            cx.spans.render_writes(span, false, true),
+        );
     }
 
     /// Uploads a frame's billboard records (back to front), growing the buffer if needed.
@@ -758,6 +827,18 @@ impl BtfAssets {
             .or_insert_with(|| pipelines_btf::build_pipeline(device, frame_layout, layout, format))
     }
 
+    /// The billboards' pipeline into the trees' layer.
+    pub fn layer_pipeline(
+        &mut self,
+        device: &wgpu::Device,
+        frame_layout: &wgpu::BindGroupLayout,
+    ) -> &wgpu::RenderPipeline {
+        let layout = &self.layout;
+        self.layer_pipeline.get_or_insert_with(|| {
+            pipelines_btf::build_layer_pipeline(device, frame_layout, layout)
+        })
+    }
+
     pub fn bind_group(&self) -> &wgpu::BindGroup {
         &self.bind_group
     }
@@ -765,6 +846,21 @@ impl BtfAssets {
     /// Texel sizes of one species' levels, for tests and tools.
     pub fn texel_sizes(&self, species: usize) -> Option<LevelTexels> {
         self.scene.texel_sizes(species)
+    }
+}
+
+/// The first of `n` records in batch `k` of `batches` (equal shares; `k == batches`: `n`).
+fn batch_start(n: u32, k: u32, batches: u32) -> u32 {
+    (u64::from(n) * u64::from(k) / u64::from(batches.max(1))) as u32
+}
+
+/// The batches the CPU's billboards (`count`) are drawn in for the trees' layer (0: back to
+/// front in the main pass).
+fn cpu_layer_batches(settings: &BtfSettings, count: usize) -> u32 {
+    if settings.front_to_back && count > 0 {
+        far::LAYER_BATCHES
+    } else {
+        0
     }
 }
 

@@ -54,6 +54,24 @@ pub(super) fn build_pipeline(
     )
 }
 
+/// The billboards drawn front to back into the trees' layer ("under",
+/// [`crate::render::layer`]), depth-tested against the frame's depth.
+pub(super) fn build_layer_pipeline(
+    device: &wgpu::Device,
+    frame_layout: &wgpu::BindGroupLayout,
+    btf_layout: &wgpu::BindGroupLayout,
+) -> wgpu::RenderPipeline {
+    billboard_pipeline(
+        device,
+        [frame_layout, btf_layout],
+        ("btf.wgsl", crate::render::shaders::btf()),
+        "fs_billboard",
+        crate::render::layer::LAYER_FORMAT,
+        crate::render::layer::UNDER,
+        (crate::render::DEPTH_FORMAT, wgpu::CompareFunction::Greater),
+    )
+}
+
 /// A pipeline drawing the billboards of `billboard.wgsl` with `fragment` of the module
 /// `source` (named, source), blended by `blend`,
 /// depth-tested (never written) against `depth`.

@@ -78,6 +78,10 @@ pub struct BtfSettings {
     /// `lod_scale` or more: wherever the tree level is drawn. Above 0 every tree is
     /// prepared on the CPU (`gpu_far` and the far canopy are not used).
     pub impostor_px: f32,
+    /// The billboards are drawn front to back into the trees' layer, and where it is
+    /// opaque the farther ones are skipped ([`crate::render::layer`]); off: back to front
+    /// over the frame.
+    pub front_to_back: bool,
 }
 
 /// The default [`BtfSettings::light_gain`]. Bench, 320x180, 3 frames, mean FLIP against
@@ -113,6 +117,7 @@ impl Default for BtfSettings {
             far_canopy: true,
             canopy_px: CANOPY_PX,
             impostor_px: IMPOSTOR_PX,
+            front_to_back: false,
         }
     }
 }

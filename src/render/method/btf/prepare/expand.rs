@@ -59,14 +59,17 @@ impl SortedBillboards {
         debug_assert_eq!(at % SIZE, 0);
     }
 
-    /// Writes the records back to front into `out` as bytes (as many as it holds).
+    /// Writes the records back to front into `out` as bytes (as many as it holds), or
+    /// front to back (the nearest first) where `front_to_back`.
     /// (`wgpu::WriteOnly` of a slice is not `Send`, so this runs on one thread.)
-    pub fn write(&self, mut out: wgpu::WriteOnly<'_, [u8]>) {
+    pub fn write(&self, mut out: wgpu::WriteOnly<'_, [u8]>, front_to_back: bool) {
         const SIZE: usize = std::mem::size_of::<BillboardGpu>();
-        let count = (out.len() / SIZE).min(self.len());
+        let n = self.len();
+        let count = (out.len() / SIZE).min(n);
         for k in 0..count {
+            let at = if front_to_back { n - 1 - k } else { k };
             out.slice(k * SIZE..(k + 1) * SIZE)
-                .copy_from_slice(bytemuck::bytes_of(self.get(k)));
+                .copy_from_slice(bytemuck::bytes_of(self.get(at)));
         }
     }
 }

@@ -102,6 +102,9 @@ pub struct BtfFrame {
     /// them with these, drawing them all (the far ones are not counted in `billboards` nor
     /// `stats` until read back).
     pub far: bool,
+    /// The billboards are drawn front to back into the trees' layer in this many batches
+    /// (0: back to front over the frame, in the main pass).
+    pub layer_batches: u32,
     pub stats: BtfStats,
 }
 
@@ -580,6 +583,7 @@ impl BtfScene {
             impostors: vec![Vec::new(); self.species.len()],
             billboards: 0,
             far: false,
+            layer_batches: 0,
             records: Vec::new(),
             stats: BtfStats {
                 vcm: self.vcm.is_some() && settings.vcm,
