@@ -77,26 +77,12 @@ fn check(ctx: &GpuContext, renderer: &mut Renderer, frame: &FrameDesc, what: &st
     let (bare, _) = renderer
         .render_image(ctx, &frame, SIZE.0, SIZE.1, 1)
         .unwrap();
-    let mask: Vec<bool> = off
-        .pixels()
-        .zip(bare.pixels())
-        .map(|(a, b)| a.0.iter().zip(b.0.iter()).any(|(x, y)| x.abs_diff(*y) > 4))
-        .collect();
-    let covered = mask.iter().filter(|&&m| m).count();
+    let (mean, covered, frame_mean) = flip_over_trees(&off, &on, &bare);
     assert!(covered > 4000, "the trees cover only {covered} pixels");
-    let flip = canopy::metrics::flip(&rgb(&off), &rgb(&on)).unwrap();
-    let sum: f64 = flip
-        .errors
-        .iter()
-        .zip(&mask)
-        .filter(|(_, m)| **m)
-        .map(|(e, _)| f64::from(*e))
-        .sum();
-    let mean = (sum / covered as f64) as f32;
     let (b_off, b_on) = (s_off.btf.unwrap(), s_on.btf.unwrap());
     eprintln!(
         "{what}: mean FLIP {mean:.4} over the trees ({covered} pixels), {:.4} over the frame; {} billboards; draw calls {} -> {}",
-        flip.stats.mean,
+        frame_mean,
         b_on.total_billboards(),
         s_off.draw_calls,
         s_on.draw_calls

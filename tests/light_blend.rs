@@ -77,27 +77,10 @@ fn off_and_on(
     let (bare, _) = renderer
         .render_image(ctx, &frame, SIZE.0, SIZE.1, 1)
         .unwrap();
-    let mask: Vec<bool> = off
-        .pixels()
-        .zip(bare.pixels())
-        .map(|(a, b)| a.0.iter().zip(b.0.iter()).any(|(x, y)| x.abs_diff(*y) > 4))
-        .collect();
-    let covered = mask.iter().filter(|&&m| m).count();
+    let (mean, covered, frame_mean) = flip_over_trees(&off, &on, &bare);
     assert!(covered > 2000, "the trees cover only {covered} pixels");
-    let flip = canopy::metrics::flip(&rgb(&off), &rgb(&on)).unwrap();
-    let sum: f64 = flip
-        .errors
-        .iter()
-        .zip(&mask)
-        .filter(|(_, m)| **m)
-        .map(|(e, _)| f64::from(*e))
-        .sum();
     eprintln!("trees cover {covered} of {} pixels", SIZE.0 * SIZE.1);
-    (
-        ((sum / covered as f64) as f32, flip.stats.mean),
-        s_off.btf.unwrap(),
-        s_on.btf.unwrap(),
-    )
+    ((mean, frame_mean), s_off.btf.unwrap(), s_on.btf.unwrap())
 }
 
 #[test]

@@ -260,3 +260,28 @@ pub fn against_reference(
     }
     out
 }
+
+/// Mean FLIP between `a` and `b` over the pixels the trees cover (where `a` differs from
+/// `bare`, the same frame without trees, by more than 4 levels in a channel), so that a
+/// bound is not thinned by bare terrain: (that mean, those pixels, the whole frame's mean).
+pub fn flip_over_trees(a: &RgbaImage, b: &RgbaImage, bare: &RgbaImage) -> (f32, usize, f32) {
+    let mask: Vec<bool> = a
+        .pixels()
+        .zip(bare.pixels())
+        .map(|(p, q)| p.0.iter().zip(q.0.iter()).any(|(x, y)| x.abs_diff(*y) > 4))
+        .collect();
+    let covered = mask.iter().filter(|&&m| m).count();
+    let flip = canopy::metrics::flip(&rgb(a), &rgb(b)).unwrap();
+    let sum: f64 = flip
+        .errors
+        .iter()
+        .zip(&mask)
+        .filter(|(_, m)| **m)
+        .map(|(e, _)| f64::from(*e))
+        .sum();
+    (
+        (sum / covered.max(1) as f64) as f32,
+        covered,
+        flip.stats.mean,
+    )
+}
