@@ -31,6 +31,8 @@ pub const UNDER: wgpu::BlendComponent = wgpu::BlendComponent {
 /// The layer's target (sized to the frame), its bind group and its two full-screen passes.
 pub struct TreeLayer {
     layout: wgpu::BindGroupLayout,
+    module: wgpu::ShaderModule,
+    pipeline_layout: wgpu::PipelineLayout,
     opaque: wgpu::RenderPipeline,
     composite: HashMap<wgpu::TextureFormat, wgpu::RenderPipeline>,
     target: Option<LayerTarget>,
@@ -88,6 +90,8 @@ impl TreeLayer {
         });
         Self {
             layout,
+            module,
+            pipeline_layout,
             opaque,
             composite: HashMap::new(),
             target: None,
@@ -145,23 +149,11 @@ impl TreeLayer {
         device: &wgpu::Device,
         format: wgpu::TextureFormat,
     ) -> wgpu::RenderPipeline {
-        let module = wgsl_module(device, "layer.wgsl", &super::shaders::layer());
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("trees' layer over the frame"),
-            bind_group_layouts: &[Some(&self.layout)],
-            immediate_size: 0,
-        });
-        // Premultiplied "over".
-        let over = wgpu::BlendComponent {
-            src_factor: wgpu::BlendFactor::One,
-            dst_factor: wgpu::BlendFactor::OneMinusSrcAlpha,
-            operation: wgpu::BlendOperation::Add,
-        };
         device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("trees' layer over the frame"),
-            layout: Some(&layout),
+            layout: Some(&self.pipeline_layout),
             vertex: wgpu::VertexState {
-                module: &module,
+                module: &self.module,
                 entry_point: Some("vs_layer"),
                 compilation_options: Default::default(),
                 buffers: &[],
@@ -170,15 +162,13 @@ impl TreeLayer {
             depth_stencil: None,
             multisample: Default::default(),
             fragment: Some(wgpu::FragmentState {
-                module: &module,
+                module: &self.module,
                 entry_point: Some("fs_composite"),
                 compilation_options: Default::default(),
                 targets: &[Some(wgpu::ColorTargetState {
                     format,
-                    blend: Some(wgpu::BlendState {
-                        color: over,
-                        alpha: over,
-                    }),
+                    // Premultiplied "over".
+                    blend: Some(wgpu::BlendState::PREMULTIPLIED_ALPHA_BLENDING),
                     write_mask: wgpu::ColorWrites::ALL,
                 })],
             }),
@@ -212,14 +202,7 @@ impl TreeLayer {
                     store: wgpu::StoreOp::Store,
                 },
             })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &depth.view,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Load,
-                    store: wgpu::StoreOp::Store,
-                }),
-                stencil_ops: None,
-            }),
+            depth_stencil_attachment: Some(kept_depth(depth)),
             timestamp_writes,
             occlusion_query_set: None,
             multiview_mask: None,
@@ -234,14 +217,7 @@ impl TreeLayer {
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("trees' layer: opaque pixels"),
             color_attachments: &[],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &depth.view,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Load,
-                    store: wgpu::StoreOp::Store,
-                }),
-                stencil_ops: None,
-            }),
+            depth_stencil_attachment: Some(kept_depth(depth)),
             timestamp_writes: None,
             occlusion_query_set: None,
             multiview_mask: None,
@@ -282,5 +258,17 @@ impl TreeLayer {
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &layer.bind_group, &[]);
         pass.draw(0..3, 0..1);
+    }
+}
+
+/// The frame's depth, loaded and kept for the next pass.
+fn kept_depth(depth: &DepthTarget) -> wgpu::RenderPassDepthStencilAttachment<'_> {
+    wgpu::RenderPassDepthStencilAttachment {
+        view: &depth.view,
+        depth_ops: Some(wgpu::Operations {
+            load: wgpu::LoadOp::Load,
+            store: wgpu::StoreOp::Store,
+        }),
+        stencil_ops: None,
     }
 }

@@ -8,6 +8,8 @@
 //! method the frame names ([`Renderer::render`]): the targets, the timestamps, the frame
 //! uniforms and bind group, the sun cascades, the ground maps (allocated when a method
 //! first needs them), the sky, the terrain and the reference's sky visibility and tree maps.
+//! (Just over 800 lines: [`Renderer::render`] is the frame's one sequence of passes and
+//! reads best whole.)
 
 pub mod camera;
 pub mod consts;

@@ -1,5 +1,6 @@
-//! The `btf` method's far trees on the GPU. Most trees
-//! of a large forest are far enough to be one tree-level billboard each, and preparing
+//! The `btf` method's far trees on the GPU (over 800 lines: the buffers, their growth and
+//! the bind groups all follow one layout of `shaders/btf_far.wgsl`, kept in one place).
+//! Most trees of a large forest are far enough to be one tree-level billboard each, and preparing
 //! those on the CPU (level choice, view and light blends, VCM factors, the sort back to
 //! front) costs tens of milliseconds per 100,000 trees. Here the CPU only finds the near
 //! trees, through a grid over the forest: those within the distance where a tree may not
@@ -875,7 +876,7 @@ impl FarGpu {
             sun_color: canopy.map_or([0.0; 3], |c| c.lights[0].to_array()),
             sky_ambient: canopy.map_or([0.0; 3], |c| c.lights[1].to_array()),
             ground_ambient: canopy.map_or([0.0; 3], |c| c.lights[2].to_array()),
-            layer_batches: layer_batches(ctx, settings),
+            layer_batches: layer_batches(settings, ctx.indirect_first_instance),
             ..self.base
         });
         self.bits = bits;
@@ -1368,10 +1369,10 @@ impl CountReadback {
 }
 
 /// The batches the billboards are drawn in for the trees' layer: [`LAYER_BATCHES`] front to
-/// back; one where indirect draws cannot start past instance 0; 0 (back to front) without
-/// `front_to_back`.
-pub fn layer_batches(ctx: &GpuContext, settings: &BtfSettings) -> u32 {
-    match (settings.front_to_back, ctx.indirect_first_instance) {
+/// back; one where the draws cannot start past instance 0 (`first_instance` false: indirect
+/// draws without `INDIRECT_FIRST_INSTANCE`); 0 (back to front) without `front_to_back`.
+pub fn layer_batches(settings: &BtfSettings, first_instance: bool) -> u32 {
+    match (settings.front_to_back, first_instance) {
         (false, _) => 0,
         (true, true) => LAYER_BATCHES,
         (true, false) => 1,

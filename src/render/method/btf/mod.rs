@@ -9,6 +9,7 @@ mod atlas;
 mod billboard;
 pub mod far;
 pub mod far_canopy;
+mod front_to_back;
 pub mod knobs;
 pub mod light_blend;
 pub mod method;
@@ -38,7 +39,7 @@ use crate::model::World;
 use crate::render::GpuContext;
 use crate::render::camera::Frustum;
 use crate::render::frame::FrameStats;
-use crate::render::method::interface::{AfterCx, DrawCx};
+use crate::render::method::interface::DrawCx;
 use crate::render::pipelines::storage_buffer_of;
 use crate::render::timing::PassSpans;
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
@@ -489,7 +490,7 @@ impl BtfAssets {
                 self.max_capacity,
                 hybrid,
             );
-            out.layer_batches = cpu_layer_batches(settings, sorted.len());
+            out.layer_batches = front_to_back::cpu_layer_batches(settings, sorted.len());
             self.upload_sorted(ctx, &sorted, out.layer_batches > 0);
             return (out, shade_ms);
         }
@@ -516,7 +517,7 @@ impl BtfAssets {
             self.max_capacity,
             hybrid,
         );
-        out.layer_batches = cpu_layer_batches(settings, sorted.len());
+        out.layer_batches = front_to_back::cpu_layer_batches(settings, sorted.len());
         self.upload_sorted(ctx, &sorted, out.layer_batches > 0);
         (out, 0.0)
     }
@@ -703,64 +704,6 @@ impl BtfAssets {
         }
     }
 
-    /// A frame's billboards drawn front to back into the trees' layer in
-    /// `bf.layer_batches` batches (sorted on the GPU with the far trees' billboards, or on
-    /// the CPU), the pixels it has made opaque marked between batches, then the layer put
-    /// over the frame; all timed as `billboards`.
-    pub(crate) fn draw_layer(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        cx: &AfterCx<'_>,
-        pipeline: Option<&wgpu::RenderPipeline>,
-        bf: &BtfFrame,
-        stats: &mut FrameStats,
-    ) {
-        let batches = bf.layer_batches;
-        let far = self
-            .far
-            .as_ref()
-            .and_then(Option::as_ref)
-            .filter(|_| bf.far);
-        let span = cx.spans.open("billboards");
-        for k in 0..batches {
-            let Some(mut pass) = cx.layer.batch_pass(
-                encoder,
-                cx.depth,
-                k == 0,
-                cx.spans.render_writes(span, k == 0, false),
-            ) else {
-                return;
-            };
-            pass.set_bind_group(0, cx.frame_group, &[]);
-            if let Some(pipeline) = pipeline {
-                pass.set_pipeline(pipeline);
-                match far {
-                    Some(f) => f.draw_batch(&mut pass, k),
-                    None => {
-                        let n = bf.billboards;
-                        let (first, end) =
-                            (batch_start(n, k, batches), batch_start(n, k + 1, batches));
-                        if end > first {
-                            pass.set_bind_group(1, &self.bind_group, &[]);
-                            pass.draw(0..6, first..end);
-                        }
-                    }
-                }
-                stats.draw_calls += 1;
-            }
-            drop(pass);
-            if k + 1 < batches {
-                cx.layer.mark_opaque(encoder, cx.depth);
-            }
-        }
-        cx.layer.composite(
-            encoder,
-            cx.target,
-            cx.format,
-            cx.spans.render_writes(span, false, true),
-        );
-    }
-
     /// Uploads a frame's billboard records (back to front), growing the buffer if needed.
     pub fn upload(&mut self, ctx: &GpuContext, records: &[BillboardGpu]) {
         self.reserve(ctx, records.len());
@@ -846,21 +789,6 @@ impl BtfAssets {
     /// Texel sizes of one species' levels, for tests and tools.
     pub fn texel_sizes(&self, species: usize) -> Option<LevelTexels> {
         self.scene.texel_sizes(species)
-    }
-}
-
-/// The first of `n` records in batch `k` of `batches` (equal shares; `k == batches`: `n`).
-fn batch_start(n: u32, k: u32, batches: u32) -> u32 {
-    (u64::from(n) * u64::from(k) / u64::from(batches.max(1))) as u32
-}
-
-/// The batches the CPU's billboards (`count`) are drawn in for the trees' layer (0: back to
-/// front in the main pass).
-fn cpu_layer_batches(settings: &BtfSettings, count: usize) -> u32 {
-    if settings.front_to_back && count > 0 {
-        far::LAYER_BATCHES
-    } else {
-        0
     }
 }
 
