@@ -1,11 +1,11 @@
 // The `btf` method's light blends, made again when the sun moves: for each tree-level image
 // set, yaw bin and view sample, the 3 light images a tree of that yaw would blend, summed
 // with their weights (normalised to 1; the billboard scales back by their sum) into one
-// image of the same texture array, in layers after the baked images. One pass per mip
-// level and layer of the blends; each image of the layer is an instanced quad over its
-// square, each texel the weighted sum of the same texel of the same mip level of the 3
-// baked images (the mips are box filters, linear, so the blend of each level is the level
-// of the blend). `BTF_ATLAS_SIDE` is prepended by src/render/shaders.rs.
+// image of the same texture array, in layers after the baked images. One compute pass:
+// a dispatch per mip level over every texel of the blends' layers, each texel the weighted
+// sum of the same texel of the same mip level of the 3 baked images (the mips are box
+// filters, linear, so the blend of each level is the level of the blend), written as 8-bit
+// sRGB. `BTF_ATLAS_SIDE` is prepended by src/render/shaders.rs.
 
 // One blended image: the baked images of its 3 lights (indices into the atlas) and their
 // weights, summing to 1 (0 for a culled light).
@@ -14,33 +14,22 @@ struct BlendImage {
     weight: vec4<f32>,
 }
 
+// What one dispatch writes: the blended images (counted from the one at the first blend
+// layer's first slot) and the mip level.
+struct BlendLevel {
+    count: u32,
+    mip: u32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
 @group(0) @binding(0) var<storage, read> blend_images: array<BlendImage>;
-// The baked images' layers alone (the blends' layers are the target).
+// The baked images' layers alone, read as sRGB (decoded to linear).
 @group(0) @binding(1) var btf_images: texture_2d_array<f32>;
-
-struct BlendOut {
-    @builtin(position) clip: vec4<f32>,
-    @location(0) @interpolate(flat) image: u32,
-    @location(1) @interpolate(flat) mip: u32,
-}
-
-// Instance: the blended image, counted from the first (which starts a layer); vertex: 6 a
-// quad, the mip level drawn being `vertex_index / 6` (the draw's first vertex says which).
-@vertex
-fn vs_blend(@builtin(vertex_index) vi: u32, @builtin(instance_index) image: u32) -> BlendOut {
-    var xs = array<f32, 6>(0.0, 1.0, 1.0, 0.0, 1.0, 0.0);
-    var ys = array<f32, 6>(0.0, 0.0, 1.0, 0.0, 1.0, 1.0);
-    let corner = vec2<f32>(xs[vi % 6u], ys[vi % 6u]);
-    let slot = image % (BTF_ATLAS_SIDE * BTF_ATLAS_SIDE);
-    let cell = vec2<f32>(f32(slot % BTF_ATLAS_SIDE), f32(slot / BTF_ATLAS_SIDE));
-    // Texture rows run down, clip space up.
-    let t = (cell + corner) / f32(BTF_ATLAS_SIDE);
-    var out: BlendOut;
-    out.clip = vec4<f32>(t.x * 2.0 - 1.0, 1.0 - t.y * 2.0, 0.0, 1.0);
-    out.image = image;
-    out.mip = vi / 6u;
-    return out;
-}
+// The blends' layers at this dispatch's mip level, written as plain 8-bit values (the
+// texels are sRGB-encoded here).
+@group(0) @binding(2) var blends: texture_storage_2d_array<rgba8unorm, write>;
+@group(0) @binding(3) var<uniform> level: BlendLevel;
 
 // Texel `local` of image `index` at level `mip` (`res` texels a side there).
 fn btf_texel(index: u32, local: vec2<u32>, mip: u32, res: u32) -> vec4<f32> {
@@ -50,18 +39,33 @@ fn btf_texel(index: u32, local: vec2<u32>, mip: u32, res: u32) -> vec4<f32> {
     return textureLoad(btf_images, cell * res + local, i32(index / per_layer), i32(mip));
 }
 
-@fragment
-fn fs_blend(in: BlendOut) -> @location(0) vec4<f32> {
-    let res = max(textureDimensions(btf_images, i32(in.mip)).x / BTF_ATLAS_SIDE, 1u);
-    let slot = in.image % (BTF_ATLAS_SIDE * BTF_ATLAS_SIDE);
-    let cell = vec2<u32>(slot % BTF_ATLAS_SIDE, slot / BTF_ATLAS_SIDE);
-    let local = min(vec2<u32>(in.clip.xy) - cell * res, vec2<u32>(res - 1u));
-    let b = blend_images[in.image];
+// Linear `x` as its 8-bit sRGB code (rounded to nearest), as a unorm value a quarter code
+// above it: the same code whether the store rounds or truncates (both are allowed).
+fn srgb_code(x: vec3<f32>) -> vec3<f32> {
+    let c = clamp(x, vec3<f32>(0.0), vec3<f32>(1.0));
+    let s = select(1.055 * pow(c, vec3<f32>(1.0 / 2.4)) - 0.055, c * 12.92, c <= vec3<f32>(0.0031308));
+    return (round(s * 255.0) + 0.25) / 255.0;
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn cs_blend(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = textureDimensions(blends);
+    if id.x >= size.x || id.y >= size.y || id.z >= textureNumLayers(blends) {
+        return;
+    }
+    let res = max(size.x / BTF_ATLAS_SIDE, 1u);
+    let cell = id.xy / res;
+    let local = id.xy - cell * res;
+    let image = id.z * BTF_ATLAS_SIDE * BTF_ATLAS_SIDE + cell.y * BTF_ATLAS_SIDE + cell.x;
     var sum = vec4<f32>(0.0);
-    for (var j = 0; j < 3; j++) {
-        if b.weight[j] > 0.0 {
-            sum += b.weight[j] * btf_texel(b.source[j], local, in.mip, res);
+    if image < level.count {
+        let b = blend_images[image];
+        for (var j = 0; j < 3; j++) {
+            if b.weight[j] > 0.0 {
+                sum += b.weight[j] * btf_texel(b.source[j], local, level.mip, res);
+            }
         }
     }
-    return sum;
+    let alpha = (round(clamp(sum.a, 0.0, 1.0) * 255.0) + 0.25) / 255.0;
+    textureStore(blends, id.xy, id.z, vec4<f32>(srgb_code(sum.rgb), alpha));
 }

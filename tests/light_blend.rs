@@ -15,10 +15,14 @@ use common::*;
 
 /// Mean FLIP between the blends and each billboard's own blend where no yaw is quantised
 /// (every tree at yaw 0, the centre of bin 0): only the blends' 8-bit sRGB texels differ.
-/// Measured on lavapipe (llvmpipe 15, 2026-11-27) over the trees' pixels 0.0052, over the
-/// whole frame 0.0012 (stored as 16-bit floats instead, 0.0009 and 0.0002: the rest is the
-/// 8-bit rounding). (tree pixels, whole frame)
-const UNQUANTISED_MAX_MEAN_FLIP: (f32, f32) = (0.007, 0.002);
+/// Measured on lavapipe (llvmpipe 15, 2026-11-28, the blends encoded by the compute shader,
+/// rounded to the nearest code) over the trees' pixels 0.0069, over the whole frame 0.0015;
+/// 0.0054 and 0.0012 when lavapipe's render targets encoded them (its own sRGB encode,
+/// nearer its sampler's decode than exact rounding). Against the geometry reference the
+/// dense stand measures the same either way (tests/front_to_back.rs, 0.0805). Stored as
+/// 16-bit floats instead, 0.0009 and 0.0002: the rest is the 8-bit rounding. (tree
+/// pixels, whole frame)
+const UNQUANTISED_MAX_MEAN_FLIP: (f32, f32) = (0.008, 0.002);
 
 /// The same with random yaws: the yaw bins' own cost on top (the sun in a tree's frame off
 /// by up to half a bin, 11.25 degrees at 16 bins). Measured on lavapipe (2026-11-27) over the

@@ -176,6 +176,56 @@ pub const MAX_LAYER_BATCHES: u32 = 16;
 pub const LAYER_BATCHES: u32 = 8;
 const _: () = assert!(LAYER_BATCHES >= 1 && LAYER_BATCHES <= MAX_LAYER_BATCHES);
 
+/// A record buffer is given back only above this size.
+const SHRINK_MIN_BYTES: u64 = 4 << 20;
+
+/// The frames and the seconds a window of [`ShrinkWindow`] spans, both at least.
+const SHRINK_FRAMES: u32 = 8;
+const SHRINK_SECONDS: f64 = 5.0;
+
+/// The most slots each record buffer needed over a window of frames (near records in
+/// their two bindings, records, sorted): a larger frame's buffers are given back once a
+/// whole window needed a quarter of them or less.
+struct ShrinkWindow {
+    began: std::time::Instant,
+    frames: u32,
+    peak: [u64; 4],
+    /// The window's length, at least (frames, seconds), and the smallest buffer given
+    /// back.
+    frames_min: u32,
+    seconds_min: f64,
+    min_bytes: u64,
+}
+
+impl ShrinkWindow {
+    fn new() -> Self {
+        Self {
+            began: std::time::Instant::now(),
+            frames: 0,
+            peak: [0; 4],
+            frames_min: SHRINK_FRAMES,
+            seconds_min: SHRINK_SECONDS,
+            min_bytes: SHRINK_MIN_BYTES,
+        }
+    }
+
+    /// Adds a frame's needs; at the window's end returns its peaks and begins the next.
+    fn observe(&mut self, needs: [u64; 4]) -> Option<[u64; 4]> {
+        for (p, n) in self.peak.iter_mut().zip(needs) {
+            *p = (*p).max(n);
+        }
+        self.frames += 1;
+        if self.frames < self.frames_min || self.began.elapsed().as_secs_f64() < self.seconds_min {
+            return None;
+        }
+        let peak = self.peak;
+        self.began = std::time::Instant::now();
+        self.frames = 0;
+        self.peak = [0; 4];
+        Some(peak)
+    }
+}
+
 /// The far trees' buffers and compute pipelines.
 pub struct FarGpu {
     /// The near trees' billboards expanded by `near_build`, one slot per part: the first
@@ -185,6 +235,9 @@ pub struct FarGpu {
     near_slots: [u64; 2],
     /// Near slots the first binding takes (one binding's records).
     near_room: u64,
+    /// The most slots the sized buffers needed lately, to give back what a larger frame
+    /// left.
+    shrink: ShrinkWindow,
     /// The sun the shades were read for (None: not uploaded yet).
     shade_sun: Option<Vec3>,
     tree_count: usize,
@@ -553,6 +606,7 @@ impl FarGpu {
             near_records: [near_first, near_second],
             near_slots: [0; 2],
             near_room: limit,
+            shrink: ShrinkWindow::new(),
             shade_sun: None,
             tree_count: n,
             species: species[..n].to_vec(),
@@ -630,7 +684,15 @@ impl FarGpu {
         let sorted = total.min(self.limit);
         let words = u64::from(self.base.draws_at) + 4 * draws;
         let [first, second] = self.near_split(expanded);
-        if slots <= self.record_slots
+        use wgpu::BufferUsages as U;
+        // Half as much again, so that a growing frame does not rebind every time.
+        let grow = |n: u64| (n + n / 2).max(1024);
+        let shrunk = match self.shrink.observe([first, second, slots, sorted]) {
+            Some(peak) => self.shrink_to(ctx, peak, grow)?,
+            None => false,
+        };
+        if !shrunk
+            && slots <= self.record_slots
             && first <= self.near_slots[0]
             && second <= self.near_slots[1]
             && keys <= self.key_slots
@@ -639,9 +701,6 @@ impl FarGpu {
         {
             return Ok(());
         }
-        use wgpu::BufferUsages as U;
-        // Half as much again, so that a growing frame does not rebind every time.
-        let grow = |n: u64| (n + n / 2).max(1024);
         let max_words = ctx.device.limits().max_storage_buffer_binding_size / 4;
         if words > self.frame_word_slots {
             let word_slots = (u64::from(self.base.draws_at) + 4 * grow(draws))
@@ -883,6 +942,67 @@ impl FarGpu {
         (near, shade_ms)
     }
 
+    /// Replaces the record buffers (near records, records, sorted) whose slots pass four
+    /// times what the last window of frames needed at most (`peak`, in the order of
+    /// [`ShrinkWindow::observe`]) by ones sized to that peak; true if any was. Each frame
+    /// writes them whole before reading, so nothing is copied.
+    fn shrink_to(
+        &mut self,
+        ctx: &GpuContext,
+        peak: [u64; 4],
+        grow: impl Fn(u64) -> u64,
+    ) -> Result<bool> {
+        use wgpu::BufferUsages as U;
+        let record = std::mem::size_of::<BillboardGpu>() as u64;
+        let oversized = |slots: u64, peak: u64| {
+            slots * record >= self.shrink.min_bytes && slots > 4 * grow(peak)
+        };
+        let mut shrunk = false;
+        for b in 0..2 {
+            if oversized(self.near_slots[b], peak[b]) {
+                let near_slots = grow(peak[b]).min(self.near_room.max(peak[b]));
+                self.near_records[b] = ctx.checked("allocating the near trees' records", || {
+                    buffer(ctx, "near records", near_slots * record, U::STORAGE)
+                })?;
+                self.near_slots[b] = near_slots;
+                shrunk = true;
+            }
+        }
+        if oversized(self.record_slots, peak[2]) {
+            let record_slots = grow(peak[2]).min(self.limit.max(peak[2]));
+            self.records = ctx.checked("allocating the billboards' records", || {
+                buffer(
+                    ctx,
+                    "far records",
+                    record_slots * record,
+                    U::STORAGE | U::COPY_DST,
+                )
+            })?;
+            self.record_slots = record_slots;
+            shrunk = true;
+        }
+        if oversized(self.sorted_slots, peak[3]) {
+            let sorted_slots = grow(peak[3]).min(self.limit);
+            self.sorted = ctx.checked("allocating the sorted billboards", || {
+                buffer(
+                    ctx,
+                    "far sorted",
+                    sorted_slots * record,
+                    U::STORAGE | U::COPY_SRC,
+                )
+            })?;
+            self.sorted_slots = sorted_slots;
+            shrunk = true;
+        }
+        if shrunk {
+            log::debug!(
+                "btf: far trees' record buffers shrunk to {} MB",
+                self.bytes() as f64 / 1e6
+            );
+        }
+        Ok(shrunk)
+    }
+
     /// The slots of `expanded` near billboards each binding takes: the first `near_room`,
     /// the second the rest.
     fn near_split(&self, expanded: u64) -> [u64; 2] {
@@ -904,6 +1024,17 @@ impl FarGpu {
     pub(crate) fn set_near_room(&mut self, slots: u64) {
         self.near_room = slots.clamp(1, self.limit);
         self.base.near_room = self.near_room as u32;
+    }
+
+    /// Grows the record buffers for `expanded` near slots, and ends the window of frames
+    /// that gives them back at every frame, for any size (tests).
+    #[cfg(test)]
+    pub(crate) fn grow_then_shrink_each_frame(&mut self, ctx: &GpuContext, expanded: u64) {
+        self.reserve(ctx, 0, expanded, 0).unwrap();
+        self.shrink.frames_min = 1;
+        self.shrink.seconds_min = 0.0;
+        self.shrink.min_bytes = 0;
+        self.shrink.peak = [0; 4];
     }
 
     /// Takes the near trees' records made on the CPU (in any order: they are sorted with

@@ -7,6 +7,10 @@
 //! box filters, linear, so that is exact), and a tree-level billboard reads that one image
 //! per view instead of three: 3 x (blend + sky + ground) = 9 reads instead of 15.
 //!
+//! One compute pass makes them all, a dispatch per mip level, writing the array through a
+//! plain RGBA8 storage view (the array is `Rgba8Unorm`, sampled through sRGB views; the
+//! shader encodes each texel to its nearest 8-bit sRGB code).
+//!
 //! The blends live in the BTF texture array itself, in layers after the baked images, so
 //! that the fragment shader reads a tree-level billboard's blend and a finer billboard's 3
 //! lights through the same loop (1 turn or 3): lavapipe, like any SIMD rasteriser without
@@ -86,16 +90,16 @@ struct BlendKey {
 /// array's layers from `first_layer` on, image
 /// [`BtfScene::light_blend_first`]`(prototype, bin) + view`.
 pub struct LightBlend {
-    texture: wgpu::Texture,
-    first_layer: u32,
     images: wgpu::Buffer,
-    bind_group: wgpu::BindGroup,
-    pipeline: wgpu::RenderPipeline,
+    /// One a mip level: the images, the baked layers read, that level of the blends'
+    /// layers written, and the level's uniform.
+    bind_groups: Vec<wgpu::BindGroup>,
+    pipeline: wgpu::ComputePipeline,
+    /// Per mip level: the blends' texels a side and their layers.
+    sizes: Vec<(u32, u32)>,
     /// Blended images.
     count: u32,
-    layers: u32,
-    mips: u32,
-    /// Whether the blends must be drawn again (set when the sun moved, cleared once
+    /// Whether the blends must be made again (set when the sun moved, cleared once
     /// encoded).
     pending: AtomicBool,
     made_for: Option<BlendKey>,
@@ -103,20 +107,32 @@ pub struct LightBlend {
     pub bytes: u64,
 }
 
+/// The view format the blends' layers are written through: the array's own format,
+/// [`BLEND_ARRAY_FORMAT`], is read as sRGB through [`BLEND_SAMPLE_FORMAT`] views.
+pub const BLEND_ARRAY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+/// The format every sampling view of an array with blends has (the baked images' bytes
+/// are 8-bit sRGB).
+pub const BLEND_SAMPLE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+
 impl LightBlend {
-    /// The blends of `count` images in `texture` (the BTF atlas, `mips` levels; made with
-    /// `RENDER_ATTACHMENT`), from layer `first_layer` on, read from its layers before.
+    /// The blends of `count` images in `texture` (the BTF atlas, `mips` levels, format
+    /// [`BLEND_ARRAY_FORMAT`] with `STORAGE_BINDING` and [`BLEND_SAMPLE_FORMAT`] views),
+    /// from layer `first_layer` on, read from its layers before.
     pub fn new(ctx: &GpuContext, texture: &wgpu::Texture, first_layer: u32, count: u32) -> Self {
         let per_layer = ATLAS_SIDE * ATLAS_SIDE;
-        let layers = count.div_ceil(per_layer);
+        let layers = count.div_ceil(per_layer).max(1);
         let mips = texture.mip_level_count();
         let side = texture.width();
-        let bytes = (0..mips)
-            .map(|m| u64::from((side >> m).max(1)).pow(2) * 4 * u64::from(layers))
+        let sizes: Vec<(u32, u32)> = (0..mips).map(|m| ((side >> m).max(1), layers)).collect();
+        let bytes = sizes
+            .iter()
+            .map(|&(s, l)| u64::from(s).pow(2) * 4 * u64::from(l))
             .sum();
-        // The baked images alone: the blends' own layers are the passes' targets.
+        // The baked images alone: the blends' own layers are written.
         let sources = texture.create_view(&wgpu::TextureViewDescriptor {
             label: Some("btf baked images"),
+            format: Some(BLEND_SAMPLE_FORMAT),
+            usage: Some(wgpu::TextureUsages::TEXTURE_BINDING),
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             base_array_layer: 0,
             array_layer_count: Some(first_layer.max(1)),
@@ -128,6 +144,21 @@ impl LightBlend {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let stride = u64::from(ctx.device.limits().min_uniform_buffer_offset_alignment).max(16);
+        let levels = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("btf light blend levels"),
+            size: stride * u64::from(mips.max(1)),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        for mip in 0..mips {
+            ctx.queue.write_buffer(
+                &levels,
+                stride * u64::from(mip),
+                bytemuck::cast_slice(&[count, mip, 0, 0]),
+            );
+        }
+        let compute = wgpu::ShaderStages::COMPUTE;
         let layout = ctx
             .device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -135,7 +166,7 @@ impl LightBlend {
                 entries: &[
                     wgpu::BindGroupLayoutEntry {
                         binding: 0,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
+                        visibility: compute,
                         ty: wgpu::BindingType::Buffer {
                             ty: wgpu::BufferBindingType::Storage { read_only: true },
                             has_dynamic_offset: false,
@@ -145,7 +176,7 @@ impl LightBlend {
                     },
                     wgpu::BindGroupLayoutEntry {
                         binding: 1,
-                        visibility: wgpu::ShaderStages::FRAGMENT,
+                        visibility: compute,
                         ty: wgpu::BindingType::Texture {
                             sample_type: wgpu::TextureSampleType::Float { filterable: true },
                             view_dimension: wgpu::TextureViewDimension::D2Array,
@@ -153,31 +184,74 @@ impl LightBlend {
                         },
                         count: None,
                     },
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 2,
+                        visibility: compute,
+                        ty: wgpu::BindingType::StorageTexture {
+                            access: wgpu::StorageTextureAccess::WriteOnly,
+                            format: BLEND_ARRAY_FORMAT,
+                            view_dimension: wgpu::TextureViewDimension::D2Array,
+                        },
+                        count: None,
+                    },
+                    wgpu::BindGroupLayoutEntry {
+                        binding: 3,
+                        visibility: compute,
+                        ty: wgpu::BindingType::Buffer {
+                            ty: wgpu::BufferBindingType::Uniform,
+                            has_dynamic_offset: false,
+                            min_binding_size: wgpu::BufferSize::new(16),
+                        },
+                        count: None,
+                    },
                 ],
             });
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("btf light blend"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: images.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&sources),
-                },
-            ],
-        });
+        let bind_groups = (0..mips)
+            .map(|mip| {
+                let target = texture.create_view(&wgpu::TextureViewDescriptor {
+                    label: Some("btf light blend target"),
+                    format: Some(BLEND_ARRAY_FORMAT),
+                    dimension: Some(wgpu::TextureViewDimension::D2Array),
+                    base_mip_level: mip,
+                    mip_level_count: Some(1),
+                    base_array_layer: first_layer,
+                    array_layer_count: Some(layers),
+                    ..Default::default()
+                });
+                ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("btf light blend"),
+                    layout: &layout,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: images.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: wgpu::BindingResource::TextureView(&sources),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::TextureView(&target),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 3,
+                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                                buffer: &levels,
+                                offset: stride * u64::from(mip),
+                                size: wgpu::BufferSize::new(16),
+                            }),
+                        },
+                    ],
+                })
+            })
+            .collect();
         Self {
-            texture: texture.clone(),
-            first_layer,
             images,
-            bind_group,
-            pipeline: build_pipeline(&ctx.device, &layout, texture.format()),
+            bind_groups,
+            pipeline: build_pipeline(&ctx.device, &layout),
+            sizes,
             count,
-            layers,
-            mips,
             pending: AtomicBool::new(false),
             made_for: None,
             bytes,
@@ -185,7 +259,8 @@ impl LightBlend {
     }
 
     /// Sets the blends' weights for the sun `to_sun` and the knobs of `settings` if they
-    /// changed since they were last made (the draw follows in [`Self::encode`]); true if so.
+    /// changed since they were last made (the blends follow in [`Self::encode`]); true if
+    /// so.
     pub fn update(
         &mut self,
         ctx: &GpuContext,
@@ -212,51 +287,20 @@ impl LightBlend {
         true
     }
 
-    /// Draws the blends if their weights changed: one render pass per mip level and layer,
-    /// timed together as `light blend`.
+    /// Makes the blends if their weights changed: one compute pass, timed as `light
+    /// blend`, a dispatch per mip level.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, spans: &PassSpans) {
         if !self.pending.swap(false, Ordering::Relaxed) {
             return;
         }
-        let per_layer = ATLAS_SIDE * ATLAS_SIDE;
-        let span = spans.open("light blend");
-        let passes = self.mips * self.layers;
-        let mut k = 0;
-        for mip in 0..self.mips {
-            for layer in 0..self.layers {
-                let target = self.texture.create_view(&wgpu::TextureViewDescriptor {
-                    label: Some("btf light blend target"),
-                    dimension: Some(wgpu::TextureViewDimension::D2),
-                    base_mip_level: mip,
-                    mip_level_count: Some(1),
-                    base_array_layer: self.first_layer + layer,
-                    array_layer_count: Some(1),
-                    ..Default::default()
-                });
-                let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                    label: Some("light blend"),
-                    color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &target,
-                        depth_slice: None,
-                        resolve_target: None,
-                        ops: wgpu::Operations {
-                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                            store: wgpu::StoreOp::Store,
-                        },
-                    })],
-                    depth_stencil_attachment: None,
-                    timestamp_writes: spans.render_writes(span, k == 0, k + 1 == passes),
-                    occlusion_query_set: None,
-                    multiview_mask: None,
-                });
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &self.bind_group, &[]);
-                let first = layer * per_layer;
-                let last = (first + per_layer).min(self.count);
-                // The first vertex tells the shader the mip level.
-                pass.draw(mip * 6..mip * 6 + 6, first..last);
-                k += 1;
-            }
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("light blend"),
+            timestamp_writes: spans.compute_pass("light blend"),
+        });
+        pass.set_pipeline(&self.pipeline);
+        for (bind_group, &(side, layers)) in self.bind_groups.iter().zip(&self.sizes) {
+            pass.set_bind_group(0, bind_group, &[]);
+            pass.dispatch_workgroups(side.div_ceil(8), side.div_ceil(8), layers);
         }
     }
 }
@@ -297,11 +341,7 @@ pub fn blend_images(scene: &BtfScene, to_sun: Vec3, settings: &BtfSettings) -> V
     out
 }
 
-fn build_pipeline(
-    device: &wgpu::Device,
-    layout: &wgpu::BindGroupLayout,
-    format: wgpu::TextureFormat,
-) -> wgpu::RenderPipeline {
+fn build_pipeline(device: &wgpu::Device, layout: &wgpu::BindGroupLayout) -> wgpu::ComputePipeline {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("light_blend.wgsl"),
         source: wgpu::ShaderSource::Wgsl(crate::render::shaders::light_blend().into()),
@@ -311,66 +351,12 @@ fn build_pipeline(
         bind_group_layouts: &[Some(layout)],
         immediate_size: 0,
     });
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some("light blend"),
         layout: Some(&pipeline_layout),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs_blend"),
-            compilation_options: Default::default(),
-            buffers: &[],
-        },
-        primitive: Default::default(),
-        depth_stencil: None,
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs_blend"),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
-        multiview_mask: None,
+        module: &module,
+        entry_point: Some("cs_blend"),
+        compilation_options: Default::default(),
         cache: None,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_tree_turned_by_a_bins_angle_sees_the_sun_of_that_bin() {
-        let to_sun = Vec3::new(0.4, 0.6, -0.5).normalize();
-        for bins in [4, 8, 16] {
-            for bin in 0..bins {
-                // A tree of yaw psi sees the sun turned by -psi about y (its azimuth,
-                // atan2(z, x), grown by psi): as `to_object * to_sun` in the prepare.
-                let yaw = std::f32::consts::TAU * bin as f32 / bins as f32;
-                let rot = glam::Mat3::from_rotation_y(yaw);
-                let l_obj = rot.transpose() * to_sun;
-                let b = yaw_bin(l_obj, to_sun, bins);
-                assert_eq!(b, bin, "{bins} bins");
-                let d = bin_direction(to_sun, b, bins);
-                assert!((d - l_obj).length() < 1e-5, "{d} vs {l_obj}");
-                // Off the bin's centre by less than half a bin: still that bin.
-                let off = glam::Mat3::from_rotation_y(0.4 * std::f32::consts::TAU / bins as f32);
-                assert_eq!(yaw_bin(off * l_obj, to_sun, bins), bin);
-            }
-        }
-    }
-
-    #[test]
-    fn a_sun_overhead_gives_every_bin_the_same_direction() {
-        let up = Vec3::Y;
-        for bin in 0..8 {
-            assert!((bin_direction(up, bin, 8) - up).length() < 1e-6);
-        }
-        assert!(yaw_bin(Vec3::new(0.3, 0.9, 0.1), up, 8) < 8);
-        assert_eq!(yaw_bin(Vec3::NAN, Vec3::NAN, 8), 0);
-        assert_eq!(yaw_bin(Vec3::X, Vec3::X, 0), 0);
-    }
 }

@@ -152,9 +152,17 @@ impl BtfAssets {
         let blend_layers = atlas_layers(blends);
         let allocate = |blend_layers: u64| {
             let mut usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-            if blend_layers > 0 {
-                usage |= wgpu::TextureUsages::RENDER_ATTACHMENT;
-            }
+            // The blends are written through a plain RGBA8 view (sRGB cannot be a storage
+            // format); every view that samples the array reads it as sRGB.
+            let (texture_format, view_formats) = if blend_layers > 0 {
+                usage |= wgpu::TextureUsages::STORAGE_BINDING;
+                (
+                    light_blend::BLEND_ARRAY_FORMAT,
+                    &[light_blend::BLEND_SAMPLE_FORMAT][..],
+                )
+            } else {
+                (format.texture_format(), &[][..])
+            };
             ctx.checked("allocating the BTF texture array", || {
                 ctx.device.create_texture(&wgpu::TextureDescriptor {
                     label: Some("btf images"),
@@ -166,9 +174,9 @@ impl BtfAssets {
                     mip_level_count: mips,
                     sample_count: 1,
                     dimension: wgpu::TextureDimension::D2,
-                    format: format.texture_format(),
+                    format: texture_format,
                     usage,
-                    view_formats: &[],
+                    view_formats,
                 })
             })
         };
@@ -217,6 +225,8 @@ impl BtfAssets {
             t0.elapsed().as_secs_f64() * 1e3
         );
         let texture_view = texture.create_view(&wgpu::TextureViewDescriptor {
+            format: Some(format.texture_format()),
+            usage: Some(wgpu::TextureUsages::TEXTURE_BINDING),
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
         });
@@ -316,7 +326,7 @@ impl BtfAssets {
         }
     }
 
-    /// The light blends' passes, when their weights changed, timed through `spans`.
+    /// The light blends' compute pass, when their weights changed, timed through `spans`.
     pub fn encode_light_blend(&self, encoder: &mut wgpu::CommandEncoder, spans: &PassSpans) {
         if let Some(b) = &self.light_blend {
             b.encode(encoder, spans);

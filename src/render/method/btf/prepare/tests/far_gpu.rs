@@ -11,6 +11,7 @@ fn gpu_far_records(
     settings: &BtfSettings,
     budget: u64,
     near_room: Option<u64>,
+    shrink: bool,
 ) -> Vec<BillboardGpu> {
     use crate::render::{AdapterPreference, GpuContext};
     let ctx = GpuContext::headless(AdapterPreference::Cpu).expect("a Vulkan adapter");
@@ -66,6 +67,11 @@ fn gpu_far_records(
     if let Some(room) = near_room {
         gpu.set_near_room(room);
     }
+    // Buffers grown by a larger frame before, given back by this one.
+    let grown = shrink.then(|| {
+        gpu.grow_then_shrink_each_frame(&ctx, 400_000);
+        gpu.bytes()
+    });
     let (near, _) = gpu.prepare(&ctx, scene, trees, &bounds, view, settings, true, None);
     if settings.gpu_near {
         let (_, records, draws, slots) =
@@ -82,6 +88,13 @@ fn gpu_far_records(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
     gpu.encode(&mut encoder, &crate::render::timing::PassSpans::off());
     ctx.queue.submit([encoder.finish()]);
+    if let Some(grown) = grown {
+        assert!(
+            gpu.bytes() * 4 < grown,
+            "the record buffers were not given back: {} of {grown} bytes",
+            gpu.bytes()
+        );
+    }
     gpu.read_sorted(&ctx).unwrap()
 }
 
@@ -93,31 +106,36 @@ fn weight_of(index: [u32; 3], weight: [f32; 3], i: u32) -> f32 {
 #[test]
 fn the_gpu_builds_the_far_trees_records_the_cpu_would_back_to_front() {
     // A crowd 90 to 400 m away: every tree past the tree level's fade band.
-    gpu_against_cpu(90.0, false, false, true, u64::MAX, false, None);
+    gpu_against_cpu(90.0, false, false, true, u64::MAX, false, None, false);
 }
 
 #[test]
 fn near_trees_made_on_the_cpu_are_sorted_with_the_far_ones() {
     // From 4 m: trees at every level, fading, the near ones' billboards made on the
     // CPU and sorted with the far ones' on the GPU.
-    gpu_against_cpu(4.0, true, false, true, u64::MAX, false, None);
+    gpu_against_cpu(4.0, true, false, true, u64::MAX, false, None, false);
 }
 
 #[test]
 fn near_trees_expanded_on_the_gpu_are_what_the_cpu_would_make() {
     // The same, the near trees' billboards expanded and shaded on the GPU: their parts'
     // cube maps read towards the sun in each part's frame, and the parents' factors.
-    gpu_against_cpu(4.0, true, true, true, u64::MAX, false, None);
+    gpu_against_cpu(4.0, true, true, true, u64::MAX, false, None, false);
     // And without cube maps (every factor 1), with the level overlay (a main-branch
     // draw's twigs in the main branch's colour).
-    gpu_against_cpu(4.0, true, true, false, u64::MAX, true, None);
+    gpu_against_cpu(4.0, true, true, false, u64::MAX, true, None, false);
+}
+
+#[test]
+fn record_buffers_a_larger_frame_grew_are_given_back_and_the_frame_stays_right() {
+    gpu_against_cpu(4.0, true, true, true, u64::MAX, false, None, true);
 }
 
 #[test]
 fn past_the_gpus_room_the_farther_near_trees_billboards_are_made_on_the_cpu() {
     // Room for some of the near trees' billboards only: the nearest trees' go to the
     // GPU, the others' are made on the CPU, and together they are the CPU's frame.
-    gpu_against_cpu(4.0, true, true, true, 300, false, None);
+    gpu_against_cpu(4.0, true, true, true, 300, false, None, false);
 }
 
 #[test]
@@ -125,13 +143,15 @@ fn near_slots_past_one_bindings_room_go_to_a_second_binding() {
     // A first binding of 100 slots (lavapipe's holds 524,288 records, which a frame of
     // 100,000 trees at 1280x720 passes): the next 100 go to the second, the farther
     // near trees' billboards to the CPU, and together they are the CPU's frame.
-    gpu_against_cpu(4.0, true, true, true, 200, false, Some(100));
+    gpu_against_cpu(4.0, true, true, true, 200, false, Some(100), false);
 }
 
 /// Trees from `z_min` to 400 m ahead; the GPU's billboards, back to front, are the
 /// CPU's (`near`: some trees are near; `gpu_near`: their billboards are expanded on the
 /// GPU, at most `budget` slots of them; `vcm`: with cube maps of random opacity;
-/// `overlay`: tinted by level).
+/// `overlay`: tinted by level; `shrink`: the record buffers grown by a larger frame
+/// before, given back by this one).
+#[allow(clippy::too_many_arguments)]
 fn gpu_against_cpu(
     z_min: f32,
     near: bool,
@@ -140,6 +160,7 @@ fn gpu_against_cpu(
     budget: u64,
     overlay: bool,
     near_room: Option<u64>,
+    shrink: bool,
 ) {
     // The tree level at 66 views and 6 lights, as the default bake; trees of mixed yaw
     // and scale.
@@ -219,7 +240,7 @@ fn gpu_against_cpu(
     }
     let mut cpu = cpu_frame.records;
     assert!(cpu.len() > 100, "{} billboards in view", cpu.len());
-    let gpu = gpu_far_records(&scene, &trees, &view, &settings, budget, near_room);
+    let gpu = gpu_far_records(&scene, &trees, &view, &settings, budget, near_room, shrink);
     assert_eq!(gpu.len(), cpu.len(), "as many billboards");
     let forward = camera.forward();
     let depth = |r: &BillboardGpu| (Vec3::from(r.center) - camera.position).dot(forward);
