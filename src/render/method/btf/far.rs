@@ -674,7 +674,6 @@ impl FarGpu {
     /// slots), `expanded` slots of `near_build` and `draws` near draws (after the shades
     /// and bits), and the sort's keys and steps to them all, rebinding what changed.
     fn reserve(&mut self, ctx: &GpuContext, near: u64, expanded: u64, draws: u64) -> Result<()> {
-        let record = std::mem::size_of::<BillboardGpu>() as u64;
         let slots = self.tree_count as u64 + near;
         let total = slots + expanded;
         let keys = u32::try_from(total.max(2))
@@ -685,10 +684,9 @@ impl FarGpu {
         let words = u64::from(self.base.draws_at) + 4 * draws;
         let [first, second] = self.near_split(expanded);
         use wgpu::BufferUsages as U;
-        // Half as much again, so that a growing frame does not rebind every time.
-        let grow = |n: u64| (n + n / 2).max(1024);
-        let shrunk = match self.shrink.observe([first, second, slots, sorted]) {
-            Some(peak) => self.shrink_to(ctx, peak, grow)?,
+        let needs = [first, second, slots, sorted];
+        let shrunk = match self.shrink.observe(needs) {
+            Some(peak) => self.shrink_to(ctx, peak)?,
             None => false,
         };
         if !shrunk
@@ -703,7 +701,7 @@ impl FarGpu {
         }
         let max_words = ctx.device.limits().max_storage_buffer_binding_size / 4;
         if words > self.frame_word_slots {
-            let word_slots = (u64::from(self.base.draws_at) + 4 * grow(draws))
+            let word_slots = (u64::from(self.base.draws_at) + 4 * grow_slots(draws))
                 .min(max_words)
                 .max(words);
             let bigger = ctx.checked("allocating the near draws' buffer", || {
@@ -731,38 +729,10 @@ impl FarGpu {
             self.frame_words = bigger;
             self.frame_word_slots = word_slots;
         }
-        if slots > self.record_slots {
-            let record_slots = grow(slots).min(self.limit.max(slots));
-            self.records = ctx.checked("allocating the billboards' records", || {
-                buffer(
-                    ctx,
-                    "far records",
-                    record_slots * record,
-                    U::STORAGE | U::COPY_DST,
-                )
-            })?;
-            self.record_slots = record_slots;
-        }
-        for (b, need) in self.near_split(expanded).into_iter().enumerate() {
-            if need > self.near_slots[b] {
-                let near_slots = grow(need).min(self.near_room.max(need));
-                self.near_records[b] = ctx.checked("allocating the near trees' records", || {
-                    buffer(ctx, "near records", near_slots * record, U::STORAGE)
-                })?;
-                self.near_slots[b] = near_slots;
+        for (k, need) in needs.into_iter().enumerate() {
+            if need > self.record_buffer_slots(k) {
+                self.set_record_buffer(ctx, k, need)?;
             }
-        }
-        if sorted > self.sorted_slots {
-            let sorted_slots = grow(sorted).min(self.limit);
-            self.sorted = ctx.checked("allocating the sorted billboards", || {
-                buffer(
-                    ctx,
-                    "far sorted",
-                    sorted_slots * record,
-                    U::STORAGE | U::COPY_SRC,
-                )
-            })?;
-            self.sorted_slots = sorted_slots;
         }
         if keys > self.key_slots {
             let steps_list = sort_steps(keys);
@@ -942,57 +912,19 @@ impl FarGpu {
         (near, shade_ms)
     }
 
-    /// Replaces the record buffers (near records, records, sorted) whose slots pass four
-    /// times what the last window of frames needed at most (`peak`, in the order of
-    /// [`ShrinkWindow::observe`]) by ones sized to that peak; true if any was. Each frame
-    /// writes them whole before reading, so nothing is copied.
-    fn shrink_to(
-        &mut self,
-        ctx: &GpuContext,
-        peak: [u64; 4],
-        grow: impl Fn(u64) -> u64,
-    ) -> Result<bool> {
-        use wgpu::BufferUsages as U;
+    /// Replaces the record buffers whose slots pass four times what the last window of
+    /// frames needed at most (`peak`, in the order of [`ShrinkWindow::observe`]) by ones
+    /// sized to that peak; true if any was. Each frame writes them whole before reading,
+    /// so nothing is copied.
+    fn shrink_to(&mut self, ctx: &GpuContext, peak: [u64; 4]) -> Result<bool> {
         let record = std::mem::size_of::<BillboardGpu>() as u64;
-        let oversized = |slots: u64, peak: u64| {
-            slots * record >= self.shrink.min_bytes && slots > 4 * grow(peak)
-        };
         let mut shrunk = false;
-        for b in 0..2 {
-            if oversized(self.near_slots[b], peak[b]) {
-                let near_slots = grow(peak[b]).min(self.near_room.max(peak[b]));
-                self.near_records[b] = ctx.checked("allocating the near trees' records", || {
-                    buffer(ctx, "near records", near_slots * record, U::STORAGE)
-                })?;
-                self.near_slots[b] = near_slots;
+        for (k, peak) in peak.into_iter().enumerate() {
+            let slots = self.record_buffer_slots(k);
+            if slots * record >= self.shrink.min_bytes && slots > 4 * grow_slots(peak) {
+                self.set_record_buffer(ctx, k, peak)?;
                 shrunk = true;
             }
-        }
-        if oversized(self.record_slots, peak[2]) {
-            let record_slots = grow(peak[2]).min(self.limit.max(peak[2]));
-            self.records = ctx.checked("allocating the billboards' records", || {
-                buffer(
-                    ctx,
-                    "far records",
-                    record_slots * record,
-                    U::STORAGE | U::COPY_DST,
-                )
-            })?;
-            self.record_slots = record_slots;
-            shrunk = true;
-        }
-        if oversized(self.sorted_slots, peak[3]) {
-            let sorted_slots = grow(peak[3]).min(self.limit);
-            self.sorted = ctx.checked("allocating the sorted billboards", || {
-                buffer(
-                    ctx,
-                    "far sorted",
-                    sorted_slots * record,
-                    U::STORAGE | U::COPY_SRC,
-                )
-            })?;
-            self.sorted_slots = sorted_slots;
-            shrunk = true;
         }
         if shrunk {
             log::debug!(
@@ -1001,6 +933,56 @@ impl FarGpu {
             );
         }
         Ok(shrunk)
+    }
+
+    /// The slots of record buffer `k`: the near records' two bindings, the records, the
+    /// sorted ones.
+    fn record_buffer_slots(&self, k: usize) -> u64 {
+        match k {
+            0 | 1 => self.near_slots[k],
+            2 => self.record_slots,
+            _ => self.sorted_slots,
+        }
+    }
+
+    /// Makes record buffer `k` (as [`Self::record_buffer_slots`]) anew with room for
+    /// `need` slots and half as much again, within one binding's records.
+    fn set_record_buffer(&mut self, ctx: &GpuContext, k: usize, need: u64) -> Result<()> {
+        use wgpu::BufferUsages as U;
+        let record = std::mem::size_of::<BillboardGpu>() as u64;
+        let room = if k < 2 { self.near_room } else { self.limit };
+        let slots = grow_slots(need).min(room.max(need));
+        let (what, label, usage) = match k {
+            0 | 1 => ("the near trees' records", "near records", U::STORAGE),
+            2 => (
+                "the billboards' records",
+                "far records",
+                U::STORAGE | U::COPY_DST,
+            ),
+            _ => (
+                "the sorted billboards",
+                "far sorted",
+                U::STORAGE | U::COPY_SRC,
+            ),
+        };
+        let made = ctx.checked(&format!("allocating {what}"), || {
+            buffer(ctx, label, slots * record, usage)
+        })?;
+        match k {
+            0 | 1 => {
+                self.near_records[k] = made;
+                self.near_slots[k] = slots;
+            }
+            2 => {
+                self.records = made;
+                self.record_slots = slots;
+            }
+            _ => {
+                self.sorted = made;
+                self.sorted_slots = slots;
+            }
+        }
+        Ok(())
     }
 
     /// The slots of `expanded` near billboards each binding takes: the first `near_room`,
@@ -1230,6 +1212,12 @@ impl FarGpu {
         pass.set_bind_group(1, &self.draw_bind_group, &[]);
         pass.draw_indirect(&self.draw_args, (DRAW_WORDS + 4 * u64::from(k)) * 4);
     }
+}
+
+/// Slots for `n` and half as much again, so that a growing frame does not rebind every
+/// time.
+fn grow_slots(n: u64) -> u64 {
+    (n + n / 2).max(1024)
 }
 
 fn buffer(ctx: &GpuContext, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
