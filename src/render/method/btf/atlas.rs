@@ -152,6 +152,44 @@ pub(super) fn upload_image(
     (bytes, mean)
 }
 
+/// The BTF texture array: `layers` of baked images and `blend_layers` of light blends,
+/// `side` texels square, in `format`. With blends the array is
+/// [`BLEND_ARRAY_FORMAT`](super::light_blend::BLEND_ARRAY_FORMAT), written through plain
+/// RGBA8 storage views (sRGB cannot be a storage format), and every view that samples it
+/// reads it as sRGB.
+pub fn allocate_array(
+    ctx: &GpuContext,
+    format: AtlasFormat,
+    side: u32,
+    layers: u64,
+    blend_layers: u64,
+) -> crate::Result<wgpu::Texture> {
+    use super::light_blend::{BLEND_ARRAY_FORMAT, BLEND_SAMPLE_FORMAT};
+    let mut usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+    let (texture_format, view_formats) = if blend_layers > 0 {
+        usage |= wgpu::TextureUsages::STORAGE_BINDING;
+        (BLEND_ARRAY_FORMAT, &[BLEND_SAMPLE_FORMAT][..])
+    } else {
+        (format.texture_format(), &[][..])
+    };
+    ctx.checked("allocating the BTF texture array", || {
+        ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("btf images"),
+            size: wgpu::Extent3d {
+                width: side,
+                height: side,
+                depth_or_array_layers: (layers + blend_layers).max(1) as u32,
+            },
+            mip_level_count: format.mips,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: texture_format,
+            usage,
+            view_formats,
+        })
+    })
+}
+
 /// Writes BC7 `blocks` of `size` texels (whole blocks) into mip `level` at `origin`.
 fn write_blocks(
     ctx: &GpuContext,

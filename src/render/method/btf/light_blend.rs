@@ -95,8 +95,10 @@ pub struct LightBlend {
     /// layers written, and the level's uniform.
     bind_groups: Vec<wgpu::BindGroup>,
     pipeline: wgpu::ComputePipeline,
-    /// Per mip level: the blends' texels a side and their layers.
-    sizes: Vec<(u32, u32)>,
+    /// The blends' texels a side, per mip level.
+    sides: Vec<u32>,
+    /// The blends' layers.
+    layers: u32,
     /// Blended images.
     count: u32,
     /// Whether the blends must be made again (set when the sun moved, cleared once
@@ -123,10 +125,10 @@ impl LightBlend {
         let layers = count.div_ceil(per_layer).max(1);
         let mips = texture.mip_level_count();
         let side = texture.width();
-        let sizes: Vec<(u32, u32)> = (0..mips).map(|m| ((side >> m).max(1), layers)).collect();
-        let bytes = sizes
+        let sides: Vec<u32> = (0..mips).map(|m| (side >> m).max(1)).collect();
+        let bytes = sides
             .iter()
-            .map(|&(s, l)| u64::from(s).pow(2) * 4 * u64::from(l))
+            .map(|&s| u64::from(s).pow(2) * 4 * u64::from(layers))
             .sum();
         // The baked images alone: the blends' own layers are written.
         let sources = texture.create_view(&wgpu::TextureViewDescriptor {
@@ -250,7 +252,8 @@ impl LightBlend {
             images,
             bind_groups,
             pipeline: build_pipeline(&ctx.device, &layout),
-            sizes,
+            sides,
+            layers,
             count,
             pending: AtomicBool::new(false),
             made_for: None,
@@ -298,9 +301,9 @@ impl LightBlend {
             timestamp_writes: spans.compute_pass("light blend"),
         });
         pass.set_pipeline(&self.pipeline);
-        for (bind_group, &(side, layers)) in self.bind_groups.iter().zip(&self.sizes) {
+        for (bind_group, &side) in self.bind_groups.iter().zip(&self.sides) {
             pass.set_bind_group(0, bind_group, &[]);
-            pass.dispatch_workgroups(side.div_ceil(8), side.div_ceil(8), layers);
+            pass.dispatch_workgroups(side.div_ceil(8), side.div_ceil(8), self.layers);
         }
     }
 }

@@ -138,7 +138,6 @@ impl BtfAssets {
         // texels for BC7 images (`AtlasFormat::choose`).
         let encodings: Vec<_> = scene.image_sets(baked).map(|(_, s)| s.encoding).collect();
         let format = AtlasFormat::choose(res, &encodings, atlas::bc7_textures(ctx));
-        let mips = format.mips;
         // The tree level's light blends take layers after the baked images, where the GPU
         // allows them and the array can be drawn into (a BC7 array cannot).
         let blends = if format.bc7 {
@@ -150,36 +149,8 @@ impl BtfAssets {
             scene.light_blend_count(light_blend::LIGHT_BINS)
         };
         let blend_layers = atlas_layers(blends);
-        let allocate = |blend_layers: u64| {
-            let mut usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
-            // The blends are written through a plain RGBA8 view (sRGB cannot be a storage
-            // format); every view that samples the array reads it as sRGB.
-            let (texture_format, view_formats) = if blend_layers > 0 {
-                usage |= wgpu::TextureUsages::STORAGE_BINDING;
-                (
-                    light_blend::BLEND_ARRAY_FORMAT,
-                    &[light_blend::BLEND_SAMPLE_FORMAT][..],
-                )
-            } else {
-                (format.texture_format(), &[][..])
-            };
-            ctx.checked("allocating the BTF texture array", || {
-                ctx.device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some("btf images"),
-                    size: wgpu::Extent3d {
-                        width: side,
-                        height: side,
-                        depth_or_array_layers: (layers + blend_layers).max(1) as u32,
-                    },
-                    mip_level_count: mips,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: texture_format,
-                    usage,
-                    view_formats,
-                })
-            })
-        };
+        let allocate =
+            |blend_layers: u64| atlas::allocate_array(ctx, format, side, layers, blend_layers);
         let fits = blend_layers > 0 && layers + blend_layers <= max_layers && layers > 0;
         let (texture, blends) = match fits.then(|| allocate(blend_layers)) {
             Some(Ok(t)) => (t, blends),
