@@ -108,7 +108,10 @@ struct FarParams {
     _canopy_pad1: u32,
 }
 
-@group(0) @binding(0) var<uniform> params: FarParams;
+// A storage buffer, not a uniform one: lavapipe (Mesa 22) compiles a shader again at every
+// bind, and keeps each compilation, where inlining a uniform buffer's values into its
+// branches removes half of it (tests/frame_memory.rs).
+@group(0) @binding(0) var<storage, read> params: FarParams;
 // The near trees' billboards expanded by `near_build`, one slot per part of each draw: the
 // first `params.near_room` slots here, the rest in the second binding (one binding holds
 // 524,288 records on lavapipe, fewer than a large frame's near parts).

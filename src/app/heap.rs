@@ -33,21 +33,6 @@ pub fn trim() {
     }
 }
 
-/// The C heap's bytes in use and bytes held free in its arenas (freed, not given back):
-/// resident growth with the first flat is fragmentation, not a leak. Zeros off glibc.
-pub fn heap_bytes() -> (u64, u64) {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    {
-        // SAFETY: mallinfo2 only reads the allocator's counters.
-        let m = unsafe { libc::mallinfo2() };
-        ((m.uordblks + m.hblkhd) as u64, m.fordblks as u64)
-    }
-    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-    {
-        (0, 0)
-    }
-}
-
 /// Trims the heap every [`TRIM_EVERY`], from the viewer's frame loop.
 pub struct Upkeep {
     last: Instant,
@@ -86,6 +71,6 @@ mod tests {
                 .all(|(i, v)| v.iter().all(|&b| b == i as u8))
         );
         #[cfg(all(target_os = "linux", target_env = "gnu"))]
-        assert!(heap_bytes().0 >= 64 * 100_000);
+        assert!(crate::render::memory::heap_bytes().0 >= 64 * 100_000);
     }
 }

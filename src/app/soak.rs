@@ -228,7 +228,7 @@ pub struct Sample {
     /// device (its allocator's report; 0 where the backend keeps none): targets, maps and
     /// per-frame buffers too, which `gpu_bytes` does not count.
     pub device_peak_bytes: u64,
-    /// The C heap (glibc's `mallinfo2`, every arena; `super::heap::heap_bytes`): bytes
+    /// The C heap (glibc's `mallinfo2`, every arena; `crate::render::memory::heap_bytes`): bytes
     /// handed out and not freed, mmapped blocks included; 0 where it cannot be read.
     pub heap_used_bytes: u64,
     /// Bytes the heap holds free in its arenas (freed, not given back to the system):

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use winit::event_loop::ActiveEventLoop;
 
-use super::{App, heap, soak};
+use super::{App, soak};
 use crate::Error;
 
 /// A soak script's run: its clock starts once the bake is on show.
@@ -54,7 +54,7 @@ impl App {
             run.device.add(b);
         }
         let sample = |t: f64, resident: &mut soak::Range, device: &mut soak::Range| {
-            let (heap_used_bytes, heap_free_bytes) = heap::heap_bytes();
+            let (heap_used_bytes, heap_free_bytes) = crate::render::memory::heap_bytes();
             let (floor, peak) = resident.take();
             soak::Sample {
                 seconds: t,

@@ -247,7 +247,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
 fn log_memory(ctx: &GpuContext, stage: &str) {
     if log::log_enabled!(log::Level::Debug) {
         let gpu = ctx.device.generate_allocator_report();
-        let (heap_used, heap_free) = crate::app::heap::heap_bytes();
+        let (heap_used, heap_free) = crate::render::memory::heap_bytes();
         log::debug!(
             "{:.1} MB resident once {stage}; GPU allocations {:.1} MB in {:.1} MB of blocks; \
              C heap {:.1} MB in use, {:.1} MB held free",

@@ -469,7 +469,7 @@ impl FarGpu {
                     ctx,
                     "far params",
                     std::mem::size_of::<FarParamsGpu>() as u64,
-                    U::UNIFORM | U::COPY_DST,
+                    U::STORAGE | U::COPY_DST,
                 ),
                 buffer(
                     ctx,
@@ -514,7 +514,7 @@ impl FarGpu {
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("btf far"),
                 entries: &[
-                    uniform(0, false),
+                    storage(0, true),
                     storage(1, false),
                     storage(2, false),
                     storage(3, true),
