@@ -103,7 +103,7 @@ impl GpuContext {
             max_texture_array_layers: supported.max_texture_array_layers,
             max_buffer_size: supported.max_buffer_size,
             max_storage_buffer_binding_size: supported.max_storage_buffer_binding_size,
-            // The far trees' compute passes bind 9 storage buffers.
+            // The far trees' compute passes bind 10 storage buffers.
             max_storage_buffers_per_shader_stage: supported
                 .max_storage_buffers_per_shader_stage
                 .min(16),

@@ -361,7 +361,7 @@ impl FarGpu {
         if keys.div_ceil(WORKGROUP) > limits.max_compute_workgroups_per_dimension
             || n as u64 >= limit
             || u64::from(keys) * 8 > limits.max_storage_buffer_binding_size
-            || limits.max_storage_buffers_per_shader_stage < 9
+            || limits.max_storage_buffers_per_shader_stage < 10
         {
             return Ok(None);
         }
