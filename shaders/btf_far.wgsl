@@ -1,3 +1,5 @@
+// (Over 800 lines: every far-tree compute pass shares this one set of bindings and the
+// record layout `far.rs` mirrors, so they stay in one file.)
 // The `btf` method's far trees on the GPU: every visible tree far enough to be drawn at the
 // tree level alone (no cross-fade) gets its billboard record here, as `Pusher::push` in
 // src/render/method/btf/prepare/ makes it on the CPU: the sphere-box frustum test, the 3
