@@ -170,11 +170,13 @@ fn fix_checksums(b: &mut [u8]) {
     let Some(n) = u32_at(b, 12).map(|n| n as usize).filter(|&n| n <= 64) else {
         return;
     };
-    // The format's header: 76 fixed bytes, then the section table.
-    let table_end = 76 + 16 * n;
+    // The format's header: 76 fixed bytes, then the section table of 28-byte entries
+    // (16 in version 7).
+    let entry_bytes = if u32_at(b, 8) == Some(7) { 16 } else { 28 };
+    let table_end = 76 + entry_bytes * n;
     let mut at = table_end + 4;
     for i in 0..n {
-        let entry = 76 + 16 * i;
+        let entry = 76 + entry_bytes * i;
         let Some(len) = b
             .get(entry + 8..entry + 16)
             .map(|s| u64::from_le_bytes(s.try_into().unwrap_or([0; 8])) as usize)
@@ -273,10 +275,21 @@ fn baked_seeds() -> Vec<Vec<u8>> {
     // The same block-compressed: BC7 images, BC4 cube maps.
     let mut compressed = with_btf.clone();
     canopy::bake::compress::compress(&mut compressed);
-    let seeds: Vec<Vec<u8>> = [small, with_btf, compressed]
+    // Mostly zeros, stored deflated.
+    let mut zeros = small.clone();
+    for v in &mut zeros.vcm {
+        v.opacity.fill(0);
+    }
+    for t in &mut zeros.texels {
+        t.voxels.fill(0);
+    }
+    let deflated = format::to_bytes_packed(&zeros, format::Packing::Deflate);
+    assert!(deflated.len() < format::to_bytes(&zeros).len());
+    let mut seeds: Vec<Vec<u8>> = [small, with_btf, compressed]
         .iter()
         .map(format::to_bytes)
         .collect();
+    seeds.push(deflated);
     for s in &seeds {
         format::from_bytes(s).expect("the seeds are valid baked files");
     }

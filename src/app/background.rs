@@ -31,7 +31,7 @@ impl BakeJob {
             .ok()
             .map(|e| {
                 format!(
-                    "if not cached: about {:.0} s, {:.0} MB file, {:.0} MB of memory",
+                    "if not cached: about {:.0} s, {:.0} MB of data, {:.0} MB of memory",
                     e.seconds,
                     e.file_bytes as f64 / 1e6,
                     e.memory_bytes as f64 / 1e6

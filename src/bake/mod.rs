@@ -128,6 +128,8 @@ pub struct BakeTimes {
     pub impostor_seconds: f64,
     /// The block compression of the images and cube maps (0 when `[bake] compress` is off).
     pub compress: compress::CompressTimes,
+    /// Writing the file, its sections deflated (0 until it is written).
+    pub write_seconds: f64,
     /// Seconds per stage, named as the progress names them (`fir 1 tree`, `fir 1 VCMs`,
     /// `tree VCMs`, `fir 1 texel volume`, `fir 1 impostor`), in the order they ran.
     pub stages: Vec<(String, f64)>,
@@ -512,8 +514,10 @@ pub fn bake_to(
     world: &World,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<(Baked, BakeTimes)> {
-    let (baked, times) = bake_scene(ctx, scene, world, progress)?;
+    let (baked, mut times) = bake_scene(ctx, scene, world, progress)?;
+    let t0 = std::time::Instant::now();
     store(path, &baked)?;
+    times.write_seconds = t0.elapsed().as_secs_f64();
     Ok((baked, times))
 }
 

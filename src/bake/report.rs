@@ -60,8 +60,21 @@ pub struct BakeReport {
     pub compressed: bool,
     pub compress_btf_seconds: f64,
     pub compress_vcm_seconds: f64,
+    /// Seconds to write the file (deflating its sections).
+    pub write_seconds: f64,
+    /// The file's sections: kind, bytes in the file and bytes of data (inflated).
+    pub sections: Vec<SectionReport>,
     /// One per BTF image set.
     pub sets: Vec<SetReport>,
+}
+
+/// One section of the written file in a [`BakeReport`].
+#[derive(Clone, Debug, Serialize)]
+pub struct SectionReport {
+    pub kind: &'static str,
+    pub deflated: bool,
+    pub file_bytes: u64,
+    pub data_bytes: u64,
 }
 
 /// One species' texel volumes in a [`BakeReport`].
@@ -203,6 +216,17 @@ impl BakeReport {
             compressed: settings.compress,
             compress_btf_seconds: times.compress.btf_seconds,
             compress_vcm_seconds: times.compress.vcm_seconds,
+            write_seconds: times.write_seconds,
+            sections: crate::format::sections(path)
+                .unwrap_or_default()
+                .iter()
+                .map(|s| SectionReport {
+                    kind: s.kind.name(),
+                    deflated: s.packing == crate::format::Packing::Deflate,
+                    file_bytes: s.stored_bytes,
+                    data_bytes: s.data_bytes,
+                })
+                .collect(),
             sets,
         }
     }

@@ -168,6 +168,7 @@ pub fn bake_resumable(
         texel_seconds,
         impostor_seconds,
         compress,
+        write_seconds: 0.0,
         stages: clock.stages,
     };
     Ok((baked, times))

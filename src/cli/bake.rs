@@ -137,7 +137,22 @@ pub fn bake(args: BakeArgs) -> anyhow::Result<()> {
         } else {
             println!("  not block-compressed ([bake] compress = false)");
         }
-        println!("wrote {} ({} bytes)", r.out, r.file_bytes);
+        for s in &r.sections {
+            println!(
+                "  section {:<14} {:>11} bytes in the file{}",
+                s.kind,
+                s.file_bytes,
+                if s.deflated {
+                    format!(" ({} bytes deflated)", s.data_bytes)
+                } else {
+                    " (stored as it is)".into()
+                }
+            );
+        }
+        println!(
+            "wrote {} ({} bytes, {:.1} s to write)",
+            r.out, r.file_bytes, r.write_seconds
+        );
     }
     Ok(())
 }
@@ -145,7 +160,7 @@ pub fn bake(args: BakeArgs) -> anyhow::Result<()> {
 /// One line with a bake's estimated time, file size and memory.
 pub(super) fn estimate_line(e: &crate::bake::estimate::Estimate) -> String {
     format!(
-        "bake estimate: about {:.0} s on a software renderer ({:.0} s of impostors), a {:.1} MB file ({:.1} MB BTF images, {:.1} MB visibility cube maps, {:.1} MB texel volumes, {:.1} MB impostors), about {:.0} MB of memory to view",
+        "bake estimate: about {:.0} s on a software renderer ({:.0} s of impostors), {:.1} MB of data ({:.1} MB BTF images, {:.1} MB visibility cube maps, {:.1} MB texel volumes, {:.1} MB impostors; the file holds it deflated, in less), about {:.0} MB of memory to view",
         e.seconds,
         e.impostor_seconds,
         e.file_bytes as f64 / 1e6,

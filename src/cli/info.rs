@@ -92,6 +92,7 @@ pub fn info(args: InfoArgs) -> anyhow::Result<()> {
     let settings = crate::bake::cache::settings_of(&scene);
     // A bake the format cannot hold is reported here, not refused: `info` only describes.
     let estimate = crate::bake::estimate::estimate(&settings, &world);
+    let cache = cached(&scene);
     if json {
         #[derive(serde::Serialize)]
         struct Info<'a> {
@@ -100,6 +101,7 @@ pub fn info(args: InfoArgs) -> anyhow::Result<()> {
             bake_estimate: Option<crate::bake::estimate::Estimate>,
             bake_refused: Option<String>,
             impostors: Impostors,
+            cache: Option<Cached>,
         }
         #[derive(serde::Serialize)]
         struct Impostors {
@@ -124,6 +126,7 @@ pub fn info(args: InfoArgs) -> anyhow::Result<()> {
                 },
                 bytes: estimate.as_ref().ok().map(|e| e.impostor_bytes),
             },
+            cache,
         };
         println!("{}", serde_json::to_string(&info).context("encoding JSON")?);
     } else {
@@ -186,6 +189,33 @@ pub fn info(args: InfoArgs) -> anyhow::Result<()> {
             }
             Err(e) => println!("bake refused: {e}"),
         }
+        if let Some(c) = &cache {
+            println!(
+                "cached bake: {}, {:.1} MB in the file for {:.1} MB of data",
+                c.path,
+                c.file_bytes as f64 / 1e6,
+                c.data_bytes as f64 / 1e6
+            );
+        }
     }
     Ok(())
+}
+
+/// The scene's cached bake as its section table gives it.
+#[derive(serde::Serialize)]
+struct Cached {
+    path: String,
+    file_bytes: u64,
+    data_bytes: u64,
+}
+
+/// The scene's cached bake, if there is one whose header reads.
+fn cached(scene: &crate::scene::Scene) -> Option<Cached> {
+    let path = crate::bake::cache::cache_path(scene);
+    let sections = crate::format::sections(&path).ok()?;
+    Some(Cached {
+        path: path.display().to_string(),
+        file_bytes: std::fs::metadata(&path).map_or(0, |m| m.len()),
+        data_bytes: sections.iter().map(|s| s.data_bytes).sum(),
+    })
 }

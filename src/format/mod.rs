@@ -5,17 +5,17 @@
 //! Over 800 lines: 171 of them are this byte layout, kept beside the types it describes;
 //! reading, writing, planning, checking and BC coding are modules of their own.
 //!
-//! # Byte layout (format version 7)
+//! # Byte layout (format version 8)
 //!
 //! All integers are little-endian, `f32` is IEEE 754 binary32 (little-endian bits). Offsets
 //! are in bytes. There is no padding anywhere.
 //!
 //! ```text
-//! HEADER (80 + 16*N bytes)
+//! HEADER (80 + 28*N bytes)
 //!   off  size  field
 //!    0     8   magic           "CANOPY\r\n" (43 41 4E 4F 50 59 0D 0A); the CR LF pair catches
 //!                              a file whose line endings were converted in transfer
-//!    8     4   version         u32, 7
+//!    8     4   version         u32, 8 (a reader also takes 7: see the end of this layout)
 //!   12     4   section_count   u32 N, at most MAX_SECTIONS (4096)
 //!   16     8   file_size       u64, total length of the file in bytes, header included
 //!   24     8   scene_hash      u64, hash of the scene text + bake settings (from the caller)
@@ -39,17 +39,28 @@
 //!   72     4   compress        u32, 0 or 1: the bake stores its     /
 //!                              BTF images in BC7 and its cube maps in BC4 (each record
 //!                              says how it is stored: the reader goes by the records)
-//!   76  16*N   section table, one 16-byte entry per section, in file order:
+//!   76  28*N   section table, one 28-byte entry per section, in file order:
 //!                +0  u32 kind      1 = BTF image sets, 2 = VCM sets, 3 = texel volumes,
 //!                                  4 = impostors (0 and others invalid)
-//!                +4  u32 crc32     CRC-32 (IEEE, as crc32fast) of the section's payload
-//!                +8  u64 length    payload length in bytes, 4..=MAX_SECTION_BYTES (1 GiB)
-//!   76+16N  4  header_crc      u32, CRC-32 of header bytes [0, 76+16N)
+//!                +4  u32 crc32     CRC-32 (IEEE, as crc32fast) of the payload as stored
+//!                +8  u64 length    bytes of the payload as stored, 1..=MAX_SECTION_BYTES
+//!                                  (1 GiB)
+//!               +16  u32 packing   0 = stored as it is, 1 = DEFLATE (RFC 1951, raw, no
+//!                                  zlib or gzip wrapper)
+//!               +20  u64 plain_length  bytes of the payload once inflated,
+//!                                  4..=MAX_SECTION_BYTES; equal to length when packing is 0
+//!   76+28N  4  header_crc      u32, CRC-32 of header bytes [0, 76+28N)
 //!
-//! PAYLOADS: the N section payloads, back to back in table order, starting right after
-//! header_crc; their lengths sum to exactly file_size - (80 + 16N) and the file ends there.
+//! PAYLOADS: the N section payloads as stored, back to back in table order, starting right
+//! after header_crc; their lengths sum to exactly file_size - (80 + 28N) and the file ends
+//! there. A deflated payload is one DEFLATE stream that inflates to exactly plain_length
+//! bytes and ends exactly at the payload's end.
 //!
-//! SECTION PAYLOAD (any kind)
+//! Version 7 differs only in the section table: 16-byte entries (kind, crc32, length), every
+//! payload stored as it is; so its header is 80 + 16*N bytes. [`read`] takes both;
+//! [`write_atomic`] writes version 8 with every section that shrinks deflated.
+//!
+//! SECTION PAYLOAD (any kind, as inflated)
 //!    0     4   record_count    u32 R
 //!    4     ..  R records of the section's kind, back to back, filling the payload exactly
 //!
@@ -154,11 +165,14 @@
 //! Every length is checked against a hard limit and against the bytes actually left before
 //! anything is sized from it, so a truncated or corrupt file gives a [`FormatError`], never
 //! a panic, an endless loop or an allocation beyond the file's own size (plus a few KiB).
+//! In a deflated section the bytes left are the ones its entry promises, so there a record's
+//! data is allocated as it inflates (in steps of 4 MiB), never more than has come out.
 //! Order of checks: magic, version, fixed header, section count, header checksum, file size,
 //! scene hash (with [`read_expecting`]), settings, table entries; then per section: its
-//! records (sizes against the section), its checksum. When a section fails to decode, its
-//! checksum is still checked first, so a flipped byte reports a checksum mismatch.
-//! [`read`] streams the file: the decoded data is the only large allocation.
+//! records (sizes against the section), its checksum. When a section fails to decode (or to
+//! inflate), its checksum is still checked first, so a flipped byte reports a checksum
+//! mismatch. [`read`] streams the file, inflating as it goes: the decoded data is the only
+//! large allocation.
 //!
 //!
 //! # Writing
@@ -191,16 +205,19 @@ mod write;
 pub use plan::{
     btf_record_bytes, file_bytes_for, impostor_record_bytes, texel_record_bytes, vcm_record_bytes,
 };
-pub use read::{from_bytes, read, read_expecting};
-pub use write::{to_bytes, write_atomic};
+pub use read::{SectionInfo, from_bytes, read, read_expecting, sections};
+pub use write::{to_bytes, to_bytes_packed, write_atomic};
 
 /// The first 8 bytes of every `.canopy` file.
 pub const MAGIC: [u8; 8] = *b"CANOPY\r\n";
 /// The `species` of a VCM set that holds a forest cell's cube maps (level tree, owner the
 /// cell's index in `crate::vcm::cells::ForestCells`), not one tree's.
 pub const VCM_CELL_SPECIES: u32 = u32::MAX;
-/// The format version this code writes and the only one it reads.
-pub const VERSION: u32 = 7;
+/// The format version this code writes.
+pub const VERSION: u32 = 8;
+/// The oldest format version this code reads (its section table has no packing: every
+/// payload is stored as it is).
+pub const OLDEST_VERSION: u32 = 7;
 /// Ambient images per view in a BTF image set: lit by the sky alone, then by the light the
 /// ground sends up alone (the two halves of the renderer's hemispherical ambient).
 pub const AMBIENT_IMAGES_PER_VIEW: u32 = 2;
@@ -236,7 +253,9 @@ const FIXED_HEADER_BYTES: usize = 76;
 /// Words of the settings in the header (from offset 32).
 const SETTINGS_WORDS: usize = 11;
 /// Bytes of one section-table entry.
-const SECTION_ENTRY_BYTES: usize = 16;
+const SECTION_ENTRY_BYTES: usize = 28;
+/// Bytes of one section-table entry in a version-7 file.
+const SECTION_ENTRY_BYTES_V7: usize = 16;
 /// Bytes of a section payload before its records (the record count).
 const SECTION_PREFIX_BYTES: u64 = 4;
 /// Bytes of a BTF record besides its image data.
@@ -288,10 +307,14 @@ pub enum FormatError {
 
     /// The file has another format version.
     #[error(
-        "the .canopy file has format version {found}, but this canopy reads version {supported}; \
-         re-bake with `canopy bake`"
+        "the .canopy file has format version {found}, but this canopy reads versions \
+         {oldest} to {supported}; re-bake with `canopy bake`"
     )]
-    UnsupportedVersion { found: u32, supported: u32 },
+    UnsupportedVersion {
+        found: u32,
+        oldest: u32,
+        supported: u32,
+    },
 
     /// The file ends before something it declares.
     #[error(
@@ -567,6 +590,26 @@ pub enum SectionKind {
     Impostor = 4,
 }
 
+/// How a section's payload is stored in the file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Packing {
+    /// As it is.
+    Plain = 0,
+    /// As one raw DEFLATE stream (RFC 1951).
+    Deflate = 1,
+}
+
+impl Packing {
+    /// The packing with this tag, if any.
+    pub fn from_u32(tag: u32) -> Option<Packing> {
+        match tag {
+            0 => Some(Packing::Plain),
+            1 => Some(Packing::Deflate),
+            _ => None,
+        }
+    }
+}
+
 impl SectionKind {
     /// The kind with this tag, if any.
     pub fn from_u32(tag: u32) -> Option<SectionKind> {
@@ -579,7 +622,7 @@ impl SectionKind {
         }
     }
 
-    fn name(self) -> &'static str {
+    pub fn name(self) -> &'static str {
         match self {
             SectionKind::Btf => "btf image sets",
             SectionKind::Vcm => "vcm sets",

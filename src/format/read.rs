@@ -50,6 +50,9 @@ fn read_file(path: &Path, expected_hash: Option<u64>) -> Result<Baked, FormatErr
     decode(&mut input, expected_hash)
 }
 
+/// The most a deflated section's record data is allocated ahead of the bytes that came.
+const BYTES_STEP: usize = 4 << 20;
+
 /// A reader that knows how many bytes it has left.
 struct Input<'p, R> {
     reader: R,
@@ -103,10 +106,79 @@ pub(super) fn u64_at(bytes: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(a)
 }
 
+/// One section of a file as its table gives it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SectionInfo {
+    pub kind: SectionKind,
+    pub packing: Packing,
+    /// Bytes in the file.
+    pub stored_bytes: u64,
+    /// Bytes once inflated.
+    pub data_bytes: u64,
+}
+
+/// The section table of a `.canopy` file, checked as [`read`] checks it (magic, version,
+/// header checksum, sizes), without reading the sections.
+pub fn sections(path: impl AsRef<Path>) -> Result<Vec<SectionInfo>, FormatError> {
+    let path = path.as_ref();
+    let io_error = |action| {
+        move |source| FormatError::Io {
+            path: path.to_owned(),
+            action,
+            source,
+        }
+    };
+    let file = File::open(path).map_err(io_error("could not open"))?;
+    let len = file.metadata().map_err(io_error("could not read"))?.len();
+    let mut input = Input {
+        reader: BufReader::new(file),
+        pos: 0,
+        len,
+        path,
+    };
+    let header = decode_header(&mut input, None)?;
+    Ok(header
+        .entries
+        .iter()
+        .map(|e| SectionInfo {
+            kind: e.kind,
+            packing: e.packing,
+            stored_bytes: e.len,
+            data_bytes: e.plain_len,
+        })
+        .collect())
+}
+
 fn decode<R: Read>(
     input: &mut Input<'_, R>,
     expected_hash: Option<u64>,
 ) -> Result<Baked, FormatError> {
+    let header = decode_header(input, expected_hash)?;
+    let mut baked = Baked::empty(header.scene_hash, header.settings);
+    for (i, entry) in header.entries.iter().enumerate() {
+        let name = format!("section {i} ({})", entry.kind.name());
+        match entry.packing {
+            Packing::Plain => decode_plain(input, entry, &name, &mut baked)?,
+            Packing::Deflate => inflate::decode_deflated(input, entry, &name, &mut baked)?,
+        }
+    }
+    check_unique_btf(&baked.btf)?;
+    check_unique_texels(&baked.texels)?;
+    check_unique_impostors(&baked.impostors)?;
+    Ok(baked)
+}
+
+/// What the header says, checked.
+struct Header {
+    scene_hash: u64,
+    settings: BakeSettings,
+    entries: Vec<TableEntry>,
+}
+
+fn decode_header<R: Read>(
+    input: &mut Input<'_, R>,
+    expected_hash: Option<u64>,
+) -> Result<Header, FormatError> {
     // Magic: a short file that matches so far is truncated, anything else is not ours.
     let mut magic = [0u8; 8];
     let got = input.available().min(8) as usize;
@@ -125,12 +197,18 @@ fn decode<R: Read>(
     }
     let version_bytes = input.array::<4>("the format version")?;
     let version = u32::from_le_bytes(version_bytes);
-    if version != VERSION {
+    if !(OLDEST_VERSION..=VERSION).contains(&version) {
         return Err(FormatError::UnsupportedVersion {
             found: version,
+            oldest: OLDEST_VERSION,
             supported: VERSION,
         });
     }
+    let entry_bytes = if version == OLDEST_VERSION {
+        SECTION_ENTRY_BYTES_V7
+    } else {
+        SECTION_ENTRY_BYTES
+    };
 
     // The rest of the fixed header; `rest` starts at file offset 12.
     let rest = input.array::<{ FIXED_HEADER_BYTES - 12 }>("the header")?;
@@ -142,7 +220,7 @@ fn decode<R: Read>(
             limit: MAX_SECTIONS.into(),
         });
     }
-    let table_len = section_count as usize * SECTION_ENTRY_BYTES;
+    let table_len = section_count as usize * entry_bytes;
     if table_len as u64 + 4 > input.available() {
         return Err(FormatError::Truncated {
             what: format!("the section table ({section_count} entries) and header checksum"),
@@ -201,34 +279,11 @@ fn decode<R: Read>(
 
     let mut entries = Vec::with_capacity(section_count as usize);
     let mut total: u64 = 0;
-    for (i, entry) in table.chunks_exact(SECTION_ENTRY_BYTES).enumerate() {
-        let tag = u32_at(entry, 0);
-        let crc = u32_at(entry, 4);
-        let len = u64_at(entry, 8);
-        let Some(kind) = SectionKind::from_u32(tag) else {
-            return Err(FormatError::MalformedContent {
-                section: format!("section {i}"),
-                reason: format!(
-                    "unknown section kind {tag} (known: 1 = btf, 2 = vcm, 3 = texel, 4 = impostor)"
-                ),
-            });
-        };
-        if len > MAX_SECTION_BYTES {
-            return Err(FormatError::AbsurdSize {
-                field: format!("the length of section {i} ({})", kind.name()),
-                value: len,
-                limit: MAX_SECTION_BYTES,
-            });
-        }
-        if len < SECTION_PREFIX_BYTES {
-            return Err(FormatError::MalformedContent {
-                section: format!("section {i} ({})", kind.name()),
-                reason: format!("its length is {len}, too short for a record count"),
-            });
-        }
+    for (i, entry) in table.chunks_exact(entry_bytes).enumerate() {
+        let entry = TableEntry::parse(i, entry)?;
         // At most 4096 * 2^30: cannot overflow.
-        total += len;
-        entries.push((kind, crc, len));
+        total += entry.len;
+        entries.push(entry);
     }
     if total != file_size - header_len {
         return Err(FormatError::MalformedContent {
@@ -240,47 +295,134 @@ fn decode<R: Read>(
         });
     }
 
-    let mut baked = Baked::empty(scene_hash, settings);
-    for (i, &(kind, stored, len)) in entries.iter().enumerate() {
-        let name = format!("section {i} ({})", kind.name());
-        let mut section = Section {
-            input: &mut *input,
-            remaining: len,
-            hasher: crc32fast::Hasher::new(),
-            name: &name,
+    Ok(Header {
+        scene_hash,
+        settings,
+        entries,
+    })
+}
+
+/// One entry of the section table, checked on its own.
+struct TableEntry {
+    kind: SectionKind,
+    crc: u32,
+    /// Bytes as stored.
+    len: u64,
+    packing: Packing,
+    /// Bytes once inflated (`len` for a plain section).
+    plain_len: u64,
+}
+
+impl TableEntry {
+    /// Entry `i` of the table: 16 bytes in a version-7 file (no packing), 28 in version 8.
+    fn parse(i: usize, entry: &[u8]) -> Result<TableEntry, FormatError> {
+        let tag = u32_at(entry, 0);
+        let crc = u32_at(entry, 4);
+        let len = u64_at(entry, 8);
+        let Some(kind) = SectionKind::from_u32(tag) else {
+            return Err(FormatError::MalformedContent {
+                section: format!("section {i}"),
+                reason: format!(
+                    "unknown section kind {tag} (known: 1 = btf, 2 = vcm, 3 = texel, 4 = impostor)"
+                ),
+            });
         };
-        let mut result = match kind {
-            SectionKind::Btf => decode_btf(&mut section, &mut baked.btf),
-            SectionKind::Vcm => decode_vcm(&mut section, &mut baked.vcm),
-            SectionKind::Texel => decode_texels(&mut section, &mut baked.texels),
-            SectionKind::Impostor => decode_impostors(&mut section, &mut baked.impostors),
+        let malformed = |reason: String| FormatError::MalformedContent {
+            section: format!("section {i} ({})", kind.name()),
+            reason,
         };
-        if result.is_ok() && section.remaining != 0 {
-            result = Err(section.malformed(format!(
-                "{} bytes are left after the last record",
-                section.remaining
+        let (packing, plain_len) = if entry.len() == SECTION_ENTRY_BYTES {
+            let tag = u32_at(entry, 16);
+            let packing = Packing::from_u32(tag).ok_or_else(|| {
+                malformed(format!("packing {tag} is not 0 (as it is) or 1 (deflate)"))
+            })?;
+            (packing, u64_at(entry, 20))
+        } else {
+            (Packing::Plain, len)
+        };
+        for (what, value) in [("length", len), ("inflated length", plain_len)] {
+            if value > MAX_SECTION_BYTES {
+                return Err(FormatError::AbsurdSize {
+                    field: format!("the {what} of section {i} ({})", kind.name()),
+                    value,
+                    limit: MAX_SECTION_BYTES,
+                });
+            }
+        }
+        if plain_len < SECTION_PREFIX_BYTES {
+            return Err(malformed(format!(
+                "its length is {plain_len}, too short for a record count"
             )));
         }
-        match result {
-            Ok(()) => {}
-            // The content does not decode: unless it is corrupt, report that.
-            Err(FormatError::MalformedContent { .. }) => section.drain()?,
-            Err(e) => return Err(e),
+        if packing == Packing::Plain && plain_len != len {
+            return Err(malformed(format!(
+                "it is stored as it is in {len} bytes but its inflated length says {plain_len}"
+            )));
         }
-        let computed = section.hasher.finalize();
-        if stored != computed {
-            return Err(FormatError::ChecksumMismatch {
-                section: name,
-                stored,
-                computed,
-            });
+        if len == 0 {
+            return Err(malformed("its deflated payload is empty".into()));
         }
-        result?;
+        Ok(TableEntry {
+            kind,
+            crc,
+            len,
+            packing,
+            plain_len,
+        })
     }
-    check_unique_btf(&baked.btf)?;
-    check_unique_texels(&baked.texels)?;
-    check_unique_impostors(&baked.impostors)?;
-    Ok(baked)
+}
+
+/// Decodes the records of a section into `baked`; the section must end with the last one.
+fn decode_records<R: Read>(
+    section: &mut Section<'_, '_, R>,
+    kind: SectionKind,
+    baked: &mut Baked,
+) -> Result<(), FormatError> {
+    match kind {
+        SectionKind::Btf => decode_btf(section, &mut baked.btf),
+        SectionKind::Vcm => decode_vcm(section, &mut baked.vcm),
+        SectionKind::Texel => decode_texels(section, &mut baked.texels),
+        SectionKind::Impostor => decode_impostors(section, &mut baked.impostors),
+    }?;
+    if section.remaining != 0 {
+        return Err(section.malformed(format!(
+            "{} bytes are left after the last record",
+            section.remaining
+        )));
+    }
+    Ok(())
+}
+
+/// A section stored as it is: its records are read from the file, and hashed as they are.
+fn decode_plain<R: Read>(
+    input: &mut Input<'_, R>,
+    entry: &TableEntry,
+    name: &str,
+    baked: &mut Baked,
+) -> Result<(), FormatError> {
+    let mut section = Section {
+        input,
+        remaining: entry.len,
+        hasher: crc32fast::Hasher::new(),
+        name,
+        sizes_backed: true,
+    };
+    let result = decode_records(&mut section, entry.kind, baked);
+    match result {
+        Ok(()) => {}
+        // The content does not decode: unless it is corrupt, report that.
+        Err(FormatError::MalformedContent { .. }) => section.drain()?,
+        Err(e) => return Err(e),
+    }
+    let computed = section.hasher.finalize();
+    if entry.crc != computed {
+        return Err(FormatError::ChecksumMismatch {
+            section: name.to_owned(),
+            stored: entry.crc,
+            computed,
+        });
+    }
+    result
 }
 
 /// The payload of one section: reads never go past its end, and everything read is hashed.
@@ -289,6 +431,10 @@ struct Section<'a, 'p, R> {
     remaining: u64,
     hasher: crc32fast::Hasher,
     name: &'a str,
+    /// Whether `remaining` counts bytes the file holds (a plain section) rather than bytes
+    /// an entry promises (a deflated one): only then is a record's data allocated whole
+    /// before it is read.
+    sizes_backed: bool,
 }
 
 impl<R: Read> Section<'_, '_, R> {
@@ -358,8 +504,23 @@ impl<R: Read> Section<'_, '_, R> {
             )));
         }
         // len <= remaining <= MAX_SECTION_BYTES, so it fits in usize.
-        let mut v = vec![0; len as usize];
-        self.fill(&mut v, what)?;
+        let len = len as usize;
+        if self.sizes_backed || len <= BYTES_STEP {
+            let mut v = vec![0; len];
+            self.fill(&mut v, what)?;
+            return Ok(v);
+        }
+        // Grown as the bytes come, to exactly `len` at the end.
+        let mut v = Vec::with_capacity(BYTES_STEP);
+        while v.len() < len {
+            let start = v.len();
+            let end = len.min(start + BYTES_STEP);
+            if end > v.capacity() {
+                v.reserve_exact((len - v.capacity()).min(v.capacity()));
+            }
+            v.resize(end, 0);
+            self.fill(&mut v[start..], what)?;
+        }
         Ok(v)
     }
 
@@ -550,5 +711,6 @@ fn decode_impostors<R: Read>(
     Ok(())
 }
 
+mod inflate;
 #[cfg(test)]
 mod tests;

@@ -225,6 +225,97 @@ pub(crate) fn reseal(bytes: &mut [u8]) {
     reseal_header(bytes);
 }
 
+/// `baked`'s data with the second half of every image, map, volume and atlas zeroed, so
+/// that its sections deflate to well under their size (noise does not).
+pub(crate) fn compressible(mut baked: Baked) -> Baked {
+    let zero_half = |v: &mut Vec<u8>| {
+        let half = v.len() / 2;
+        v[half..].fill(0);
+    };
+    for s in &mut baked.btf {
+        zero_half(&mut s.direct);
+        zero_half(&mut s.ambient);
+    }
+    for s in &mut baked.vcm {
+        zero_half(&mut s.opacity);
+    }
+    for t in &mut baked.texels {
+        zero_half(&mut t.voxels);
+    }
+    for i in &mut baked.impostors {
+        zero_half(&mut i.albedo);
+        zero_half(&mut i.normal_depth);
+    }
+    baked
+}
+
+/// `bytes` as one raw DEFLATE stream.
+pub(crate) fn deflate(bytes: &[u8]) -> Vec<u8> {
+    use std::io::Write;
+    let mut e = flate2::write::DeflateEncoder::new(Vec::new(), flate2::Compression::fast());
+    e.write_all(bytes).unwrap();
+    e.finish().unwrap()
+}
+
+/// The payloads of a version-8 file's sections as stored.
+pub(crate) fn payloads(bytes: &[u8]) -> Vec<Vec<u8>> {
+    (0..section_count(bytes))
+        .map(|i| {
+            let start = payload_start(bytes, i);
+            let len = u64_at(bytes, FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * i + 8) as usize;
+            bytes[start..start + len].to_vec()
+        })
+        .collect()
+}
+
+/// The version-8 file `bytes` with section `i`'s payload replaced by `stored`, its entry
+/// saying `packing` and `plain_len`, and every size and checksum made right.
+pub(crate) fn with_section(
+    bytes: &[u8],
+    i: usize,
+    stored: &[u8],
+    packing: Packing,
+    plain_len: u64,
+) -> Vec<u8> {
+    let mut parts = payloads(bytes);
+    parts[i] = stored.to_vec();
+    let end = header_end(bytes);
+    let mut out = bytes[..end + 4].to_vec();
+    let entry = FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * i;
+    out[entry + 8..entry + 16].copy_from_slice(&(stored.len() as u64).to_le_bytes());
+    out[entry + 16..entry + 20].copy_from_slice(&(packing as u32).to_le_bytes());
+    out[entry + 20..entry + 28].copy_from_slice(&plain_len.to_le_bytes());
+    for p in &parts {
+        out.extend_from_slice(p);
+    }
+    let len = out.len() as u64;
+    out[16..24].copy_from_slice(&len.to_le_bytes());
+    reseal(&mut out);
+    out
+}
+
+/// A version-8 file whose sections are all stored as they are, written as version 7: the
+/// table's entries without their packing and inflated length.
+pub(crate) fn as_version_7(bytes: &[u8]) -> Vec<u8> {
+    let n = section_count(bytes);
+    let mut out = bytes[..FIXED_HEADER_BYTES].to_vec();
+    out[8..12].copy_from_slice(&7u32.to_le_bytes());
+    for i in 0..n {
+        let entry = FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * i;
+        assert_eq!(u32_at(bytes, entry + 16), Packing::Plain as u32);
+        out.extend_from_slice(&bytes[entry..entry + SECTION_ENTRY_BYTES_V7]);
+    }
+    let crc = crc32fast::hash(&out);
+    out.extend_from_slice(&crc.to_le_bytes());
+    out.extend_from_slice(&bytes[header_end(bytes) + 4..]);
+    let len = out.len() as u64;
+    out[16..24].copy_from_slice(&len.to_le_bytes());
+    let crc = crc32fast::hash(&out[..out.len() - (bytes.len() - header_end(bytes) - 4) - 4]);
+    let at = FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES_V7 * n;
+    out[at..at + 4].copy_from_slice(&crc.to_le_bytes());
+    out
+}
+
 /// Offset of the first payload byte of section `i`.
 pub(crate) fn payload_start(bytes: &[u8], i: usize) -> usize {
     let mut pos = header_end(bytes) + 4;
