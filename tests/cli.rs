@@ -508,15 +508,18 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     // One byte changed inside the texel volumes' section (kind 3): refused, naming it.
     let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
     let sections = u32_at(12) as usize;
-    // The format's header: 76 fixed bytes, the section table, the header checksum.
-    let mut at = 80 + 16 * sections;
+    // The format's header: 76 fixed bytes, the section table of 28-byte entries, the header
+    // checksum.
+    let mut at = 80 + 28 * sections;
     let mut texel_section = None;
     let mut impostor_section = None;
     let mut btf_section = None;
     let mut vcm_section = None;
     for i in 0..sections {
-        let entry = 76 + 16 * i;
+        let entry = 76 + 28 * i;
         let len = u64::from_le_bytes(bytes[entry + 8..entry + 16].try_into().unwrap()) as usize;
+        // Packing 1: the sections are stored deflated.
+        assert_eq!(u32_at(entry + 16), 1, "section {i} stored deflated");
         match u32_at(entry) {
             1 => btf_section = Some((at, len)),
             2 => vcm_section = Some((at, len)),
@@ -533,13 +536,14 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     assert_eq!(compressed, 1, "[bake] compress is on by default");
     for (section, name) in [(btf_section, "btf image sets"), (vcm_section, "vcm sets")] {
         let (start, len) = section.expect("the bake has BTF and VCM sections");
-        let record = start + 4;
-        let encoding = if name == "vcm sets" {
-            record + 9
-        } else {
-            record + 5
-        };
-        assert_eq!(bytes[encoding], 1, "{name}: stored compressed");
+        let mut payload = Vec::new();
+        std::io::Read::read_to_end(
+            &mut flate2::read::DeflateDecoder::new(&bytes[start..start + len]),
+            &mut payload,
+        )
+        .unwrap();
+        let encoding = if name == "vcm sets" { 4 + 9 } else { 4 + 5 };
+        assert_eq!(payload[encoding], 1, "{name}: stored compressed");
         let mut flipped = bytes.clone();
         flipped[start + len / 2] ^= 0x10;
         let bad = tmp("bad-blocks.canopy");
@@ -557,7 +561,7 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     std::fs::write(&bad, &old).unwrap();
     refused(
         render(&lone, &bad, "btf"),
-        "format version 6, but this canopy reads version 7; re-bake with `canopy bake`",
+        "format version 6, but this canopy reads versions 7 to 8; re-bake with `canopy bake`",
     );
     let (start, len) = texel_section.expect("the bake has a texel section");
     let mut flipped = bytes.clone();

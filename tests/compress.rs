@@ -254,8 +254,9 @@ fn the_stand_drawn_from_bc7_is_close_to_rgba8_and_the_decoded_fallback_matches()
 }
 
 /// Prints the bytes of a baked file by part, as stored and as they would be uncompressed,
-/// with the GPU bytes of its BTF images either way: `CANOPY_MEASURE_FILE=path cargo test
-/// --test compress measure -- --ignored --nocapture` (docs/RESULTS.md, "Bake").
+/// with the GPU bytes of its BTF images either way, and the same bake written and read
+/// again as this canopy writes it (sections deflated): `CANOPY_MEASURE_FILE=path cargo test
+/// --release --test compress measure -- --ignored --nocapture` (docs/RESULTS.md, "Bake").
 #[test]
 #[ignore]
 fn measure() {
@@ -318,4 +319,41 @@ fn measure() {
         baked.texel_bytes(),
         baked.impostor_bytes(),
     );
+    // The same bake written as a bake writes it now (each section deflated where that
+    // shrinks it), and read back.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("rewritten.canopy");
+    let t2 = std::time::Instant::now();
+    canopy::format::write_atomic(&out, &baked).unwrap();
+    let write_s = t2.elapsed().as_secs_f64();
+    let t3 = std::time::Instant::now();
+    let back = canopy::format::read(&out).unwrap();
+    let reread_s = t3.elapsed().as_secs_f64();
+    assert!(back == baked, "the rewritten file reads as the same bake");
+    println!(
+        "written as this canopy writes it: {} bytes in {write_s:.2} s, read back in {reread_s:.2} s",
+        std::fs::metadata(&out).unwrap().len()
+    );
+    let plain = dir.path().join("plain.canopy");
+    let t4 = std::time::Instant::now();
+    canopy::format::write_atomic_packed(&plain, &baked, canopy::format::Packing::Plain).unwrap();
+    let plain_write_s = t4.elapsed().as_secs_f64();
+    let t5 = std::time::Instant::now();
+    let back = canopy::format::read(&plain).unwrap();
+    let plain_read_s = t5.elapsed().as_secs_f64();
+    assert!(back == baked);
+    println!(
+        "written with every section as it is: {} bytes in {plain_write_s:.2} s, read back in {plain_read_s:.2} s",
+        std::fs::metadata(&plain).unwrap().len()
+    );
+    for s in canopy::format::sections(&out).unwrap() {
+        println!(
+            "  {:<15} {:>11} bytes in the file, {:>11} of data ({:.1} %), {:?}",
+            s.kind.name(),
+            s.stored_bytes,
+            s.data_bytes,
+            100.0 * s.stored_bytes as f64 / s.data_bytes as f64,
+            s.packing
+        );
+    }
 }

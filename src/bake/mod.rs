@@ -516,7 +516,7 @@ pub fn bake_to(
 ) -> Result<(Baked, BakeTimes)> {
     let (baked, mut times) = bake_scene(ctx, scene, world, progress)?;
     let t0 = std::time::Instant::now();
-    store(path, &baked)?;
+    store(path, &baked, crate::format::Packing::Deflate)?;
     times.write_seconds = t0.elapsed().as_secs_f64();
     Ok((baked, times))
 }

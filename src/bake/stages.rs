@@ -5,14 +5,15 @@
 //! variants' (handed over, a first variant standing in for its siblings), then the other
 //! variants' (handed over again); then the finer levels, the visibility cube maps, the
 //! texel volumes and the impostors. After each stage but the last, what is made so far is
-//! written beside the cache file (`<key>.partial.canopy`, uncompressed, the same format); a
-//! bake that finds one for its scene starts from it. The finished bake is the same file
+//! written beside the cache file (`<key>.partial.canopy`, the same format, neither block-
+//! compressed nor deflated, so that keeping it costs the stages little); a bake that finds
+//! one for its scene starts from it. The finished bake is the same file
 //! whichever way it was made.
 
 use std::path::{Path, PathBuf};
 
 use super::{BakeTimes, Progress, Source, StageClock, cache, compress, impostor, texel, vcm};
-use crate::format::{BakeSettings, Baked};
+use crate::format::{BakeSettings, Baked, Packing};
 use crate::model::World;
 use crate::model::params::TexelParams;
 use crate::render::GpuContext;
@@ -300,7 +301,7 @@ pub fn load_or_bake_progressive(
             if stage == BakeStage::Preview {
                 return;
             }
-            if !write_failed && let Err(e) = store(&partial, so_far) {
+            if !write_failed && let Err(e) = store(&partial, so_far, Packing::Plain) {
                 // The bake goes on; an interruption then costs what was made.
                 log::warn!(
                     "could not keep the partial bake at {}: {e}",
@@ -311,7 +312,7 @@ pub fn load_or_bake_progressive(
         },
     )?;
     // A cache that cannot be written costs a re-bake next time, not this run.
-    let not_cached = store(path, &baked).err().map(|e| {
+    let not_cached = store(path, &baked, Packing::Deflate).err().map(|e| {
         log::warn!("could not cache the bake at {}: {e}", path.display());
         e.to_string()
     });
@@ -327,14 +328,15 @@ pub fn load_or_bake_progressive(
     ))
 }
 
-/// Writes `baked` to `path` atomically, creating its folder first.
-pub(super) fn store(path: &Path, baked: &Baked) -> Result<()> {
+/// Writes `baked` to `path` atomically, creating its folder first, its sections packed as
+/// asked.
+pub(super) fn store(path: &Path, baked: &Baked, packing: Packing) -> Result<()> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|source| Error::Io {
             path: dir.to_path_buf(),
             source,
         })?;
     }
-    crate::format::write_atomic(path, baked)?;
+    crate::format::write_atomic_packed(path, baked, packing)?;
     Ok(())
 }

@@ -234,7 +234,17 @@ pub fn to_bytes_packed(baked: &Baked, packing: Packing) -> Vec<u8> {
 /// is untouched (the old file, if any, stays) and the temporary file is removed. Each
 /// section that shrinks deflated is stored deflated.
 pub fn write_atomic(path: impl AsRef<Path>, baked: &Baked) -> Result<(), FormatError> {
-    write_atomic_with_hook(path.as_ref(), baked, MAX_SECTION_BYTES, |_| Ok(()))
+    write_atomic_packed(path, baked, Packing::Deflate)
+}
+
+/// [`write_atomic`] with the sections packed as asked ([`Packing::Plain`]: all stored as
+/// they are, which writes faster).
+pub fn write_atomic_packed(
+    path: impl AsRef<Path>,
+    baked: &Baked,
+    packing: Packing,
+) -> Result<(), FormatError> {
+    write_atomic_with_hook(path.as_ref(), baked, MAX_SECTION_BYTES, packing, |_| Ok(()))
 }
 
 /// [`write_atomic`] with the section size limit as a parameter and a hook run on the
@@ -244,10 +254,11 @@ pub(super) fn write_atomic_with_hook(
     path: &Path,
     baked: &Baked,
     section_limit: u64,
+    packing: Packing,
     before_rename: impl FnOnce(&Path) -> io::Result<()>,
 ) -> Result<(), FormatError> {
     baked.validate_for(section_limit)?;
-    let encoding = Encoding::new(baked, section_limit, Packing::Deflate);
+    let encoding = Encoding::new(baked, section_limit, packing);
     atomic_file::write_atomic_with_hook(path, |w| encoding.write_to(w), before_rename).map_err(
         |e| FormatError::Io {
             path: e.path,
@@ -422,15 +433,16 @@ mod tests {
 
         let new = sample();
         let mut seen_temp = None;
-        let err = write_atomic_with_hook(&path, &new, MAX_SECTION_BYTES, |temp| {
-            // The complete new file sits next to the target, under another name.
-            assert_eq!(temp.parent(), Some(dir.as_path()));
-            assert_ne!(temp, path);
-            assert!(from_bytes(&fs::read(temp)?).unwrap() == new);
-            seen_temp = Some(temp.to_owned());
-            Err(io::Error::other("simulated crash before rename"))
-        })
-        .unwrap_err();
+        let err =
+            write_atomic_with_hook(&path, &new, MAX_SECTION_BYTES, Packing::Deflate, |temp| {
+                // The complete new file sits next to the target, under another name.
+                assert_eq!(temp.parent(), Some(dir.as_path()));
+                assert_ne!(temp, path);
+                assert!(from_bytes(&fs::read(temp)?).unwrap() == new);
+                seen_temp = Some(temp.to_owned());
+                Err(io::Error::other("simulated crash before rename"))
+            })
+            .unwrap_err();
         assert!(matches!(err, FormatError::Io { .. }), "{err:?}");
         let temp = seen_temp.expect("the hook ran");
         assert!(!temp.exists(), "temp file removed");
@@ -453,7 +465,8 @@ mod tests {
         let path = dir.join("big.canopy");
         let baked = sample();
         let limit = btf_record_len(&baked.btf[0]) + 3;
-        let err = write_atomic_with_hook(&path, &baked, limit, |_| Ok(())).unwrap_err();
+        let err =
+            write_atomic_with_hook(&path, &baked, limit, Packing::Plain, |_| Ok(())).unwrap_err();
         match err {
             FormatError::AbsurdSize { field, value, .. } => {
                 assert!(field.contains("btf image sets record 0"), "{field}");
@@ -463,7 +476,7 @@ mod tests {
         }
         assert!(dir_entries(&dir).is_empty(), "nothing written");
         // One more byte of room and it is written, one record per section.
-        write_atomic_with_hook(&path, &baked, limit + 1, |_| Ok(())).unwrap();
+        write_atomic_with_hook(&path, &baked, limit + 1, Packing::Plain, |_| Ok(())).unwrap();
         let bytes = fs::read(&path).unwrap();
         // Two btf sections, the vcm sets together, the texel volume, the impostor.
         assert_eq!(section_count(&bytes), 5);
