@@ -32,11 +32,14 @@ impl Default for RenderScale {
 }
 
 impl RenderScale {
-    /// The default for an adapter: automatic on a software renderer (a CPU cannot draw the
-    /// forest at window size interactively), full size otherwise.
+    /// The default for an adapter: on a software renderer automatic, starting from the
+    /// smallest scale (a CPU cannot draw the forest at window size interactively, and a
+    /// first frame at window size takes it most of a minute) and rising while frames are
+    /// quick; full size otherwise.
     pub fn for_adapter(software: bool) -> Self {
         Self {
             auto: software,
+            scale: if software { MIN_SCALE } else { 1.0 },
             ..Self::default()
         }
     }
@@ -59,10 +62,12 @@ pub fn scaled_size(width: u32, height: u32, scale: f32) -> (u32, u32) {
 /// of the old ones: a one-hour soak beside other work grew by steps of 30-40 MB).
 pub const AUTO_SCALES: [f32; 10] = [1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.42, 0.35, 0.3, MIN_SCALE];
 
-/// The automatic mode's next scale after a frame of `frame_ms`: one rung of
-/// [`AUTO_SCALES`] down when the frame took more than 10 % over the target, one up when it
-/// took under 70 % of it (the gap keeps it from hunting); a scale between rungs (set by the
-/// slider) goes to the nearest rung first.
+/// The automatic mode's next scale after a frame of `frame_ms`. When the frame took more
+/// than 10 % over the target: down the ladder of [`AUTO_SCALES`] to the rung where the frame,
+/// its cost taken as following its pixels, would take about the target (at least one rung),
+/// so that a frame of many seconds does not take many more to recover. When it took under
+/// 70 % of the target: one rung up (the gap keeps it from hunting). A scale between rungs
+/// (set by the slider) goes to the nearest rung first.
 pub fn next_scale(scale: f32, frame_ms: f32, target_ms: f32) -> f32 {
     if !(frame_ms.is_finite() && frame_ms > 0.0 && target_ms > 0.0) {
         return scale;
@@ -72,8 +77,11 @@ pub fn next_scale(scale: f32, frame_ms: f32, target_ms: f32) -> f32 {
         .enumerate()
         .min_by(|a, b| (a.1 - scale).abs().total_cmp(&(b.1 - scale).abs()))
         .map_or(0, |(i, _)| i);
+    let last = AUTO_SCALES.len() - 1;
     let next = if frame_ms > 1.1 * target_ms {
-        (rung + 1).min(AUTO_SCALES.len() - 1)
+        let fits = AUTO_SCALES[rung] * (target_ms / frame_ms).sqrt();
+        let to = AUTO_SCALES.iter().position(|&s| s <= fits).unwrap_or(last);
+        to.max(rung + 1).min(last)
     } else if frame_ms < 0.7 * target_ms {
         rung.saturating_sub(1)
     } else {
@@ -255,26 +263,34 @@ mod tests {
     #[test]
     fn the_automatic_mode_lowers_the_scale_when_frames_are_slow_and_raises_it_back() {
         let mut s = 1.0;
-        // A forced slow frame time: 200 ms against a 50 ms target, frame after frame.
-        for _ in 0..5 {
-            s = next_scale(s, 200.0, 50.0);
-        }
+        // A frame 4 times over the target: straight to the rung of a quarter of the
+        // pixels (half the side).
+        s = next_scale(s, 200.0, 50.0);
         assert_eq!(s, 0.5);
+        // Just over it: one rung down.
+        assert_eq!(next_scale(0.5, 56.0, 50.0), 0.42);
+        // A first frame of a minute: to the floor at once.
+        assert_eq!(next_scale(1.0, 60_000.0, 100.0), MIN_SCALE);
+        // Twice the target at 0.8: 0.8 / sqrt(2) = 0.57, the rung under it 0.5.
+        assert_eq!(next_scale(0.8, 100.0, 50.0), 0.5);
         for _ in 0..100 {
             s = next_scale(s, 200.0, 50.0);
         }
         assert_eq!(s, MIN_SCALE);
-        // Within the band it holds; fast frames raise it back to 1.
+        // Within the band it holds; fast frames raise it back to 1, a rung a frame.
         assert_eq!(next_scale(0.6, 45.0, 50.0), 0.6);
+        assert_eq!(next_scale(0.25, 10.0, 50.0), 0.3);
         // A slider's scale between rungs joins the ladder.
         assert_eq!(next_scale(0.63, 45.0, 50.0), 0.6);
-        assert_eq!(next_scale(0.63, 200.0, 50.0), 0.5);
+        assert_eq!(next_scale(0.63, 60.0, 50.0), 0.5);
         for _ in 0..100 {
             s = next_scale(s, 10.0, 50.0);
         }
         assert_eq!(s, 1.0);
         assert_eq!(next_scale(0.5, f32::NAN, 50.0), 0.5);
         assert!(RenderScale::for_adapter(true).auto && !RenderScale::for_adapter(false).auto);
+        assert_eq!(RenderScale::for_adapter(true).scale, MIN_SCALE);
+        assert_eq!(RenderScale::for_adapter(false).scale, 1.0);
     }
 
     #[test]
