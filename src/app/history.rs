@@ -163,15 +163,21 @@ impl FrameTimeHistory {
 }
 
 /// Draws the history as a small plot: CPU and (when measured) GPU frame time, ms, against
-/// frames ago, with a legend, and under the GPU line each pass's time stacked (where the
-/// GPU timed passes). Fixed axes (no drag or zoom), so it reads the same every frame and
+/// frames ago, with a legend in small type, and under the GPU line each pass's time stacked
+/// (where the GPU timed passes). Fixed axes (no drag or zoom), so it reads the same every frame and
 /// the panel's scroll wheel keeps scrolling the panel.
 pub fn plot(ui: &mut egui::Ui, history: &FrameTimeHistory) {
     use egui_plot::{Corner, FilledArea, Legend, Line, Plot};
     let bands = history.pass_bands();
     Plot::new("frame time history")
-        .height(if bands.is_empty() { 120.0 } else { 160.0 })
-        .legend(Legend::default().position(Corner::LeftTop))
+        // Room for the passes' legend (a dozen entries in small type) beside the newest
+        // frames, which are drawn on the right.
+        .height(if bands.is_empty() { 120.0 } else { 230.0 })
+        .legend(
+            Legend::default()
+                .position(Corner::LeftTop)
+                .text_style(egui::TextStyle::Small),
+        )
         .include_x(-(history.capacity() as f64 - 1.0))
         .include_x(0.0)
         .include_y(0.0)
