@@ -205,7 +205,7 @@ mod write;
 pub use plan::{
     btf_record_bytes, file_bytes_for, impostor_record_bytes, texel_record_bytes, vcm_record_bytes,
 };
-pub use read::{SectionInfo, from_bytes, read, read_expecting, sections};
+pub use read::{SectionInfo, from_bytes, read, read_expecting, sections, version_of};
 pub use write::{to_bytes, to_bytes_packed, write_atomic, write_atomic_packed};
 
 /// The first 8 bytes of every `.canopy` file.

@@ -149,6 +149,25 @@ pub fn sections(path: impl AsRef<Path>) -> Result<Vec<SectionInfo>, FormatError>
         .collect())
 }
 
+/// The format version a `.canopy` file says it is (its first 12 bytes, the magic checked).
+pub fn version_of(path: impl AsRef<Path>) -> Result<u32, FormatError> {
+    let path = path.as_ref();
+    let mut head = [0u8; 12];
+    File::open(path)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .map_err(|source| FormatError::Io {
+            path: path.to_owned(),
+            action: "could not read",
+            source,
+        })?;
+    if head[..8] != MAGIC {
+        return Err(FormatError::NotCanopy {
+            found: head[..8].to_vec(),
+        });
+    }
+    Ok(u32_at(&head, 8))
+}
+
 fn decode<R: Read>(
     input: &mut Input<'_, R>,
     expected_hash: Option<u64>,
