@@ -760,12 +760,25 @@ fn bakes_are_estimated_and_refused_before_they_start() {
     assert!(o.status.success(), "{err}");
     assert!(err.contains("bake estimate: about"), "{err}");
     let written = std::fs::metadata(&file).unwrap().len();
-    assert_eq!(estimate["file_bytes"].as_u64(), Some(written), "{estimate}");
+    let baked: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // The estimate is the file with every section stored as it is, exactly; the file
+    // written holds the same data, its sections deflated where that shrinks them.
+    let sections = baked["sections"]
+        .as_array()
+        .expect("the bake lists its sections");
+    let header = 80 + 28 * sections.len() as u64;
+    let sum = |key: &str| -> u64 { sections.iter().map(|s| s[key].as_u64().unwrap()).sum() };
+    assert_eq!(
+        estimate["file_bytes"].as_u64(),
+        Some(header + sum("data_bytes")),
+        "{estimate} {baked}"
+    );
+    assert_eq!(header + sum("file_bytes"), written, "{baked}");
+    assert!(written < header + sum("data_bytes"), "{baked}");
     assert!(estimate["memory_bytes"].as_u64().unwrap() > written);
     // The impostor section, in both: the lone fir's 4 x 4 frames of 32², mipped to 4 pixels
     // (4 levels), two RGBA8 atlases, and 52 bytes of record in the estimate.
     let atlas = (128 * 128 + 64 * 64 + 32 * 32 + 16 * 16) * 4;
-    let baked: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(baked["impostor_frames"], 4, "{baked}");
     assert_eq!(baked["impostor_resolution"], 32);
     assert_eq!(baked["impostor_layout"], "full");
