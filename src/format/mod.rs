@@ -2,8 +2,9 @@
 //! texel volumes, octahedral impostors),
 //! in one versioned, checksummed file that the viewer caches and validates on load.
 //!
-//! Over 800 lines: 171 of them are this byte layout, kept beside the types it describes;
-//! reading, writing, planning, checking and BC coding are modules of their own.
+//! Over 800 lines: 188 of them are these docs (the byte layout, 145 lines, kept beside the
+//! types it describes, and how it is read and written); reading, writing, planning,
+//! checking and BC coding are modules of their own.
 //!
 //! # Byte layout (format version 8)
 //!

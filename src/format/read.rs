@@ -32,6 +32,11 @@ pub fn from_bytes(bytes: &[u8]) -> Result<Baked, FormatError> {
 }
 
 fn read_file(path: &Path, expected_hash: Option<u64>) -> Result<Baked, FormatError> {
+    decode(&mut open(path)?, expected_hash)
+}
+
+/// The file at `path` as an [`Input`], buffered.
+fn open(path: &Path) -> Result<Input<'_, BufReader<File>>, FormatError> {
     let io_error = |action| {
         move |source| FormatError::Io {
             path: path.to_owned(),
@@ -41,13 +46,12 @@ fn read_file(path: &Path, expected_hash: Option<u64>) -> Result<Baked, FormatErr
     };
     let file = File::open(path).map_err(io_error("could not open"))?;
     let len = file.metadata().map_err(io_error("could not read"))?.len();
-    let mut input = Input {
+    Ok(Input {
         reader: BufReader::new(file),
         pos: 0,
         len,
         path,
-    };
-    decode(&mut input, expected_hash)
+    })
 }
 
 /// The most a deflated section's record data is allocated ahead of the bytes that came.
@@ -120,23 +124,7 @@ pub struct SectionInfo {
 /// The section table of a `.canopy` file, checked as [`read`] checks it (magic, version,
 /// header checksum, sizes), without reading the sections.
 pub fn sections(path: impl AsRef<Path>) -> Result<Vec<SectionInfo>, FormatError> {
-    let path = path.as_ref();
-    let io_error = |action| {
-        move |source| FormatError::Io {
-            path: path.to_owned(),
-            action,
-            source,
-        }
-    };
-    let file = File::open(path).map_err(io_error("could not open"))?;
-    let len = file.metadata().map_err(io_error("could not read"))?.len();
-    let mut input = Input {
-        reader: BufReader::new(file),
-        pos: 0,
-        len,
-        path,
-    };
-    let header = decode_header(&mut input, None)?;
+    let header = decode_header(&mut open(path.as_ref())?, None)?;
     Ok(header
         .entries
         .iter()
@@ -391,6 +379,20 @@ impl TableEntry {
     }
 }
 
+impl TableEntry {
+    /// The section's checksum against the one `computed` over its stored bytes.
+    fn check_crc(&self, name: &str, computed: u32) -> Result<(), FormatError> {
+        if self.crc != computed {
+            return Err(FormatError::ChecksumMismatch {
+                section: name.to_owned(),
+                stored: self.crc,
+                computed,
+            });
+        }
+        Ok(())
+    }
+}
+
 /// Decodes the records of a section into `baked`; the section must end with the last one.
 fn decode_records<R: Read>(
     section: &mut Section<'_, '_, R>,
@@ -433,14 +435,7 @@ fn decode_plain<R: Read>(
         Err(FormatError::MalformedContent { .. }) => section.drain()?,
         Err(e) => return Err(e),
     }
-    let computed = section.hasher.finalize();
-    if entry.crc != computed {
-        return Err(FormatError::ChecksumMismatch {
-            section: name.to_owned(),
-            stored: entry.crc,
-            computed,
-        });
-    }
+    entry.check_crc(name, section.hasher.finalize())?;
     result
 }
 

@@ -297,22 +297,19 @@ pub(crate) fn with_section(
 /// A version-8 file whose sections are all stored as they are, written as version 7: the
 /// table's entries without their packing and inflated length.
 pub(crate) fn as_version_7(bytes: &[u8]) -> Vec<u8> {
-    let n = section_count(bytes);
+    let payloads = &bytes[header_end(bytes) + 4..];
     let mut out = bytes[..FIXED_HEADER_BYTES].to_vec();
     out[8..12].copy_from_slice(&7u32.to_le_bytes());
-    for i in 0..n {
+    for i in 0..section_count(bytes) {
         let entry = FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * i;
         assert_eq!(u32_at(bytes, entry + 16), Packing::Plain as u32);
         out.extend_from_slice(&bytes[entry..entry + SECTION_ENTRY_BYTES_V7]);
     }
+    let len = (out.len() + 4 + payloads.len()) as u64;
+    out[16..24].copy_from_slice(&len.to_le_bytes());
     let crc = crc32fast::hash(&out);
     out.extend_from_slice(&crc.to_le_bytes());
-    out.extend_from_slice(&bytes[header_end(bytes) + 4..]);
-    let len = out.len() as u64;
-    out[16..24].copy_from_slice(&len.to_le_bytes());
-    let crc = crc32fast::hash(&out[..out.len() - (bytes.len() - header_end(bytes) - 4) - 4]);
-    let at = FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES_V7 * n;
-    out[at..at + 4].copy_from_slice(&crc.to_le_bytes());
+    out.extend_from_slice(payloads);
     out
 }
 

@@ -80,14 +80,7 @@ pub(super) fn decode_deflated<R: Read>(
             "{trailing} bytes follow the end of its deflate stream"
         )));
     }
-    let computed = stored.hasher.clone().finalize();
-    if entry.crc != computed {
-        return Err(FormatError::ChecksumMismatch {
-            section: name.to_owned(),
-            stored: entry.crc,
-            computed,
-        });
-    }
+    entry.check_crc(name, stored.hasher.clone().finalize())?;
     result
 }
 
