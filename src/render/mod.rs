@@ -115,6 +115,8 @@ pub struct Renderer {
     /// them (the bake takes every view under one light in a row). None after any other
     /// frame, which clears or redraws them.
     studio_cascades: Option<Vec<u8>>,
+    /// Frames in a row whose plan drew nothing into the cascades ([`shadow::cascade_side`]).
+    frames_without_casters: u32,
     /// Unique among the renderers of this process (see [`Self::id`]).
     id: u64,
 }
@@ -163,6 +165,7 @@ impl Renderer {
             voxel_pipeline: None,
             self_shadow: None,
             studio_cascades: None,
+            frames_without_casters: 0,
             id: NEXT_RENDERER_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         })
     }
@@ -436,7 +439,6 @@ impl Renderer {
             self.bake.forget_pipelines();
         }
         shaders::set_counting(counting);
-        self.ensure_bindings(ctx, frame.shadows.map_size)?;
         if !self.color_pipelines.contains_key(&format) {
             let p = ctx.checked("building the render pipelines", || {
                 ColorPipelines::new(&ctx.device, &self.layouts, format)
@@ -481,6 +483,15 @@ impl Renderer {
             },
         )?;
         method.ensure_pipelines(&mut self.bake, ctx, &self.layouts, format)?;
+        let casts = plan.casters.is_some() || plan.self_shadowed.is_some();
+        self.frames_without_casters = if casts {
+            0
+        } else {
+            self.frames_without_casters.saturating_add(1)
+        };
+        let held = self.bindings.as_ref().map(|b| b.cascades.size);
+        let side = shadow::cascade_side(frame.shadows.map_size, held, self.frames_without_casters);
+        self.ensure_bindings(ctx, side)?;
         if plan.layer {
             let layer = self
                 .layer

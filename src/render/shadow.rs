@@ -142,6 +142,30 @@ pub fn split_depths(near: f32, far: f32) -> [f32; CASCADES] {
     out
 }
 
+/// The cascades' side for a frame at knob `map_size`, the side held now (`held`) and the
+/// frames in a row that drew nothing into them (`idle`, this one included): the knob's
+/// side while anything casts, a placeholder of [`IDLE_CASCADE_SIDE`] once nothing has for
+/// [`IDLE_CASCADE_FRAMES`] frames. Clear maps shade everything lit at any size; the
+/// image-based methods cast their trees' shadows through the ground maps, so their
+/// cascades hold nothing and need not take 3 x 2048² x 4 bytes (50 MB).
+pub fn cascade_side(map_size: u32, held: Option<u32>, idle: u32) -> u32 {
+    if idle == 0 {
+        map_size
+    } else if idle >= IDLE_CASCADE_FRAMES {
+        IDLE_CASCADE_SIDE
+    } else {
+        held.unwrap_or(IDLE_CASCADE_SIDE)
+    }
+}
+
+/// Side of the cascades' maps while nothing is drawn into them.
+pub const IDLE_CASCADE_SIDE: u32 = 16;
+
+/// Frames in a row without casters before the cascades' maps shrink to the placeholder,
+/// so that a method whose casters come and go (`hybrid`'s geometry trees) does not make
+/// them again every other frame.
+pub const IDLE_CASCADE_FRAMES: u32 = 30;
+
 /// The cascades' depth maps: one texture array, a layer per cascade.
 pub struct CascadeMaps {
     /// Side of each layer, in texels.
@@ -202,6 +226,18 @@ pub(crate) fn layered_target(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cascades_shrink_only_after_a_while_without_casters_and_grow_at_once() {
+        // The first frame without casters gets the placeholder; one with them the knob's.
+        assert_eq!(cascade_side(2048, None, 1), IDLE_CASCADE_SIDE);
+        assert_eq!(cascade_side(2048, Some(16), 0), 2048);
+        // A gap of a few frames keeps what is held.
+        assert_eq!(cascade_side(2048, Some(2048), 1), 2048);
+        assert_eq!(cascade_side(2048, Some(2048), IDLE_CASCADE_FRAMES - 1), 2048);
+        assert_eq!(cascade_side(2048, Some(2048), IDLE_CASCADE_FRAMES), IDLE_CASCADE_SIDE);
+        assert_eq!(cascade_side(1024, Some(2048), 0), 1024);
+    }
 
     #[test]
     fn splits_increase_and_end_at_the_shadow_distance() {
