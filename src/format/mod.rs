@@ -197,12 +197,14 @@ use crate::sphere::OctaLayout;
 
 pub mod bc;
 mod check;
+mod packed;
 mod plan;
 mod read;
 #[cfg(test)]
 pub(crate) mod test_support;
 mod write;
 
+pub use packed::PackedBytes;
 pub use plan::{
     btf_record_bytes, file_bytes_for, impostor_record_bytes, texel_record_bytes, vcm_record_bytes,
 };

@@ -222,7 +222,7 @@ impl Renderer {
         }
         if let Some(p) = &self.bake.texel_pending {
             cpu.push(memory::MemoryPart {
-                name: "texel volumes as baked, not yet drawn (CPU)".into(),
+                name: "texel volumes as baked, deflated, not yet drawn (CPU)".into(),
                 bytes: p.bytes(),
                 count: 1,
             });

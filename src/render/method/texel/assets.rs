@@ -7,7 +7,7 @@ use glam::{Mat4, UVec3, Vec3};
 use super::prepare::{TexelFrame, prepare};
 use super::scene::TexelScene;
 use super::{TexelGpu, TexelMode, TexelSettings, polygons, stacks, tiles};
-use crate::format::{Baked, TexelVolume};
+use crate::format::{Baked, PackedBytes, TexelVolume};
 use crate::model::World;
 use crate::render::GpuContext;
 use crate::render::frame::FrameStats;
@@ -39,9 +39,9 @@ pub struct TexelAssets {
     opacity_pipeline: Option<wgpu::RenderPipeline>,
     /// Bytes of the 3D texture, mipmaps included.
     pub bytes: u64,
-    /// The baked volumes, kept to build the stack atlas the first time the stacks mode
-    /// draws (most sessions never do).
-    volumes: Vec<TexelVolume>,
+    /// The baked volumes, kept deflated to build the stack atlas or the forest-cover
+    /// tiles the first time they draw.
+    volumes: PackedVolumes,
     species_count: usize,
     stacks: Option<stacks::StackAssets>,
     /// Why the stack atlas could not be built (the slices3d mode still draws).
@@ -63,12 +63,64 @@ pub struct TexelPipelines {
     pub polygon: Option<wgpu::RenderPipeline>,
 }
 
+/// Baked texel volumes with their voxels deflated ([`PackedBytes`]): about a thirteenth of
+/// their 18 MB for the example forest, the volumes being mostly air. Unpacked for the
+/// upload, the stack atlas and the forest-cover tiles.
+struct PackedVolumes(Vec<(TexelVolume, PackedBytes)>);
+
+impl PackedVolumes {
+    fn pack(volumes: &[TexelVolume]) -> Self {
+        use rayon::prelude::*;
+        Self(
+            volumes
+                .par_iter()
+                .map(|v| {
+                    (header_of(v, Vec::new()), PackedBytes::pack(&v.voxels))
+                })
+                .collect(),
+        )
+    }
+
+    fn unpack(&self) -> Result<Vec<TexelVolume>> {
+        self.0
+            .iter()
+            .map(|(header, voxels)| {
+                let voxels = voxels.unpack().map_err(|e| {
+                    Error::Gpu(format!(
+                        "the texel volumes kept in memory could not be read again: {e}"
+                    ))
+                })?;
+                Ok(header_of(header, voxels))
+            })
+            .collect()
+    }
+
+    /// Bytes held.
+    fn bytes(&self) -> u64 {
+        self.0.iter().map(|(_, v)| v.held_bytes()).sum()
+    }
+}
+
+/// `v` with `voxels` in place of its own.
+fn header_of(v: &TexelVolume, voxels: Vec<u8>) -> TexelVolume {
+    TexelVolume {
+        species: v.species,
+        lights: v.lights,
+        dims: v.dims,
+        box_min: v.box_min,
+        voxel: v.voxel,
+        voxels,
+    }
+}
+
 /// A bake's texel volumes checked against the scene, and what their upload needs, until a
-/// frame first draws them: a bake attached for another method keeps them on the CPU only
-/// (the GPU's copy, with its mips and padding, is about four times larger).
+/// frame first draws them: a bake attached for another method keeps them on the CPU only,
+/// deflated (the GPU's copy, with its mips and padding, is about four times larger than
+/// the volumes, and they deflate to about a thirteenth).
 pub struct PendingTexel {
-    /// The bake's settings and texel volumes (its other parts left out).
+    /// The bake's settings (its parts left out).
     baked: Baked,
+    volumes: PackedVolumes,
     species_count: usize,
     /// Placed trees (the sun's records are sized by them).
     trees: usize,
@@ -86,22 +138,19 @@ impl PendingTexel {
                 settings: baked.settings,
                 btf: Vec::new(),
                 vcm: Vec::new(),
-                texels: baked.texels.clone(),
+                texels: Vec::new(),
                 impostors: Vec::new(),
             },
+            volumes: PackedVolumes::pack(&baked.texels),
             species_count: world.species.len(),
             trees: world.forest.instances.len(),
             terrain: world.terrain.clone(),
         })
     }
 
-    /// Bytes of volumes it holds.
+    /// Bytes of volumes it holds (deflated).
     pub fn bytes(&self) -> u64 {
-        self.baked
-            .texels
-            .iter()
-            .map(|v| crate::render::memory::vec_bytes(&v.voxels))
-            .sum()
+        self.volumes.bytes()
     }
 }
 
@@ -121,13 +170,13 @@ impl TexelAssets {
         }
     }
 
-    /// What it keeps on the CPU: the baked volumes (for the stack atlas, built the first
-    /// time the stacks mode draws) and the terrain (for the forest-cover tiles).
+    /// What it keeps on the CPU: the baked volumes deflated (for the stack atlas and the
+    /// forest-cover tiles, built the first time they draw) and the terrain (for the tiles).
     pub fn cpu_parts(&self, out: &mut Vec<crate::render::memory::MemoryPart>) {
         use crate::render::memory::{MemoryPart, vec_bytes};
-        let volumes: u64 = self.volumes.iter().map(|v| vec_bytes(&v.voxels)).sum();
+        let volumes = self.volumes.bytes();
         for (name, bytes) in [
-            ("texel volumes as baked (CPU)", volumes),
+            ("texel volumes as baked, deflated (CPU)", volumes),
             (
                 "terrain heights for the texel tiles (CPU)",
                 vec_bytes(&self.terrain.heights),
@@ -146,11 +195,13 @@ impl TexelAssets {
     /// The volumes of `pending` on the GPU.
     pub fn new(ctx: &GpuContext, pending: PendingTexel) -> Result<Self> {
         let PendingTexel {
-            baked,
+            mut baked,
+            volumes,
             species_count,
             trees,
             terrain,
         } = pending;
+        baked.texels = volumes.unpack()?;
         let max_dim = ctx.device.limits().max_texture_dimension_3d;
         let scene = TexelScene::new(&baked, species_count, max_dim)?;
         let size = scene.atlas_size();
@@ -204,7 +255,7 @@ impl TexelAssets {
             capacity,
             bind_group,
             pipelines: HashMap::new(),
-            volumes: baked.texels,
+            volumes,
             species_count,
             stacks: None,
             stack_problem: None,
@@ -230,7 +281,11 @@ impl TexelAssets {
             )));
         }
         if self.tiles.is_none() {
-            match tiles::TileAssets::new(ctx, &self.terrain, world, &self.volumes) {
+            let made = self
+                .volumes
+                .unpack()
+                .and_then(|v| tiles::TileAssets::new(ctx, &self.terrain, world, &v));
+            match made {
                 Ok(t) => self.tiles = Some(t),
                 Err(e) => {
                     self.tile_problem = Some(e.to_string());
@@ -302,7 +357,11 @@ impl TexelAssets {
             )));
         }
         if self.stacks.is_none() {
-            match stacks::StackAssets::new(ctx, &self.volumes, self.species_count) {
+            let made = self
+                .volumes
+                .unpack()
+                .and_then(|v| stacks::StackAssets::new(ctx, &v, self.species_count));
+            match made {
                 Ok(s) => self.stacks = Some(s),
                 Err(e) => {
                     self.stack_problem = Some(e.to_string());
