@@ -80,6 +80,11 @@ pub struct RenderArgs {
     /// Prefer the CPU (software) adapter.
     #[arg(long)]
     cpu: bool,
+    /// Keep the BTF images block-compressed (BC7) on a software adapter too, as a GPU with
+    /// BC textures holds them, instead of decoding them for speed: to see the memory such a
+    /// GPU needs (lavapipe samples BC7 about 15 times slower).
+    #[arg(long)]
+    bc7_textures: bool,
     /// Print one JSON object with the frame's statistics on stdout.
     #[arg(long)]
     json: bool,
@@ -87,6 +92,9 @@ pub struct RenderArgs {
 
 pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     let method = args.method;
+    if args.bc7_textures {
+        crate::render::btf::BC7_ON_CPU_ADAPTERS.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
     let scene = load_scene(args.scene.as_deref())?;
     let world = scene.build_world().map_err(crate::Error::from)?;
     let mut frame = FrameDesc::from_scene(&scene);

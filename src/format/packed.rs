@@ -74,7 +74,11 @@ mod tests {
         }
         let p = PackedBytes::pack(&bytes);
         assert_eq!(p.len(), bytes.len());
-        assert!(p.held_bytes() < bytes.len() as u64 / 4, "{}", p.held_bytes());
+        assert!(
+            p.held_bytes() < bytes.len() as u64 / 4,
+            "{}",
+            p.held_bytes()
+        );
         assert_eq!(p.unpack().unwrap(), bytes);
         let empty = PackedBytes::pack(&[]);
         assert!(empty.is_empty());

@@ -282,7 +282,7 @@ impl GroundMaps {
         pass.set_scissor_rect(0, 0, key.size, key.size);
         pass.set_pipeline(&self.terrain_pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.set_bind_group(1, &world.trees_bind_group, &[]);
+        pass.set_bind_group(1, &world.trees_bind_group(), &[]);
         world.draw(&mut pass, &[], None, true, &[]);
         if let Some(b) = billboards.filter(|b| b.count > 0) {
             pass.set_pipeline(b.pipeline);

@@ -82,7 +82,7 @@ impl MeshPasses {
         stats: &mut FrameStats,
     ) {
         pass.set_bind_group(0, &self.cascade_uniforms[c].1, &[]);
-        pass.set_bind_group(1, &world.trees_bind_group, &[]);
+        pass.set_bind_group(1, &world.trees_bind_group(), &[]);
         let (tris, casters, calls) = match pipeline {
             Some(p) => {
                 pass.set_pipeline(p);

@@ -608,7 +608,7 @@ impl Renderer {
                 pass.draw(0..3, 0..1);
                 stats.draw_calls += 1;
             }
-            pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
+            pass.set_bind_group(1, &self.world.trees_bind_group(), &[]);
             if !studio {
                 // Instance 0 of every method's upload is the terrain's.
                 spans.mark(&mut pass, "terrain");

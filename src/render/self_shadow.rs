@@ -346,7 +346,7 @@ impl SelfShadow {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_bind_group(1, &world.trees_bind_group, &[]);
+            pass.set_bind_group(1, &world.trees_bind_group(), &[]);
             pass.set_bind_group(3, &self.lights_group, &[]);
             let (plain, cutout) = &self.map_pipelines;
             tris += world
@@ -393,7 +393,7 @@ impl SelfShadow {
                 spans.render_pass("reference trees"),
             );
             pass.set_bind_group(0, frame_group, &[]);
-            pass.set_bind_group(1, &world.trees_bind_group, &[]);
+            pass.set_bind_group(1, &world.trees_bind_group(), &[]);
             pass.set_bind_group(3, group, &[]);
             let (tris, drawn, calls) = world.draw(
                 &mut pass,

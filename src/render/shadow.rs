@@ -234,8 +234,14 @@ mod tests {
         assert_eq!(cascade_side(2048, Some(16), 0), 2048);
         // A gap of a few frames keeps what is held.
         assert_eq!(cascade_side(2048, Some(2048), 1), 2048);
-        assert_eq!(cascade_side(2048, Some(2048), IDLE_CASCADE_FRAMES - 1), 2048);
-        assert_eq!(cascade_side(2048, Some(2048), IDLE_CASCADE_FRAMES), IDLE_CASCADE_SIDE);
+        assert_eq!(
+            cascade_side(2048, Some(2048), IDLE_CASCADE_FRAMES - 1),
+            2048
+        );
+        assert_eq!(
+            cascade_side(2048, Some(2048), IDLE_CASCADE_FRAMES),
+            IDLE_CASCADE_SIDE
+        );
         assert_eq!(cascade_side(1024, Some(2048), 0), 1024);
     }
 

@@ -312,7 +312,7 @@ impl super::Renderer {
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &bindings.bind_group, &[]);
-            pass.set_bind_group(1, &self.world.trees_bind_group, &[]);
+            pass.set_bind_group(1, &self.world.trees_bind_group(), &[]);
             pass.set_bind_group(3, &target.bind_group, &[]);
             MeshPasses::draw_with(&mut pass, &self.world, &runs[0], voxel.meshes(), !studio);
         }

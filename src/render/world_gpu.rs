@@ -222,8 +222,13 @@ pub struct WorldGpu {
     pub scene_bounds: Aabb,
     /// Bounds of the trees alone (the object, in the bake's studio).
     pub forest_bounds: Aabb,
-    pub trees_buffer: wgpu::Buffer,
-    pub trees_bind_group: wgpu::BindGroup,
+    /// The frame's tree instances: made at the size of the lists drawn so far and grown
+    /// when a frame's lists pass it (the cascades' lists come only with trees drawn as
+    /// geometry), to at most [`Self::capacity`].
+    instances: std::sync::Mutex<TreeInstances>,
+    trees_layout: wgpu::BindGroupLayout,
+    /// Most instance records a frame holds: the terrain's identity, the camera's list and
+    /// one list per shadow cascade.
     capacity: usize,
     /// Bytes of mesh and part data on the GPU.
     pub mesh_bytes: u64,
@@ -382,22 +387,8 @@ impl WorldGpu {
 
         // Terrain identity + the camera list + one list per shadow cascade.
         let capacity = 1 + (1 + super::consts::CASCADES) * n.max(1);
-        let trees_buffer = ctx.checked("allocating the tree instance buffer", || {
-            ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("tree instances"),
-                size: (capacity * std::mem::size_of::<TreeGpu>()) as u64,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        })?;
-        let trees_bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("tree instances"),
-            layout: trees_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: trees_buffer.as_entire_binding(),
-            }],
-        });
+        // Room for the camera's list at first.
+        let instances = TreeInstances::new(ctx, trees_layout, 1 + n.max(1))?;
         Ok(Self {
             terrain,
             terrain_layout,
@@ -407,8 +398,8 @@ impl WorldGpu {
             tree_bounds,
             scene_bounds,
             forest_bounds,
-            trees_buffer,
-            trees_bind_group,
+            instances: std::sync::Mutex::new(instances),
+            trees_layout: trees_layout.clone(),
             capacity,
             mesh_bytes,
         })
@@ -591,7 +582,7 @@ impl WorldGpu {
         faded: &[&[Vec<(u32, f32)>]],
         tint: Option<[f32; 3]>,
     ) -> Vec<Vec<TreeRun>> {
-        let mut data = Vec::with_capacity(self.capacity);
+        let mut data = Vec::new();
         data.push(TreeGpu {
             model: Mat4::IDENTITY.to_cols_array_2d(),
             tint: Vec3::ONE.extend(1.0).to_array(),
@@ -616,9 +607,71 @@ impl WorldGpu {
             });
             runs.push(append_runs(&mut data, self.capacity, records));
         }
+        let mut instances = self
+            .instances
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if data.len() > instances.capacity {
+            // Half as much again, so that lists growing a little each frame do not make
+            // the buffer again every frame.
+            let room = (data.len() + data.len() / 2).min(self.capacity);
+            match TreeInstances::new(ctx, &self.trees_layout, room) {
+                Ok(grown) => *instances = grown,
+                Err(e) => {
+                    log::warn!(
+                        "the tree instances keep {} records: {e}",
+                        instances.capacity
+                    );
+                    data.truncate(instances.capacity);
+                }
+            }
+        }
         ctx.queue
-            .write_buffer(&self.trees_buffer, 0, bytemuck::cast_slice(&data));
+            .write_buffer(&instances.buffer, 0, bytemuck::cast_slice(&data));
         runs
+    }
+
+    /// The bind group of the frame's tree instances, as [`Self::upload_lists`] left them.
+    pub fn trees_bind_group(&self) -> wgpu::BindGroup {
+        self.instances
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .bind_group
+            .clone()
+    }
+}
+
+/// The tree instance buffer and its bind group.
+struct TreeInstances {
+    buffer: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    /// Records it holds.
+    capacity: usize,
+}
+
+impl TreeInstances {
+    fn new(ctx: &GpuContext, layout: &wgpu::BindGroupLayout, capacity: usize) -> Result<Self> {
+        let buffer = ctx.checked("allocating the tree instance buffer", || {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("tree instances"),
+                size: (capacity.max(1) * std::mem::size_of::<TreeGpu>()) as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        })?;
+        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("tree instances"),
+            layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: buffer.as_entire_binding(),
+            }],
+        });
+        Ok(Self {
+            buffer,
+            bind_group,
+            capacity: capacity.max(1),
+        })
     }
 }
 

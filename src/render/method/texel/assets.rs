@@ -74,9 +74,7 @@ impl PackedVolumes {
         Self(
             volumes
                 .par_iter()
-                .map(|v| {
-                    (header_of(v, Vec::new()), PackedBytes::pack(&v.voxels))
-                })
+                .map(|v| (header_of(v, Vec::new()), PackedBytes::pack(&v.voxels)))
                 .collect(),
         )
     }
