@@ -196,14 +196,14 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
     let impostor_bytes: u64 = impostors.iter().sum();
     // In memory: the bake itself, the BTF texture array and the texel 3D texture with their
     // mipmaps (4/3 and 8/7; BC7 images hold their mips already), and the VCM shading's own
-    // copy (the tree level's as stored, the finer levels' a byte a texel: twice the BC4
-    // bytes). The impostors' mips are in their bytes already.
+    // copy (as stored). The impostors' mips are in their bytes already.
     let tree_vcm_bytes = tree_record * tree_objects;
-    let (btf_gpu, vcm_copy) = if settings.compress {
-        (btf_bytes, vcm_bytes * 2 - tree_vcm_bytes.min(vcm_bytes))
+    let btf_gpu = if settings.compress {
+        btf_bytes
     } else {
-        (btf_bytes * 4 / 3, vcm_bytes)
+        btf_bytes * 4 / 3
     };
+    let vcm_copy = vcm_bytes;
     let memory_bytes =
         VIEWER_BASE_BYTES + file_bytes + btf_gpu + texel_bytes * 8 / 7 + vcm_copy + impostor_bytes;
     let pixels = (f64::from(settings.resolution) * f64::from(settings.supersample) / 256.0).powi(2);

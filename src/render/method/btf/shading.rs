@@ -361,13 +361,12 @@ impl VcmShading {
             .collect();
         let mut cell_res = None;
         let mut bytes = 0u64;
-        // The finer levels' maps are read a byte a texel (per drawn tree, and by the GPU):
-        // their BC4 sets are decoded here, once. The tree level's and the cells' stay as
-        // stored (`keep_blocks`).
+        // BC4 sets stay as stored: a read decodes the blocks it falls in. The GPU's tables
+        // get the finer levels' maps a byte a texel, decoded when they are made
+        // (`species_maps`).
         let maps =
-            |set: &crate::format::VcmSet, keep_blocks: bool| {
-                if keep_blocks
-                    && set.encoding == crate::format::MapEncoding::Bc4
+            |set: &crate::format::VcmSet| {
+                if set.encoding == crate::format::MapEncoding::Bc4
                     && set.expected_opacity_len() == Some(set.opacity.len() as u64)
                 {
                     return Ok(Maps::Bc4(set.opacity.clone()));
@@ -402,7 +401,7 @@ impl VcmShading {
                 if slot.is_some() {
                     return Err(bad(format!("forest cell {o} has two sets")));
                 }
-                let opacity = maps(set, true)?;
+                let opacity = maps(set)?;
                 bytes += opacity.bytes();
                 *slot = Some(ObjectVcm {
                     opacity,
@@ -437,7 +436,7 @@ impl VcmShading {
                     set.level.name()
                 )));
             }
-            let opacity = maps(set, set.level == Level::Tree)?;
+            let opacity = maps(set)?;
             bytes += opacity.bytes();
             *slot = Some(ObjectVcm {
                 opacity,
