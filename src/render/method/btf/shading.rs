@@ -876,7 +876,7 @@ mod tests {
     }
 
     #[test]
-    fn bc4_tree_maps_are_kept_as_stored_and_read_as_their_decoded_bytes() {
+    fn bc4_maps_are_kept_as_stored_and_read_as_their_decoded_bytes() {
         let world = lone_world();
         let mut bc4 = complete(&world);
         for (i, s) in bc4.iter_mut().enumerate() {
@@ -893,12 +893,14 @@ mod tests {
                 ..s.clone()
             })
             .collect();
+        let r8: u64 = decoded.iter().map(|s| s.opacity.len() as u64).sum();
         let mut from_bc4 = VcmShading::new(&baked(bc4), &world).unwrap().unwrap();
         let mut from_r8 = VcmShading::new(&baked(decoded), &world).unwrap().unwrap();
-        // The tree's maps stay BC4: half a byte a texel (a byte for the finer levels').
-        let tree_r8 = (CORNERS * FACES * 64) as u64;
-        assert_eq!(from_r8.bytes - from_bc4.bytes, tree_r8 / 2);
+        // Every level's maps stay BC4: half a byte a texel.
+        assert_eq!(from_r8.bytes - from_bc4.bytes, r8 / 2);
         assert!(matches!(from_bc4.trees[0].opacity, Maps::Bc4(_)));
+        assert!(matches!(from_bc4.branches[0][0].opacity, Maps::Bc4(_)));
+        assert!(matches!(from_bc4.twigs[0][0].opacity, Maps::Bc4(_)));
         for sun in [
             Vec3::Y,
             Vec3::new(0.3, 0.8, -0.5),
@@ -910,6 +912,14 @@ mod tests {
             let b: Vec<Factors> = from_r8.tree_factors(1).collect();
             assert_eq!(a, b);
             assert!(a[0].0.iter().any(|&v| v < 0.99), "{a:?}");
+            for (x, y) in [
+                (&from_bc4.branches[0], &from_r8.branches[0]),
+                (&from_bc4.twigs[0], &from_r8.twigs[0]),
+            ] {
+                for (o, p) in x.iter().zip(y) {
+                    assert_eq!(o.direct(8, sun.normalize()), p.direct(8, sun.normalize()));
+                }
+            }
         }
         for sp in 0..world.species.len() {
             let (a, b) = (from_bc4.species_maps(sp), from_r8.species_maps(sp));
