@@ -618,11 +618,13 @@ impl WorldGpu {
             match TreeInstances::new(ctx, &self.trees_layout, room) {
                 Ok(grown) => *instances = grown,
                 Err(e) => {
-                    log::warn!(
-                        "the tree instances keep {} records: {e}",
-                        instances.capacity
-                    );
-                    data.truncate(instances.capacity);
+                    // The runs that do not fit are left out of this frame.
+                    let room = instances.capacity;
+                    log::warn!("the tree instances keep {room} records: {e}");
+                    data.truncate(room);
+                    for list in &mut runs {
+                        list.retain(|r| r.first as usize + r.count as usize <= room);
+                    }
                 }
             }
         }
