@@ -11,6 +11,9 @@
 //! one billboard the coarser levels vary little, its own level most.) The same products of
 //! the cube maps' mean visibility (1 − mean opacity) weight the sky term.
 //!
+//! Over 800 lines: its tests are the last 380 (the reads against their decoded bytes and the
+//! checks of every set against the scene belong beside the reader they test).
+//!
 //! Tree-level cube maps come one set per tree, or one per forest cell
 //! ([`crate::vcm::cells`]): then a tree's 8 corner factors are the cell's cube maps read
 //! at the tree's corners (trilinearly), times the sun ray from each corner through the
