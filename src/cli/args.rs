@@ -118,6 +118,14 @@ pub fn adapter(cpu: bool) -> AdapterPreference {
     }
 }
 
+/// `--bc7-textures`: a software adapter keeps the BTF images BC7 as well (read when a bake
+/// is attached).
+pub fn keep_bc7_textures(on: bool) {
+    if on {
+        crate::render::btf::BC7_ON_CPU_ADAPTERS.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -92,9 +92,7 @@ pub struct RenderArgs {
 
 pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     let method = args.method;
-    if args.bc7_textures {
-        crate::render::btf::BC7_ON_CPU_ADAPTERS.store(true, std::sync::atomic::Ordering::Relaxed);
-    }
+    super::args::keep_bc7_textures(args.bc7_textures);
     let scene = load_scene(args.scene.as_deref())?;
     let world = scene.build_world().map_err(crate::Error::from)?;
     let mut frame = FrameDesc::from_scene(&scene);
