@@ -118,11 +118,23 @@ pub fn adapter(cpu: bool) -> AdapterPreference {
     }
 }
 
-/// `--bc7-textures`: a software adapter keeps the BTF images BC7 as well (read when a bake
-/// is attached).
-pub fn keep_bc7_textures(on: bool) {
-    if on {
-        crate::render::btf::BC7_ON_CPU_ADAPTERS.store(true, std::sync::atomic::Ordering::Relaxed);
+/// `--bc7-textures`, shared by `render`, `view` and `bench`.
+#[derive(clap::Args)]
+pub struct Bc7Textures {
+    /// Keep the BTF images block-compressed (BC7) on a software adapter too, as a GPU with
+    /// BC textures holds them, instead of decoding them for speed: to see the memory such a
+    /// GPU needs (lavapipe samples BC7 about 15 times slower).
+    #[arg(long)]
+    bc7_textures: bool,
+}
+
+impl Bc7Textures {
+    /// Sets it for the bakes attached from now on.
+    pub fn apply(&self) {
+        if self.bc7_textures {
+            crate::render::btf::BC7_ON_CPU_ADAPTERS
+                .store(true, std::sync::atomic::Ordering::Relaxed);
+        }
     }
 }
 

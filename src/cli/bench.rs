@@ -47,15 +47,12 @@ pub struct BenchArgs {
     /// Prefer the CPU (software) adapter.
     #[arg(long)]
     cpu: bool,
-    /// Keep the BTF images block-compressed (BC7) on a software adapter too, as a GPU with
-    /// BC textures holds them, instead of decoding them for speed: to see the memory such a
-    /// GPU needs (lavapipe samples BC7 about 15 times slower).
-    #[arg(long)]
-    bc7_textures: bool,
+    #[command(flatten)]
+    bc7: super::args::Bc7Textures,
 }
 
 pub fn bench(args: BenchArgs) -> anyhow::Result<()> {
-    super::args::keep_bc7_textures(args.bc7_textures);
+    args.bc7.apply();
     let (width, height) = args.size;
     let req = crate::bench::command::BenchRequest {
         scene: args.scene,

@@ -80,11 +80,8 @@ pub struct RenderArgs {
     /// Prefer the CPU (software) adapter.
     #[arg(long)]
     cpu: bool,
-    /// Keep the BTF images block-compressed (BC7) on a software adapter too, as a GPU with
-    /// BC textures holds them, instead of decoding them for speed: to see the memory such a
-    /// GPU needs (lavapipe samples BC7 about 15 times slower).
-    #[arg(long)]
-    bc7_textures: bool,
+    #[command(flatten)]
+    bc7: super::args::Bc7Textures,
     /// Print one JSON object with the frame's statistics on stdout.
     #[arg(long)]
     json: bool,
@@ -92,7 +89,7 @@ pub struct RenderArgs {
 
 pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     let method = args.method;
-    super::args::keep_bc7_textures(args.bc7_textures);
+    args.bc7.apply();
     let scene = load_scene(args.scene.as_deref())?;
     let world = scene.build_world().map_err(crate::Error::from)?;
     let mut frame = FrameDesc::from_scene(&scene);

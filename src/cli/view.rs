@@ -38,16 +38,13 @@ pub struct ViewArgs {
     /// screenshots; memory sampled), then quit; fails if memory grew over 5 %.
     #[arg(long)]
     script: Option<PathBuf>,
-    /// Keep the BTF images block-compressed (BC7) on a software adapter too, as a GPU with
-    /// BC textures holds them, instead of decoding them for speed: to see the memory such a
-    /// GPU needs (lavapipe samples BC7 about 15 times slower).
-    #[arg(long)]
-    bc7_textures: bool,
+    #[command(flatten)]
+    bc7: super::args::Bc7Textures,
 }
 
 /// Opens the viewer with these options.
 pub fn view(args: ViewArgs) -> anyhow::Result<()> {
-    super::args::keep_bc7_textures(args.bc7_textures);
+    args.bc7.apply();
     let options = ViewOptions {
         screenshot: args.screenshot,
         after_frames: args.after_frames,
