@@ -40,21 +40,42 @@ struct VertexOut {
 
 // The fragment as its material colours it: the vertex colour times the part set's texture
 // (1 for untextured parts), cut away below its alpha cut-off. First in every entry point.
-// The terrain's skirts carry in uv.y how far below the chunk's edge they hang: they are
-// shaded as the edge above them, not as the ground's inside (`model::terrain_lod`).
+// The terrain's coarse levels (uv.x < 0, `model::terrain_lod`) take their colour and normal
+// from the terrain's maps, which keep the grid's detail between their vertices; its skirts
+// carry in uv.y how far below the chunk's edge they hang: they are shaded as the edge above
+// them, not as the ground's inside.
 fn textured(in: VertexOut) -> VertexOut {
     var out = in;
     out.color = in.color * part_texel(in.uv).rgb;
     if in.tree == 0.0 {
         out.world.y += in.uv.y;
     }
+    if part_set.textured == 2u && in.uv.x < 0.0 {
+        // The point where the eye's ray meets the full-detail surface, found from the coarse
+        // surface's point in two steps along the ray (each at most a few cells long).
+        let ray = out.world - frame.camera_pos;
+        let reach = 3.0 / (part_set.terrain_map.y * max(length(ray.xz), 1e-3));
+        var p = out.world;
+        for (var k = 0; k < 2; k++) {
+            let h = terrain_texels(p.xz).height;
+            let t = (h - p.y) / select(ray.y, -1e-6, abs(ray.y) < 1e-6);
+            p += ray * clamp(t, -reach, reach);
+        }
+        let t = terrain_texels(p.xz);
+        out.world = vec3<f32>(p.x, t.height, p.z);
+        out.color = t.color;
+        out.normal = t.normal;
+        // On the full-detail surface: no lift for its own shadows.
+        out.uv.x = -1.0;
+    }
     return out;
 }
 
 // How far the terrain's point is raised for its own shadows: a coarse level's height error
-// there (uv.x), so that the surface cutting below the hills is not shadowed by them.
+// there (-1 - uv.x), so that the surface cutting below the hills is not shadowed by them.
 fn shadow_lift(in: VertexOut) -> vec3<f32> {
-    return vec3<f32>(0.0, select(0.0, in.uv.x, in.tree == 0.0), 0.0);
+    let lift = select(0.0, -1.0 - in.uv.x, in.tree == 0.0 && in.uv.x < 0.0);
+    return vec3<f32>(0.0, lift, 0.0);
 }
 
 @vertex

@@ -15,8 +15,13 @@ struct PartSet {
     count: u32,
     alpha_cutoff: f32,
     // 0: the set is untextured (every procedural part): its texel is white, unread.
+    // 1: its texture is an imported material's. 2: the terrain, whose coarse levels read
+    // its colour and normal maps (`terrain_texels`), the rest its vertex colours.
     textured: u32,
     _pad2: u32,
+    // The terrain's maps: a world point's grid coordinates (texel (i, j) being grid
+    // point (i, j)) are (xz + terrain_map.x) * terrain_map.y.
+    terrain_map: vec4<f32>,
 }
 
 @group(1) @binding(0) var<storage, read> trees: array<TreeInstance>;
@@ -25,6 +30,8 @@ struct PartSet {
 // The part set's base-colour texture: an imported material's, or 1x1 white.
 @group(2) @binding(2) var part_texture: texture_2d<f32>;
 @group(2) @binding(3) var part_sampler: sampler;
+// The terrain's normals and heights (xyz, w); 1x1 white for every other part set.
+@group(2) @binding(4) var part_normals: texture_2d<f32>;
 
 struct VertexIn {
     @location(0) position: vec3<f32>,
@@ -37,7 +44,7 @@ struct VertexIn {
 // The part set's texture at `uv`, or nothing (the fragment discarded) where its alpha is
 // below the set's cut-off. Call it first, in uniform control flow.
 fn part_texel(uv: vec2<f32>) -> vec4<f32> {
-    if part_set.textured == 0u {
+    if part_set.textured != 1u {
         return vec4<f32>(1.0);
     }
     let t = textureSample(part_texture, part_sampler, uv);
@@ -45,6 +52,40 @@ fn part_texel(uv: vec2<f32>) -> vec4<f32> {
         discard;
     }
     return t;
+}
+
+// The full-detail terrain at world point `xz`: its colour (linear), unit normal and height,
+// interpolated over the full grid's triangle there from its three grid points, exactly as
+// the full-detail mesh interpolates its vertices (cells split along the diagonal from
+// (0, 1) to (1, 0), `model::terrain::Terrain::mesh`).
+struct TerrainTexel {
+    color: vec3<f32>,
+    normal: vec3<f32>,
+    height: f32,
+}
+
+fn terrain_texels(xz: vec2<f32>) -> TerrainTexel {
+    let g = (xz + part_set.terrain_map.x) * part_set.terrain_map.y;
+    let last = vec2<f32>(textureDimensions(part_texture)) - 2.0;
+    let cell = clamp(floor(g), vec2<f32>(0.0), last);
+    let f = g - cell;
+    let i = vec2<i32>(cell);
+    // Weights of the corners 00, 10, 01, 11: the lower triangle (00, 10, 01) where
+    // f.x + f.y <= 1, the upper (10, 01, 11) elsewhere.
+    let upper = f.x + f.y > 1.0;
+    let w = select(
+        vec4<f32>(1.0 - f.x - f.y, f.x, f.y, 0.0),
+        vec4<f32>(0.0, 1.0 - f.y, 1.0 - f.x, f.x + f.y - 1.0),
+        upper,
+    );
+    var c = vec3<f32>(0.0);
+    var nh = vec4<f32>(0.0);
+    let corners = array<vec2<i32>, 4>(vec2<i32>(0, 0), vec2<i32>(1, 0), vec2<i32>(0, 1), vec2<i32>(1, 1));
+    for (var k = 0; k < 4; k++) {
+        c += w[k] * textureLoad(part_texture, i + corners[k], 0).rgb;
+        nh += w[k] * textureLoad(part_normals, i + corners[k], 0);
+    }
+    return TerrainTexel(c, normalize(nh.xyz + vec3<f32>(0.0, 1e-4, 0.0)), nh.w);
 }
 
 // Instance `i` of a draw is part `i % count` of tree `i / count`: the hierarchy is drawn

@@ -162,7 +162,8 @@ fn instancing_structs_match_instancing_wgsl() {
             count,
             alpha_cutoff,
             textured,
-            _pad2
+            _pad2,
+            terrain_map
         }),
     );
     check(

@@ -21,12 +21,13 @@ use super::terrain::Terrain;
 /// Levels of detail per chunk: a grid point every 1, 2, 4 and 8 points.
 pub const TERRAIN_LODS: usize = 4;
 
-/// A level's grid points are at most this many pixels apart on screen where it is drawn:
-/// its colours and normals are the grid's filtered over its spacing, so a coarser spacing
-/// blurs the ground's detail. At 2 px hardly a chunk is coarser than level 0 at 320x180
-/// and the draw calls cost more than the triangles saved; at 4 px the default scene's
-/// overview is about 30 % faster, for 0.006 more mean FLIP (docs/RESULTS.md).
-pub const SPACING_PX: f32 = 4.0;
+/// A level's grid points are at most this many pixels apart on screen where it is drawn.
+/// A coarse level is shaded from the terrain's maps (the full grid's colours, normals and
+/// heights, `render::terrain_maps`), so its spacing costs no detail inside the chunk; what
+/// bounds it is the height error (`tolerance_px`) and this, which keeps a coarse level's
+/// outline near. At 4 px the default scene's overview kept most chunks at full detail
+/// (docs/RESULTS.md).
+pub const SPACING_PX: f32 = 16.0;
 
 /// Sectors of the compass the horizon ring is cut into.
 pub const HORIZON_SECTORS: usize = 16;
@@ -334,13 +335,16 @@ impl Terrain {
         }
         let full = 0..level0_end;
 
-        // What `shaders/geometry.wgsl` reads in a terrain vertex's uv: in x, the height
-        // error of the coarse quads around it, by which its point is raised for the
-        // terrain's own shadows (a surface that cuts below the hills would be shadowed by
-        // them in the terrain's depth map); in y, how far a skirt hangs below the edge it
-        // hangs from, which it is shaded as.
-        for (&v, &e) in &quad_lift {
-            mesh.vertices[v as usize].uv[0] = e;
+        // What `shaders/geometry.wgsl` reads in a terrain vertex's uv: in x, 0 at level 0
+        // and -(1 + e) at a coarser level, e being the height error of the coarse quads
+        // around the vertex, by which its point is raised for the terrain's own shadows (a
+        // surface that cuts below the hills would be shadowed by them in the terrain's
+        // depth map), the sign saying that the vertex is a coarse level's (shaded from the
+        // terrain's colour and normal maps, which keep the detail its grid points skip);
+        // in y, how far a skirt hangs below the edge it hangs from, which it is shaded as.
+        for &v in level_of.values() {
+            let e = quad_lift.get(&v).copied().unwrap_or(0.0);
+            mesh.vertices[v as usize].uv[0] = -(1.0 + e);
         }
         for (&top, &skirt) in &skirt_of {
             let edge = mesh.vertices[top as usize].uv;
@@ -585,5 +589,31 @@ mod tests {
             }
         }
         assert!(skirts > 0);
+    }
+
+    #[test]
+    fn coarse_vertices_are_marked_and_carry_their_lift() {
+        let t = terrain(65, |i, j| ((i * 13 + j * 7) % 17) as f32 * 0.5);
+        let c = t.chunked();
+        let res = 65 * 65;
+        // The grid (level 0) is unmarked; every vertex after it that a coarser level's
+        // surface uses is marked, its lift at least 0.
+        assert!(c.mesh.vertices[..res].iter().all(|v| v.uv[0] == 0.0));
+        let coarse: std::collections::HashSet<u32> = c
+            .layout
+            .chunks
+            .iter()
+            .flat_map(|ch| ch.ranges[1..].iter().cloned())
+            .flat_map(|r| c.mesh.indices[r.start as usize..r.end as usize].to_vec())
+            .collect();
+        assert!(!coarse.is_empty());
+        for v in coarse {
+            assert!(v as usize >= res, "a coarse level draws grid vertex {v}");
+            assert!(c.mesh.vertices[v as usize].uv[0] <= -1.0);
+        }
+        let level0 = &c.layout.chunks[0].ranges[0];
+        for &v in &c.mesh.indices[level0.start as usize..level0.end as usize] {
+            assert_eq!(c.mesh.vertices[v as usize].uv[0], 0.0);
+        }
     }
 }

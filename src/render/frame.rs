@@ -158,9 +158,9 @@ pub struct FrameDesc {
     /// when the renderer has one ([`super::Renderer::prepare_sky`]).
     pub ground_sky: bool,
     /// Image-based methods: the terrain's chunks are drawn as coarse as keeps their height
-    /// error below this many pixels on screen, and only those in view (0, the default:
-    /// every chunk at full detail, as `geometry` draws it; coarser chunks blur the ground's
-    /// colours, which are per vertex).
+    /// error below this many pixels on screen, and only those in view; a coarse chunk's
+    /// fragments take the full grid's colour, normal and height from the terrain's maps
+    /// ([`super::terrain_maps`]). 0: every chunk at full detail, as `geometry` draws it.
     pub terrain_px: f32,
     /// The user is moving the sun right now (a drag in progress): the ground shadow maps
     /// are rebuilt at a reduced resolution while it lasts, and at full resolution on the
@@ -219,7 +219,7 @@ impl FrameDesc {
             trees: true,
             ground_shadows: true,
             ground_sky: true,
-            terrain_px: 0.0,
+            terrain_px: 0.5,
             sun_held: false,
             reference: None,
             render_scale: Default::default(),

@@ -33,6 +33,7 @@ pub mod shaders;
 pub mod shadow;
 pub mod sky_visibility;
 pub mod target;
+pub mod terrain_maps;
 pub mod timing;
 pub mod uniforms;
 pub mod voxelize;

@@ -173,7 +173,7 @@ pub(crate) fn target_texture(
     )
 }
 
-fn texture(
+pub(crate) fn texture(
     device: &wgpu::Device,
     label: &str,
     dimension: wgpu::TextureDimension,
@@ -225,7 +225,7 @@ pub(crate) fn write_rgba8(
     );
 }
 
-fn extent(size: glam::UVec3) -> wgpu::Extent3d {
+pub(crate) fn extent(size: glam::UVec3) -> wgpu::Extent3d {
     wgpu::Extent3d {
         width: size.x,
         height: size.y,
@@ -280,6 +280,8 @@ impl Layouts {
                 // An imported tree's material texture (1x1 white for every other part).
                 texture_entry(2, FILTERABLE, wgpu::TextureViewDimension::D2),
                 sampler_entry(3, wgpu::SamplerBindingType::Filtering),
+                // The terrain's normal map (1x1 white for every other part).
+                texture_entry(4, FILTERABLE, wgpu::TextureViewDimension::D2),
             ],
         });
         Self {

@@ -8,6 +8,7 @@ use wgpu::util::DeviceExt;
 use super::GpuContext;
 use super::camera::Frustum;
 use super::pipelines::MeshPipelines;
+use super::terrain_maps::TerrainMaps;
 use crate::model::World;
 use crate::model::mesh::{Aabb, Mesh};
 use crate::model::terrain_lod::{ChunkedTerrain, TerrainLayout, TerrainView};
@@ -34,8 +35,11 @@ pub struct PartSetGpu {
     pub alpha_cutoff: f32,
     /// 1: the fragments sample the set's texture; 0: they skip it (white, nothing
     /// discarded), as every procedural part does.
+    /// 2: the terrain, whose coarse levels read its colour and normal maps.
     pub textured: u32,
     pub _pad2: u32,
+    /// Where the world falls in the terrain's maps ([`TerrainMaps::placement`]).
+    pub terrain_map: [f32; 4],
 }
 
 /// How a part set is drawn: two-sided (leaves, needles, double-sided materials: no
@@ -49,6 +53,11 @@ pub struct PartLook<'a> {
     pub alpha_cutoff: f32,
     /// The texture is a material's (not the white one) or the alpha test is on.
     pub textured: bool,
+    /// The terrain's normal map (the white texture for every other part set).
+    pub normals: &'a wgpu::TextureView,
+    /// The terrain's: `texture` and `normals` are its maps, read where a coarse level is
+    /// drawn, placed so.
+    pub terrain_map: Option<[f32; 4]>,
 }
 
 pub struct GpuMesh {
@@ -146,7 +155,12 @@ impl PartSet {
                 contents: bytemuck::bytes_of(&PartSetGpu {
                     count: parts.len() as u32,
                     alpha_cutoff: look.alpha_cutoff,
-                    textured: u32::from(look.textured),
+                    textured: if look.terrain_map.is_some() {
+                        2
+                    } else {
+                        u32::from(look.textured)
+                    },
+                    terrain_map: look.terrain_map.unwrap_or_default(),
                     ..bytemuck::Zeroable::zeroed()
                 }),
                 usage: wgpu::BufferUsages::UNIFORM,
@@ -170,6 +184,10 @@ impl PartSet {
                 wgpu::BindGroupEntry {
                     binding: 3,
                     resource: wgpu::BindingResource::Sampler(look.sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::TextureView(look.normals),
                 },
             ],
         });
@@ -255,11 +273,15 @@ impl WorldGpu {
             sampler: &sampler,
             alpha_cutoff: 0.0,
             textured: false,
+            normals: &white,
+            terrain_map: None,
         };
         let ChunkedTerrain {
             mesh: terrain_mesh,
             layout: terrain_layout,
         } = world.terrain.chunked();
+        let maps = TerrainMaps::new(ctx, &world.terrain, &terrain_mesh)
+            .ok_or_else(|| Error::BadInput("the terrain's mesh is shorter than its grid".into()))?;
         let terrain = PartSet::new(
             ctx,
             parts_layout,
@@ -267,10 +289,15 @@ impl WorldGpu {
             "terrain",
             &terrain_mesh,
             &[Mat4::IDENTITY],
-            plain,
+            PartLook {
+                texture: &maps.color,
+                normals: &maps.normal,
+                terrain_map: Some(maps.placement),
+                ..plain
+            },
         )
         .ok_or_else(|| Error::BadInput("the terrain has no triangles".into()))?;
-        let mut mesh_bytes = terrain.mesh.bytes();
+        let mut mesh_bytes = terrain.mesh.bytes() + maps.bytes;
         let mut species = Vec::with_capacity(world.species.len());
         let mut uploaded = Vec::new();
         for tree in &world.species {
@@ -321,6 +348,7 @@ impl WorldGpu {
                                 sampler: &sampler,
                                 alpha_cutoff: m.alpha_cutoff,
                                 textured: texture.is_some() || m.alpha_cutoff > 0.0,
+                                ..plain
                             },
                         )
                     })
