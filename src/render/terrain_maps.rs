@@ -1,8 +1,8 @@
-//! The terrain's colour and normal maps: one texel per grid point, that the terrain's coarse
-//! levels are shaded from (`shaders/geometry.wgsl`, `textured`). A coarse chunk's vertices
-//! skip grid points; interpolated over the full grid's triangles (`terrain_texels` in
-//! `shaders/instancing.wgsl`), the maps give each of its fragments the colour and normal
-//! the full-detail mesh has there.
+//! The terrain's maps of colours, normals and heights: one texel per grid point, that the
+//! terrain's coarse levels are shaded from (`shaders/geometry.wgsl`, `textured`). A coarse
+//! chunk's vertices skip grid points; interpolated over the full grid's triangles
+//! (`terrain_texels` in `shaders/instancing.wgsl`), the maps give each of its fragments the
+//! point, colour and normal the full-detail mesh has there.
 
 use crate::model::mesh::Mesh;
 use crate::model::terrain::Terrain;
