@@ -40,8 +40,8 @@ struct VertexOut {
 
 // The fragment as its material colours it: the vertex colour times the part set's texture
 // (1 for untextured parts), cut away below its alpha cut-off. First in every entry point.
-// The terrain's coarse levels (uv.x < 0, `model::terrain_lod`) take their colour and normal
-// from the terrain's maps, which keep the grid's detail between their vertices; its skirts
+// The terrain's coarse levels (uv.x < 0, `model::terrain_lod`) take their point, colour and
+// normal from the terrain's maps, which keep the grid's detail between their vertices; its skirts
 // carry in uv.y how far below the chunk's edge they hang: they are shaded as the edge above
 // them, not as the ground's inside.
 fn textured(in: VertexOut) -> VertexOut {

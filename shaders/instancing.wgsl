@@ -16,7 +16,7 @@ struct PartSet {
     alpha_cutoff: f32,
     // 0: the set is untextured (every procedural part): its texel is white, unread.
     // 1: its texture is an imported material's. 2: the terrain, whose coarse levels read
-    // its colour and normal maps (`terrain_texels`), the rest its vertex colours.
+    // its maps (`terrain_texels`), the rest its vertex colours.
     textured: u32,
     _pad2: u32,
     // The terrain's maps: a world point's grid coordinates (texel (i, j) being grid

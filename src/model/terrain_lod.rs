@@ -25,8 +25,7 @@ pub const TERRAIN_LODS: usize = 4;
 /// A coarse level is shaded from the terrain's maps (the full grid's colours, normals and
 /// heights, `render::terrain_maps`), so its spacing costs no detail inside the chunk; what
 /// bounds it is the height error (`tolerance_px`) and this, which keeps a coarse level's
-/// outline near. At 4 px the default scene's overview kept most chunks at full detail
-/// (docs/RESULTS.md).
+/// outline near (docs/RESULTS.md).
 pub const SPACING_PX: f32 = 16.0;
 
 /// Sectors of the compass the horizon ring is cut into.
@@ -340,7 +339,7 @@ impl Terrain {
         // around the vertex, by which its point is raised for the terrain's own shadows (a
         // surface that cuts below the hills would be shadowed by them in the terrain's
         // depth map), the sign saying that the vertex is a coarse level's (shaded from the
-        // terrain's colour and normal maps, which keep the detail its grid points skip);
+        // terrain's maps, which keep the detail its grid points skip);
         // in y, how far a skirt hangs below the edge it hangs from, which it is shaded as.
         for &v in level_of.values() {
             let e = quad_lift.get(&v).copied().unwrap_or(0.0);

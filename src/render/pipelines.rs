@@ -204,6 +204,20 @@ pub(crate) fn write_rgba8(
     data: &[u8],
     size: glam::UVec3,
 ) {
+    write_texels(queue, texture, level, origin, data, size, 4);
+}
+
+/// Writes tightly packed `data` of `size` texels of `texel_bytes` each into mip `level` of
+/// `texture` at `origin`.
+pub(crate) fn write_texels(
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    level: u32,
+    origin: glam::UVec3,
+    data: &[u8],
+    size: glam::UVec3,
+    texel_bytes: u32,
+) {
     queue.write_texture(
         wgpu::TexelCopyTextureInfo {
             texture,
@@ -218,14 +232,14 @@ pub(crate) fn write_rgba8(
         data,
         wgpu::TexelCopyBufferLayout {
             offset: 0,
-            bytes_per_row: Some(4 * size.x),
+            bytes_per_row: Some(texel_bytes * size.x),
             rows_per_image: Some(size.y),
         },
         extent(size),
     );
 }
 
-pub(crate) fn extent(size: glam::UVec3) -> wgpu::Extent3d {
+fn extent(size: glam::UVec3) -> wgpu::Extent3d {
     wgpu::Extent3d {
         width: size.x,
         height: size.y,
@@ -280,7 +294,7 @@ impl Layouts {
                 // An imported tree's material texture (1x1 white for every other part).
                 texture_entry(2, FILTERABLE, wgpu::TextureViewDimension::D2),
                 sampler_entry(3, wgpu::SamplerBindingType::Filtering),
-                // The terrain's normal map (1x1 white for every other part).
+                // The terrain's normals and heights (1x1 white for every other part).
                 texture_entry(4, FILTERABLE, wgpu::TextureViewDimension::D2),
             ],
         });

@@ -12,9 +12,9 @@ use super::pipelines;
 
 /// The two maps on the GPU, and where the world falls in them.
 pub struct TerrainMaps {
-    /// Linear colours, stored sRGB.
+    /// Linear colours (16-bit floats).
     pub color: wgpu::TextureView,
-    /// Unit normals and heights (m).
+    /// Unit normals and heights (m) (16-bit floats).
     pub normal: wgpu::TextureView,
     /// A world point's grid coordinates are (xz + x) * y (`PartSet::terrain_map` in
     /// `shaders/instancing.wgsl`).
@@ -23,8 +23,8 @@ pub struct TerrainMaps {
     pub bytes: u64,
 }
 
-/// The maps' texels: colours (RGBA8, sRGB) and normals with heights (RGBA16 floats, the
-/// height in alpha) of the grid points of `mesh`, whose first `resolution`² vertices are
+/// The maps' texels, RGBA 16-bit floats as their bits: linear colours, and normals with the
+/// height in alpha, of the grid points of `mesh`, whose first `resolution`² vertices are
 /// `terrain`'s grid ([`Terrain::mesh`]).
 pub fn texels(terrain: &Terrain, mesh: &Mesh) -> Option<(Vec<u16>, Vec<u16>)> {
     let res = terrain.resolution.max(2);
@@ -53,34 +53,24 @@ impl TerrainMaps {
         let (color, normal) = texels(terrain, mesh)?;
         let res = terrain.resolution.max(2);
         let size = glam::UVec3::new(res, res, 1);
-        let upload = |label: &str, data: &[u8], format: wgpu::TextureFormat| {
+        let upload = |label: &str, data: &[u8]| {
             let texture = pipelines::texture(
                 &ctx.device,
                 label,
                 wgpu::TextureDimension::D2,
                 size,
                 1,
-                format,
+                wgpu::TextureFormat::Rgba16Float,
                 wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
             );
-            let row = data.len() as u32 / res;
-            ctx.queue.write_texture(
-                texture.as_image_copy(),
-                data,
-                wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(row),
-                    rows_per_image: Some(res),
-                },
-                pipelines::extent(size),
-            );
+            pipelines::write_texels(&ctx.queue, &texture, 0, glam::UVec3::ZERO, data, size, 8);
             texture.create_view(&wgpu::TextureViewDescriptor::default())
         };
         let normal: &[u8] = bytemuck::cast_slice(&normal);
         let color: &[u8] = bytemuck::cast_slice(&color);
         Some(Self {
-            color: upload("terrain colours", color, wgpu::TextureFormat::Rgba16Float),
-            normal: upload("terrain normals", normal, wgpu::TextureFormat::Rgba16Float),
+            color: upload("terrain colours", color),
+            normal: upload("terrain normals", normal),
             placement: placement(terrain),
             bytes: (color.len() + normal.len()) as u64,
         })

@@ -35,7 +35,7 @@ pub struct PartSetGpu {
     pub alpha_cutoff: f32,
     /// 1: the fragments sample the set's texture; 0: they skip it (white, nothing
     /// discarded), as every procedural part does.
-    /// 2: the terrain, whose coarse levels read its colour and normal maps.
+    /// 2: the terrain, whose coarse levels read its maps ([`TerrainMaps`]).
     pub textured: u32,
     pub _pad2: u32,
     /// Where the world falls in the terrain's maps ([`TerrainMaps::placement`]).
@@ -53,7 +53,7 @@ pub struct PartLook<'a> {
     pub alpha_cutoff: f32,
     /// The texture is a material's (not the white one) or the alpha test is on.
     pub textured: bool,
-    /// The terrain's normal map (the white texture for every other part set).
+    /// The terrain's normals and heights (the white texture for every other part set).
     pub normals: &'a wgpu::TextureView,
     /// The terrain's: `texture` and `normals` are its maps, read where a coarse level is
     /// drawn, placed so.
