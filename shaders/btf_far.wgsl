@@ -107,7 +107,8 @@ struct FarParams {
     // draw, back to front).
     layer_batches: u32,
     ground_ambient: vec3<f32>,
-    _canopy_pad1: u32,
+    // The word of `draw_args` that counts the keys made this frame.
+    sort_args_at: u32,
 }
 
 // A storage buffer, not a uniform one: lavapipe (Mesa 22) compiles a shader again at every
@@ -137,7 +138,7 @@ struct FarParams {
 // then the image fetches of every billboard made here, and those image-weight culling saved;
 // then the billboards made here that read the light blends; then the trees in view past
 // the far canopy's band (drawn by the canopy alone).
-@group(0) @binding(7) var<storage, read_write> draw_args: array<atomic<u32>, 76>;
+@group(0) @binding(7) var<storage, read_write> draw_args: array<atomic<u32>>;
 @group(0) @binding(8) var<storage, read_write> sorted: array<Billboard>;
 
 // One step of the bitonic sort: block size `k`, partner distance `j`.
@@ -540,7 +541,7 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     records[i] = r;
-    keys[i] = key_of(r, i);
+    keys[next_key()] = key_of(r, i);
     atomicAdd(&draw_args[4], 1u);
 }
 
@@ -799,7 +800,7 @@ fn near_build(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     put_near(s, r);
     let slot = params.count + params.near_count + s;
-    keys[slot] = key_of(r, slot);
+    keys[next_key()] = key_of(r, slot);
     atomicAdd(&draw_args[5u + level], 1u);
 }
 
@@ -810,10 +811,42 @@ fn near_keys(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let slot = params.count + gid.x;
-    keys[slot] = key_of(records[slot], slot);
+    keys[next_key()] = key_of(records[slot], slot);
 }
 
-// One compare-exchange step of a bitonic sort over all of `keys`, into decreasing order.
+// Where the next key goes: the keys are packed at the start of `keys`, in any order (the
+// sort orders them by (depth, slot), whatever order they came in).
+fn next_key() -> u32 {
+    return atomicAdd(&draw_args[params.sort_args_at], 1u);
+}
+
+// The sort's dispatch arguments, 3 words a step (its own bind group: a buffer read as
+// dispatch arguments cannot be bound for writing in the same dispatch).
+@group(1) @binding(1) var<storage, read_write> sort_args: array<u32>;
+
+// The sort's dispatches for the keys made: n, the next power of two, needs only the steps
+// of the network for n keys (with k <= n), each over n keys. The later steps get no
+// workgroups: the first n keys already run in decreasing order, the rest are zero.
+@compute @workgroup_size(1)
+fn sort_plan() {
+    let made = atomicLoad(&draw_args[params.sort_args_at]);
+    var n = 2u;
+    while n < made && n < params.sort_n {
+        n *= 2u;
+    }
+    var at = 0u;
+    for (var k = 2u; k <= params.sort_n; k *= 2u) {
+        for (var j = k / 2u; j > 0u; j /= 2u) {
+            sort_args[at] = select(0u, (n + 63u) / 64u, k <= n);
+            sort_args[at + 1u] = 1u;
+            sort_args[at + 2u] = 1u;
+            at += 3u;
+        }
+    }
+}
+
+// One compare-exchange step of a bitonic sort over the keys made (dispatched for the next
+// power of two above their count), into decreasing order.
 @compute @workgroup_size(64)
 fn sort_step(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x;

@@ -343,7 +343,7 @@ fn far_tree_structs_match_btf_far_wgsl() {
         sky_ambient,
         layer_batches,
         ground_ambient,
-        _canopy_pad1
+        sort_args_at
     });
     check(
         "FarParams",

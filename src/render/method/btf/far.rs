@@ -9,7 +9,9 @@
 //! one bit per tree marking them. Compute passes (`shaders/btf_far.wgsl`) take every other
 //! tree: cull it as the CPU would and build its record as the CPU would; then sort all the
 //! records, far and near, back to front (bitonic, on (depth, slot) keys, so the order is
-//! the same every run) and gather them for one indirect draw. The per-tree VCM factors are
+//! the same every run) and gather them for one indirect draw. The keys are packed as the
+//! records are made, and the sort runs over the next power of two above their count, its
+//! dispatches sized on the GPU (`sort_plan`), not over a key for every slot. The per-tree VCM factors are
 //! uploaded when the sun moves.
 //!
 //! With [`BtfSettings::gpu_near`] (the default) the CPU does not make the near trees'
@@ -145,7 +147,8 @@ pub struct FarParamsGpu {
     /// draw, back to front).
     pub layer_batches: u32,
     pub ground_ambient: [f32; 3],
-    pub _canopy_pad1: u32,
+    /// The word of the draw arguments that counts the keys made ([`SORT_ARGS_AT`]).
+    pub sort_args_at: u32,
 }
 
 /// One step of the bitonic sort (`SortStep`).
@@ -170,6 +173,13 @@ const DRAW_WORDS: u64 = 12;
 /// Most batches the billboards are drawn in for the trees' layer; each has its indirect
 /// draw's 4 words after [`DRAW_WORDS`].
 pub const MAX_LAYER_BATCHES: u32 = 16;
+
+/// The word of the draw arguments, after the batches', that counts the sort's keys as they
+/// are made.
+const SORT_ARGS_AT: u64 = DRAW_WORDS + 4 * MAX_LAYER_BATCHES as u64;
+
+/// Most steps of the sort: a bitonic network over 2^32 keys.
+const MAX_SORT_STEPS: u64 = 32 * 33 / 2;
 
 /// Batches the billboards are drawn in for the trees' layer, with the opaque pixels found
 /// between them.
@@ -281,11 +291,15 @@ pub struct FarGpu {
     draw_resources: (wgpu::Buffer, wgpu::TextureView, wgpu::Sampler),
     bind_group: wgpu::BindGroup,
     step_bind_group: wgpu::BindGroup,
+    /// The sort's dispatch arguments, written by `sort_plan`, and its bind group.
+    sort_args: wgpu::Buffer,
+    plan_bind_group: wgpu::BindGroup,
     /// The sorted records, bound as the btf pass's billboards.
     draw_bind_group: wgpu::BindGroup,
     build: wgpu::ComputePipeline,
     near_build: wgpu::ComputePipeline,
     near_keys: wgpu::ComputePipeline,
+    sort_plan: wgpu::ComputePipeline,
     sort: wgpu::ComputePipeline,
     gather: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
@@ -448,7 +462,7 @@ impl FarGpu {
             sky_ambient: [0.0; 3],
             layer_batches: 0,
             ground_ambient: [0.0; 3],
-            _canopy_pad1: 0,
+            sort_args_at: SORT_ARGS_AT as u32,
         };
         let init = |label: &str, contents: &[u8]| {
             wgpu::util::DeviceExt::create_buffer_init(
@@ -480,7 +494,7 @@ impl FarGpu {
                 buffer(
                     ctx,
                     "far draw",
-                    (DRAW_WORDS + 4 * u64::from(MAX_LAYER_BATCHES)) * 4,
+                    (SORT_ARGS_AT + 1) * 4,
                     U::STORAGE | U::INDIRECT | U::COPY_DST | U::COPY_SRC,
                 ),
                 // Zeroed: no tree has a colour before its first frame in the canopy.
@@ -532,6 +546,12 @@ impl FarGpu {
                 label: Some("btf far sort step"),
                 entries: &[uniform(0, true)],
             });
+        let plan_layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("btf far sort plan"),
+                entries: &[storage(1, false)],
+            });
         let pipelines = ctx.checked("building the far trees' compute pipelines", || {
             let module = crate::render::pipelines::wgsl_module(
                 &ctx.device,
@@ -545,11 +565,18 @@ impl FarGpu {
                     bind_group_layouts: &[Some(&layout0), Some(&layout1)],
                     immediate_size: 0,
                 });
+            let plan_pl = ctx
+                .device
+                .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("btf far sort plan"),
+                    bind_group_layouts: &[Some(&layout0), Some(&plan_layout)],
+                    immediate_size: 0,
+                });
             let pipeline = |entry: &str| {
                 ctx.device
                     .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                         label: Some(entry),
-                        layout: Some(&pl),
+                        layout: Some(if entry == "sort_plan" { &plan_pl } else { &pl }),
                         module: &module,
                         entry_point: Some(entry),
                         compilation_options: Default::default(),
@@ -560,12 +587,34 @@ impl FarGpu {
                 pipeline("build"),
                 pipeline("near_build"),
                 pipeline("near_keys"),
+                pipeline("sort_plan"),
                 pipeline("sort_step"),
                 pipeline("gather"),
                 pipeline("finish"),
             ]
         })?;
-        let [build, near_build, near_keys, sort, gather, finish] = pipelines;
+        let [
+            build,
+            near_build,
+            near_keys,
+            sort_plan,
+            sort,
+            gather,
+            finish,
+        ] = pipelines;
+        let sort_args = ctx.checked("allocating the sort's dispatches", || {
+            buffer(
+                ctx,
+                "far sort dispatch",
+                12 * MAX_SORT_STEPS,
+                U::STORAGE | U::INDIRECT,
+            )
+        })?;
+        let plan_bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("btf far sort plan"),
+            layout: &plan_layout,
+            entries: &[entry(1, &sort_args)],
+        });
         let step_stride = u64::from(limits.min_uniform_buffer_offset_alignment)
             .max(std::mem::size_of::<SortStepGpu>() as u64);
         // Placeholders until the first frame sizes them.
@@ -635,10 +684,13 @@ impl FarGpu {
             draw_resources,
             bind_group,
             step_bind_group,
+            sort_args,
+            plan_bind_group,
             draw_bind_group,
             build,
             near_build,
             near_keys,
+            sort_plan,
             sort,
             gather,
             finish,
@@ -1095,6 +1147,8 @@ impl FarGpu {
             0,
             bytemuck::cast_slice(&[6u32, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]),
         );
+        ctx.queue
+            .write_buffer(&self.draw_args, SORT_ARGS_AT * 4, bytemuck::bytes_of(&0u32));
         self.frame = Some((keys, total as u32, draw_slots as u32));
         self.batches = params.layer_batches;
         Ok(true)
@@ -1126,11 +1180,16 @@ impl FarGpu {
             pass.set_pipeline(&self.near_keys);
             pass.dispatch_workgroups(made_here.div_ceil(WORKGROUP), 1, 1);
         }
+        // The keys are packed at the start; the sort runs over the next power of two
+        // above their count, its dispatches sized on the GPU.
+        pass.set_pipeline(&self.sort_plan);
+        pass.set_bind_group(1, &self.plan_bind_group, &[]);
+        pass.dispatch_workgroups(1, 1, 1);
         pass.set_pipeline(&self.sort);
         for (i, _) in sort_steps(keys).iter().enumerate() {
             let offset = (i as u64 * self.step_stride) as u32;
             pass.set_bind_group(1, &self.step_bind_group, &[offset]);
-            pass.dispatch_workgroups(keys.div_ceil(WORKGROUP), 1, 1);
+            pass.dispatch_workgroups_indirect(&self.sort_args, 12 * i as u64);
         }
         pass.set_bind_group(1, &self.step_bind_group, &[0]);
         pass.set_pipeline(&self.gather);
