@@ -126,6 +126,7 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
             Method::Btf,
             &[
                 "far trees",
+                "far sort",
                 "cascades",
                 "sky",
                 "terrain",
@@ -171,6 +172,7 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
         names(&stats),
         [
             "far trees",
+            "far sort",
             "cascades",
             "sky",
             "terrain",
@@ -193,7 +195,10 @@ fn without_timing_inside_passes_the_main_pass_is_one_span() {
     let world = scene.build_world().unwrap();
     let mut r = renderer(&ctx, &world);
     let stats = measured(&ctx, &mut r, &scene, Method::Btf);
-    assert_eq!(names(&stats), ["far trees", "cascades", "main pass"]);
+    assert_eq!(
+        names(&stats),
+        ["far trees", "far sort", "cascades", "main pass"]
+    );
     assert_adds_up("btf, whole passes", &stats);
 }
 

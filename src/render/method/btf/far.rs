@@ -1154,9 +1154,9 @@ impl FarGpu {
         Ok(true)
     }
 
-    /// The frame's compute pass (timed as `far trees` through `spans`): build the far
-    /// records, key the near ones, sort, gather, set the draw's count. Nothing without a
-    /// frame.
+    /// The frame's compute passes (timed through `spans`): `far trees` builds the far
+    /// records and keys the near ones; `far sort` sorts them, gathers them and sets the
+    /// draw's count. Nothing without a frame.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, spans: &PassSpans) {
         let Some((keys, slots, expanded)) = self.frame else {
             return;
@@ -1180,8 +1180,14 @@ impl FarGpu {
             pass.set_pipeline(&self.near_keys);
             pass.dispatch_workgroups(made_here.div_ceil(WORKGROUP), 1, 1);
         }
+        drop(pass);
         // The keys are packed at the start; the sort runs over the next power of two
         // above their count, its dispatches sized on the GPU.
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("btf far sort"),
+            timestamp_writes: spans.compute_pass("far sort"),
+        });
+        pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_pipeline(&self.sort_plan);
         pass.set_bind_group(1, &self.plan_bind_group, &[]);
         pass.dispatch_workgroups(1, 1, 1);
