@@ -130,14 +130,16 @@ struct FarParams {
 // One slot per tree (its record when it is far and in view), then the near trees' made on
 // the CPU. (A key's slot past those is `near_records`' slot after them.)
 @group(0) @binding(5) var<storage, read_write> records: array<Billboard>;
-// Per slot of `records` (padded to a power of two): (ordered depth, !slot), 0 for none;
-// sorted in decreasing order, back to front.
+// One key per record made, (ordered depth, !slot), packed at the start as they are made
+// (room for every slot, padded to a power of two, 0 past those made); sorted in decreasing
+// order, back to front.
 @group(0) @binding(6) var<storage, read_write> keys: array<vec2<u32>>;
 // The indirect draw: vertex count, instance count, first vertex, first instance; then the
 // far billboards made, and the near ones expanded here per level (twig, branch, tree);
 // then the image fetches of every billboard made here, and those image-weight culling saved;
 // then the billboards made here that read the light blends; then the trees in view past
-// the far canopy's band (drawn by the canopy alone).
+// the far canopy's band (drawn by the canopy alone); then each layer batch's indirect draw
+// (4 words); then the keys made (`params.sort_args_at`).
 @group(0) @binding(7) var<storage, read_write> draw_args: array<atomic<u32>>;
 @group(0) @binding(8) var<storage, read_write> sorted: array<Billboard>;
 

@@ -11,8 +11,8 @@
 //! records, far and near, back to front (bitonic, on (depth, slot) keys, so the order is
 //! the same every run) and gather them for one indirect draw. The keys are packed as the
 //! records are made, and the sort runs over the next power of two above their count, its
-//! dispatches sized on the GPU (`sort_plan`), not over a key for every slot. The per-tree VCM factors are
-//! uploaded when the sun moves.
+//! dispatches sized on the GPU (`sort_plan`), not over a key for every slot. The per-tree
+//! VCM factors are uploaded when the sun moves.
 //!
 //! With [`BtfSettings::gpu_near`] (the default) the CPU does not make the near trees'
 //! records either: it chooses each near tree's levels and cross-fade as before and hands
