@@ -572,11 +572,11 @@ impl FarGpu {
                     bind_group_layouts: &[Some(&layout0), Some(&plan_layout)],
                     immediate_size: 0,
                 });
-            let pipeline = |entry: &str| {
+            let pipeline = |entry: &str, layout: &wgpu::PipelineLayout| {
                 ctx.device
                     .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                         label: Some(entry),
-                        layout: Some(if entry == "sort_plan" { &plan_pl } else { &pl }),
+                        layout: Some(layout),
                         module: &module,
                         entry_point: Some(entry),
                         compilation_options: Default::default(),
@@ -584,13 +584,13 @@ impl FarGpu {
                     })
             };
             [
-                pipeline("build"),
-                pipeline("near_build"),
-                pipeline("near_keys"),
-                pipeline("sort_plan"),
-                pipeline("sort_step"),
-                pipeline("gather"),
-                pipeline("finish"),
+                pipeline("build", &pl),
+                pipeline("near_build", &pl),
+                pipeline("near_keys", &pl),
+                pipeline("sort_plan", &plan_pl),
+                pipeline("sort_step", &pl),
+                pipeline("gather", &pl),
+                pipeline("finish", &pl),
             ]
         })?;
         let [
