@@ -26,6 +26,7 @@ use crate::render::GpuContext;
 use crate::render::camera::Frustum;
 use crate::render::pipelines::{
     FILTERABLE, buffer_entry, sampler_entry, storage_buffer_of, storage_entry, write_growing,
+    write_texels,
 };
 
 /// The mean of an sRGB-encoded RGBA8 image (`lut` decoding its bytes): linear colour
@@ -369,24 +370,15 @@ fn write_level(
     data: &[u8],
     bytes_per: u32,
 ) {
-    ctx.queue.write_texture(
-        wgpu::TexelCopyTextureInfo {
-            texture,
-            mip_level: level,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
+    let size = glam::UVec3::new(side, side, 1);
+    write_texels(
+        &ctx.queue,
+        texture,
+        level,
+        glam::UVec3::ZERO,
         data,
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(side * bytes_per),
-            rows_per_image: Some(side),
-        },
-        wgpu::Extent3d {
-            width: side,
-            height: side,
-            depth_or_array_layers: 1,
-        },
+        size,
+        bytes_per,
     );
 }
 
