@@ -2,30 +2,24 @@
 //! and its cache, accuracy where the tree level is valid, image-weight culling, and the LOD
 //! switching distances the texel criterion predicts.
 
-mod common;
-
 use canopy::bake::{self, Source};
 use canopy::model::Level;
 use canopy::model::World;
 use canopy::render::btf::BtfSettings;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
-use std::sync::OnceLock;
 
 use glam::Vec3;
 
-use common::*;
+use crate::common::*;
 
 fn cache_file(name: &str) -> std::path::PathBuf {
-    std::env::temp_dir()
-        .join(format!("canopy-btf-test-{}", std::process::id()))
-        .join(name)
+    scratch_dir("btf-test").join(name)
 }
 
-/// The stand's bake, made once per test process.
-fn baked() -> &'static canopy::format::Baked {
-    static BAKED: OnceLock<canopy::format::Baked> = OnceLock::new();
-    BAKED.get_or_init(|| load_or_bake(&btf_stand(), &cache_file("shared.canopy")))
+/// The stand's bake, made once per run.
+fn stand_baked() -> &'static canopy::format::Baked {
+    baked(&btf_stand())
 }
 
 /// Where the trees are in `trees` (an image of `frame` at `size`): the pixels that differ
@@ -72,7 +66,7 @@ fn masked_flip(a: &image::RgbaImage, b: &image::RgbaImage, mask: &[bool]) -> f32
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
     let (scene, world) = built(btf_stand());
     let mut renderer = Renderer::new(ctx, &world).unwrap();
-    renderer.attach_btf(ctx, baked(), &world).unwrap();
+    renderer.attach_btf(ctx, stand_baked(), &world).unwrap();
     (scene, world, renderer)
 }
 
@@ -307,7 +301,7 @@ fn the_cache_is_reused_and_a_corrupt_file_is_baked_again() {
     let (scene, world) = built(btf_stand());
     let path = cache_file("own.canopy");
     let _ = std::fs::remove_file(&path);
-    let first = baked().clone();
+    let first = stand_baked().clone();
     canopy::format::write_atomic(&path, &first).unwrap();
     let (again, source) = bake::load_or_bake_at(&path, &ctx, &scene, &world, &mut |_| {}).unwrap();
     assert_eq!(source, Source::Cache);

@@ -3,7 +3,7 @@
 //! Over 800 lines: each bad input the binary refuses (one per baked section and version,
 //! scene typos, paths) is its own case here, sharing one baked file and its helpers.
 
-mod common;
+use crate::common;
 
 use std::process::Command;
 

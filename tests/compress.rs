@@ -4,9 +4,6 @@
 //! drawn from RGBA8; and the fallback for a GPU without BC textures (BC7 decoded on load)
 //! draws what the GPU's own BC7 sampling draws.
 
-mod common;
-
-use std::sync::OnceLock;
 use std::sync::atomic::Ordering;
 
 use canopy::bake::compress::{bc7_chain, compress};
@@ -17,7 +14,7 @@ use canopy::scene::Scene;
 use glam::Vec3;
 use image::RgbaImage;
 
-use common::*;
+use crate::common::*;
 
 /// Root-mean-square error of the BC7 chain's levels against the RGBA8 levels they were
 /// made from, over every channel of every texel of every image of the stand (6 views x 6
@@ -72,11 +69,7 @@ fn stand() -> Scene {
 }
 
 fn raw_bake() -> &'static Baked {
-    static BAKED: OnceLock<Baked> = OnceLock::new();
-    BAKED.get_or_init(|| {
-        let cache = scratch_dir("compress-test").join("stand.canopy");
-        load_or_bake(&stand(), &cache)
-    })
+    baked(&stand())
 }
 
 #[test]
@@ -256,7 +249,7 @@ fn the_stand_drawn_from_bc7_is_close_to_rgba8_and_the_decoded_fallback_matches()
 /// Prints the bytes of a baked file by part, as stored and as they would be uncompressed,
 /// with the GPU bytes of its BTF images either way, and the same bake written and read
 /// again as this canopy writes it (sections deflated): `CANOPY_MEASURE_FILE=path cargo test
-/// --release --test compress measure -- --ignored --nocapture` (docs/RESULTS.md, "Bake").
+/// --release --test suite compress::measure -- --ignored --nocapture` (docs/RESULTS.md, "Bake").
 #[test]
 #[ignore]
 fn measure() {

@@ -9,7 +9,7 @@
 //! default forest would leave about 1.4 MB of compiled shader behind, and an hour in the
 //! viewer several gigabytes.
 
-mod common;
+use crate::common;
 
 use canopy::render::{Camera, FrameDesc, Method, Renderer};
 use glam::Vec3;

@@ -2,15 +2,14 @@
 //! `src/render/layer.rs`): the picture of drawing them back to front over the frame, within
 //! a bound, on the GPU's sort and on the CPU's, with every billboard still drawn.
 
-mod common;
+use crate::common;
 
-use canopy::bake;
 use canopy::model::World;
 use canopy::render::{Camera, FrameDesc, FrameStats, GpuContext, Method, Reference, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
 
-use common::*;
+use crate::common::*;
 
 /// Mean FLIP between back to front and front to back over the pixels the trees cover. The
 /// two are the same sum but for rounding: back to front rounds the frame to 8-bit sRGB after
@@ -33,12 +32,9 @@ fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
     let scene =
         Scene::load(&data("canopy_stand.toml")).expect("tests/data/canopy_stand.toml parses");
     let world = scene.build_world().unwrap();
-    let cache = std::env::temp_dir()
-        .join(format!("canopy-front-to-back-test-{}", std::process::id()))
-        .join("stand.canopy");
-    let (baked, _) = bake::load_or_bake_at(&cache, ctx, &scene, &world, &mut |_| {}).unwrap();
+    let baked = common::baked(&scene);
     let mut renderer = Renderer::new(ctx, &world).unwrap();
-    renderer.attach_btf(ctx, &baked, &world).unwrap();
+    renderer.attach_btf(ctx, baked, &world).unwrap();
     (scene, world, renderer)
 }
 

@@ -9,7 +9,7 @@
 //! taking a second. Half of the baked inputs have their checksums recomputed after the
 //! mutation, so the records behind the checksums are reached too.
 //!
-//! `cargo test --release --test fuzz -- --ignored` runs 1,000,000 inputs per target
+//! `cargo test --release --test suite fuzz:: -- --ignored` runs 1,000,000 inputs per target
 //! (`CANOPY_FUZZ_INPUTS` to change, `CANOPY_FUZZ_SEED` for another sequence) and prints
 //! inputs, time and outcomes; the plain `cargo test` runs a short smoke of each.
 
@@ -521,7 +521,7 @@ fn fuzz_smoke_gltf_reader() {
 }
 
 #[test]
-#[ignore = "a million inputs: cargo test --release --test fuzz -- --ignored"]
+#[ignore = "a million inputs: cargo test --release --test suite fuzz:: -- --ignored"]
 fn fuzz_gltf_reader() {
     let o = fuzz_gltf(inputs(1_000_000));
     eprintln!(
@@ -545,7 +545,7 @@ fn fuzz_smoke_scene_parser() {
 }
 
 #[test]
-#[ignore = "a million inputs: cargo test --release --test fuzz -- --ignored"]
+#[ignore = "a million inputs: cargo test --release --test suite fuzz:: -- --ignored"]
 fn fuzz_baked_decoder() {
     let o = fuzz_baked(inputs(1_000_000));
     eprintln!(
@@ -555,7 +555,7 @@ fn fuzz_baked_decoder() {
 }
 
 #[test]
-#[ignore = "a million inputs: cargo test --release --test fuzz -- --ignored"]
+#[ignore = "a million inputs: cargo test --release --test suite fuzz:: -- --ignored"]
 fn fuzz_scene_parser() {
     let o = fuzz_scenes(inputs(1_000_000));
     eprintln!(

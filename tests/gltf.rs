@@ -4,8 +4,6 @@
 //! a scene mixing an imported species with a preset; and a geometry render in which the
 //! needle cards are visibly alpha-tested.
 
-mod common;
-
 use std::path::{Path, PathBuf};
 
 use canopy::model::gltf::{self, AlphaMode, ImportOptions, UpAxis};
@@ -14,7 +12,7 @@ use canopy::scene::Scene;
 use glam::Vec3;
 use serde_json::{Value, json};
 
-use common::*;
+use crate::common::*;
 
 fn pine_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/trees/pine5")
@@ -101,6 +99,73 @@ fn pine5_imports_with_its_triangles_and_materials() {
     .unwrap();
     let bz = z_up.mesh.bounds();
     assert!((bz.min.z + 2.0 * b.max.y).abs() < 1e-3, "{bz:?}");
+}
+
+/// The mean colour (RGB, 0-255) of an RGBA8 image's pixels.
+fn mean_rgb(pixels: &[u8]) -> [f64; 3] {
+    let mut sum = [0.0f64; 3];
+    for p in pixels.chunks_exact(4) {
+        for (s, &c) in sum.iter_mut().zip(p) {
+            *s += f64::from(c);
+        }
+    }
+    let n = (pixels.len() / 4).max(1) as f64;
+    sum.map(|s| s / n)
+}
+
+/// glTF 2.0's core allows PNG and JPEG images: Pine_5 with its bark re-encoded as a JPEG
+/// (by file and inside a bufferView of a .glb-style buffer) imports with the same texture
+/// size and, within JPEG's loss, the same colours.
+#[test]
+fn a_jpeg_textured_tree_imports_with_its_colours() {
+    let png = image::open(pine_dir().join("Bark_NormalTree.png"))
+        .unwrap()
+        .to_rgb8();
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 90)
+        .encode_image(&png)
+        .unwrap();
+    assert_eq!(&jpeg[..2], &[0xff, 0xd8], "a JPEG stream");
+    let want = {
+        let t = gltf::import(&pine_path(), ImportOptions::default()).unwrap();
+        mean_rgb(&t.materials[0].texture.as_ref().unwrap().pixels)
+    };
+    let check = |path: &Path| {
+        let tree = gltf::import(path, ImportOptions::default())
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let bark = tree.materials[0]
+            .texture
+            .as_ref()
+            .expect("the bark's texture");
+        assert_eq!((bark.width, bark.height), (256, 256));
+        let got = mean_rgb(&bark.pixels);
+        for c in 0..3 {
+            assert!((got[c] - want[c]).abs() < 3.0, "{got:?} against {want:?}");
+        }
+        assert!(bark.pixels.chunks_exact(4).all(|p| p[3] == 255));
+    };
+    // By file.
+    let mut j = pine_json();
+    j["images"][1]["uri"] = json!("bark.jpg");
+    j["images"][1]["mimeType"] = json!("image/jpeg");
+    let path = broken("jpeg-file", &j);
+    std::fs::write(path.with_file_name("bark.jpg"), &jpeg).unwrap();
+    check(&path);
+    // In a bufferView of a second buffer.
+    let mut j = pine_json();
+    j["buffers"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"byteLength": jpeg.len(), "uri": "bark.bin"}));
+    j["bufferViews"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"buffer": 1, "byteLength": jpeg.len(), "byteOffset": 0}));
+    let view = j["bufferViews"].as_array().unwrap().len() - 1;
+    j["images"][1] = json!({"mimeType": "image/jpeg", "name": "bark", "bufferView": view});
+    let path = broken("jpeg-view", &j);
+    std::fs::write(path.with_file_name("bark.bin"), &jpeg).unwrap();
+    check(&path);
 }
 
 #[test]

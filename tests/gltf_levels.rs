@@ -2,10 +2,8 @@
 //! exported to glTF comes back with the preset's three levels and draws as the preset in
 //! every method.
 
-mod common;
-
+use crate::common::*;
 use canopy::render::{Camera, FrameDesc, Method, Renderer};
-use common::*;
 use glam::Vec3;
 
 #[test]

@@ -2,12 +2,10 @@
 //! renderer against a committed reference, sun shadows by pixel statistics, and the sun's
 //! effect on the image.
 
-mod common;
-
 use canopy::render::{Camera, FrameDesc, Renderer};
 use glam::Vec3;
 
-use common::*;
+use crate::common::*;
 
 /// Mean FLIP allowed against the committed reference. Set from measurement: the same
 /// lavapipe build gives 0.0; the bound leaves room for other Mesa versions' rasterisation

@@ -3,18 +3,15 @@
 //! terrain's own depth shadows let a ridge shade the valley behind it at a low sun but not
 //! at noon.
 
-mod common;
-
 use canopy::model::World;
 use canopy::model::forest::Forest;
 use canopy::model::terrain::Terrain;
 use canopy::render::{Camera, FrameDesc, GROUND_MAP_SIZE, GROUND_PREVIEW_SIZE, Method, Renderer};
 use canopy::scene::Scene;
-use std::sync::OnceLock;
 
 use glam::Vec3;
 
-use common::*;
+use crate::common::*;
 
 /// One fir on flat ground, a coarse bake, but with 18 views rather than the file's 6 (at
 /// every level): they include east at 45° up, where the proportion test puts the sun.
@@ -25,14 +22,9 @@ fn lone_tree() -> Scene {
     scene
 }
 
-/// The lone fir's bake, made once per test process.
-fn baked() -> &'static canopy::format::Baked {
-    static BAKED: OnceLock<canopy::format::Baked> = OnceLock::new();
-    BAKED.get_or_init(|| {
-        let cache =
-            std::env::temp_dir().join(format!("canopy-ground-{}.canopy", std::process::id()));
-        load_or_bake(&lone_tree(), &cache)
-    })
+/// The lone fir's bake, made once per run.
+fn lone_baked() -> &'static canopy::format::Baked {
+    baked(&lone_tree())
 }
 
 #[test]
@@ -40,7 +32,7 @@ fn the_alpha_shadow_map_darkens_the_ground_under_a_tree_and_nowhere_else() {
     let ctx = gpu();
     let (scene, world) = built(lone_tree());
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
-    renderer.attach_btf(&ctx, baked(), &world).unwrap();
+    renderer.attach_btf(&ctx, lone_baked(), &world).unwrap();
 
     let (w, h) = (160u32, 160u32);
     let CrownShadow {
@@ -127,7 +119,7 @@ fn a_tree_at_the_squares_edge_shadows_the_horizon_ring_past_it() {
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     // The 80 m scene's bake: the same fir (its tree cube maps were baked on that square;
     // they shade the crown, not the ground).
-    renderer.attach_btf(&ctx, baked(), &world).unwrap();
+    renderer.attach_btf(&ctx, lone_baked(), &world).unwrap();
     let (w, h) = (96u32, 96u32);
     let CrownShadow {
         frame,
@@ -198,7 +190,7 @@ fn a_ridge_shades_the_valley_behind_it_at_a_low_sun_but_not_at_noon() {
     let scene = lone_tree();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     // The lone fir's species data, without its tree's cube maps: this world has no trees.
-    let mut species_only = baked().clone();
+    let mut species_only = lone_baked().clone();
     species_only
         .vcm
         .retain(|s| s.level != canopy::model::Level::Tree);
@@ -308,7 +300,7 @@ fn the_alpha_shadow_map_darkens_the_ground_in_proportion_to_the_trees_opacity() 
     scene.sun.elevation = 45.0;
     let world = scene.build_world().unwrap();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
-    renderer.attach_btf(&ctx, baked(), &world).unwrap();
+    renderer.attach_btf(&ctx, lone_baked(), &world).unwrap();
     let (w, h) = (192u32, 192u32);
     let CrownShadow {
         mut frame,

@@ -4,15 +4,13 @@
 //! impostors where the bake has them. (The switch's cross-fade is judged in
 //! tests/stability.rs.)
 
-mod common;
-
 use canopy::format::Baked;
 use canopy::render::sky_visibility::SKY_DIRECTIONS;
 use canopy::render::{Camera, FrameDesc, Method, Reference, Renderer};
 use canopy::scene::Scene;
 use glam::{Mat4, Vec3};
 
-use common::*;
+use crate::common::*;
 
 /// The lone-tree scene with a broadleaf (its twig images magnify most up close).
 fn lone_broadleaf() -> Scene {
@@ -23,11 +21,8 @@ fn lone_broadleaf() -> Scene {
     scene
 }
 
-fn bake_of(scene: &Scene) -> Baked {
-    let cache = std::env::temp_dir().join(format!("canopy-hybrid-{}.canopy", std::process::id()));
-    let b = load_or_bake(scene, &cache);
-    let _ = std::fs::remove_file(&cache);
-    b
+fn bake_of(scene: &Scene) -> &'static Baked {
+    baked(scene)
 }
 
 /// Measured on lavapipe (200x200, a broadleaf's crown from 7 m, sun 45 degrees), mean FLIP

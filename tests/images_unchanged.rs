@@ -5,13 +5,12 @@
 //! a deliberate change of the images re-writes the references with `UPDATE_SNAPSHOTS=1` and
 //! says why in its commit.
 
-mod common;
+use crate::common;
 
-use canopy::bake;
 use canopy::render::{Camera, FrameDesc, Method, Renderer};
 use glam::Vec3;
 
-use common::*;
+use crate::common::*;
 
 /// lavapipe renders the same frame to the same bytes on one machine, so a structural change
 /// measures 0 there. Its shaders are compiled for the host CPU, though, and a CPU with other
@@ -47,12 +46,9 @@ fn every_method_matches_its_references_at_three_distances() {
     let mut stand = btf_stand();
     stand.bake.compress = false;
     let (scene, world) = built(stand);
-    let cache = std::env::temp_dir()
-        .join(format!("canopy-images-test-{}", std::process::id()))
-        .join("stand.canopy");
-    let (baked, _) = bake::load_or_bake_at(&cache, &ctx, &scene, &world, &mut |_| {}).unwrap();
+    let baked = common::baked(&scene);
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
-    renderer.attach_btf(&ctx, &baked, &world).unwrap();
+    renderer.attach_btf(&ctx, baked, &world).unwrap();
     let mut worst = 0.0f32;
     for (name, eye, at) in VIEWS {
         for &method in Method::ALL {

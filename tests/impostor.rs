@@ -4,7 +4,7 @@
 //! view between frames, made from the 3 frames around it, against the picture from that
 //! view, at several frames per side: the measurement behind the default frame count.
 
-mod common;
+use crate::common;
 
 use canopy::bake::atlas::FrameMaps;
 use canopy::bake::impostor::{bake_impostors, draw_frame};
@@ -245,7 +245,7 @@ fn frames_of(
 }
 
 #[test]
-#[ignore = "prints figures: cargo test --test impostor -- --ignored --nocapture"]
+#[ignore = "prints figures: cargo test --test suite impostor:: -- --ignored --nocapture"]
 fn views_between_frames_against_frames_per_side() {
     let ctx = common::gpu();
     let world = fir_world();

@@ -5,15 +5,15 @@
 //! the crown with the sun behind the camera (its luminance against the reference's, with
 //! btf's beside it).
 
-mod common;
+use crate::common;
 
 use std::sync::OnceLock;
 
+use crate::common::{gpu, lone_fir, rgb};
 use canopy::format::Baked;
 use canopy::model::World;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::sphere::{Frame, OctaGrid, OctaLayout};
-use common::{gpu, lone_fir, rgb};
 use glam::{Mat3, Vec3};
 
 const SIZE: u32 = 128;

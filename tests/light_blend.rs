@@ -2,16 +2,15 @@
 //! the picture of each billboard blending its 3 lights itself, within a bound, with 9 image
 //! reads a fragment instead of 15; and they are made again only when the sun moves.
 
-mod common;
+use crate::common;
 
-use canopy::bake;
 use canopy::model::World;
 use canopy::render::btf::BtfStats;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
 
-use common::*;
+use crate::common::*;
 
 /// Mean FLIP between the blends and each billboard's own blend where no yaw is quantised
 /// (every tree at yaw 0, the centre of bin 0): only the blends' 8-bit sRGB texels differ.
@@ -38,12 +37,9 @@ fn setup(ctx: &GpuContext, random_yaw: bool) -> (Scene, World, Renderer) {
     let mut scene = Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses");
     scene.forest.random_yaw = random_yaw;
     let world = scene.build_world().unwrap();
-    let cache = std::env::temp_dir()
-        .join(format!("canopy-light-blend-test-{}", std::process::id()))
-        .join(format!("stand-{random_yaw}.canopy"));
-    let (baked, _) = bake::load_or_bake_at(&cache, ctx, &scene, &world, &mut |_| {}).unwrap();
+    let baked = common::baked(&scene);
     let mut renderer = Renderer::new(ctx, &world).unwrap();
-    renderer.attach_btf(ctx, &baked, &world).unwrap();
+    renderer.attach_btf(ctx, baked, &world).unwrap();
     (scene, world, renderer)
 }
 

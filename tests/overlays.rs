@@ -7,10 +7,6 @@
 //! `p = (1 - a) B + a c`: `B` the same pixel without trees, `c` the overlay's colour and `a`
 //! the billboards' coverage. The tests read `c` back through that model.
 
-mod common;
-
-use std::sync::OnceLock;
-
 use canopy::format::Baked;
 use canopy::model::{Level, PerLevel, World};
 use canopy::render::btf::LOD_COLORS;
@@ -18,7 +14,7 @@ use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use glam::Vec3;
 use image::RgbaImage;
 
-use common::*;
+use crate::common::*;
 
 /// The LOD knob of these views: each level is valid up to 3 pixels a texel, so that a tree
 /// drawn at its coarsest level still covers enough pixels to judge (at 1, a tree at the tree
@@ -91,10 +87,9 @@ fn lod_fractions(covered: &[(usize, Vec3, Vec3)]) -> (PerLevel<f32>, usize) {
 // Show LOD, on the BTF test stand.
 
 /// The stand's BTF image sets (no cube maps: the overlay draws no VCM shading, and the
-/// stand's tree-level cube maps are per instance), baked once per test process.
+/// stand's tree-level cube maps are per instance), baked once per run.
 fn stand_btf() -> &'static Baked {
-    static BAKED: OnceLock<Baked> = OnceLock::new();
-    BAKED.get_or_init(|| bake_btf(&btf_stand()))
+    btf_stand_btf()
 }
 
 /// At each level, at least this fraction of a lone tree's visibly changed pixels must be

@@ -3,16 +3,14 @@
 //! inside a pass the main pass is one span, and without timestamp queries a frame has no
 //! pass times and still draws.
 
-mod common;
-
-use std::sync::OnceLock;
+use crate::common;
 
 use canopy::format::Baked;
 use canopy::model::World;
 use canopy::render::{FrameDesc, FrameStats, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 
-use common::*;
+use crate::common::*;
 
 const W: u32 = 96;
 const H: u32 = 64;
@@ -24,21 +22,9 @@ fn scene() -> Scene {
     scene
 }
 
-/// The scene's bake, made once for the file's tests.
+/// The scene's bake, made once per run.
 fn baked() -> &'static Baked {
-    static BAKED: OnceLock<Baked> = OnceLock::new();
-    BAKED.get_or_init(|| {
-        let ctx = gpu();
-        let scene = scene();
-        let world = scene.build_world().unwrap();
-        let cache =
-            std::env::temp_dir().join(format!("canopy-passes-{}.canopy", std::process::id()));
-        let b = canopy::bake::load_or_bake_at(&cache, &ctx, &scene, &world, &mut |_| {})
-            .unwrap()
-            .0;
-        let _ = std::fs::remove_file(&cache);
-        b
-    })
+    common::baked(&scene())
 }
 
 fn renderer(ctx: &GpuContext, world: &World) -> Renderer {

@@ -3,20 +3,18 @@
 //! resumes from what it made, and the tree levels alone draw the forest (finer levels as
 //! geometry).
 
-mod common;
-
 use std::path::{Path, PathBuf};
 
+use crate::common::*;
 use canopy::bake::stages::{load_or_bake_progressive, partial_path};
 use canopy::format::Baked;
 use canopy::model::Level;
 use canopy::render::{Camera, FrameDesc, Method, Renderer};
 use canopy::scene::Scene;
-use common::*;
 use glam::Vec3;
 
-/// The lone fir's scene (its coarse bake) with a broadleaf of two variants beside it: three
-/// prototypes, six trees.
+/// The lone fir's scene (its coarse bake, texel volumes at their coarsest: every stage is
+/// baked, cheaply) with a broadleaf of two variants beside it: three prototypes, six trees.
 fn two_species(dir: &Path) -> Scene {
     let text = std::fs::read_to_string(data("lone_tree.toml"))
         .unwrap()
@@ -25,7 +23,8 @@ fn two_species(dir: &Path) -> Scene {
             "[[species]]\nname = \"broadleaf\"\npreset = \"broadleaf\"\nseed = 2\nvariants = 2\n\n[forest]",
         )
         .replace("count = 1\n", "count = 6\n")
-        .replace("mix = [1.0]", "mix = [0.5, 0.5]");
+        .replace("mix = [1.0]", "mix = [0.5, 0.5]")
+        .replace("[bake]\n", "[bake]\ntexel_resolution = 16\n");
     let path = dir.join("two.toml");
     std::fs::write(&path, text).unwrap();
     Scene::load(&path).unwrap()
@@ -225,7 +224,8 @@ fn a_viewer_bake_first_hands_over_a_preview_at_18_views() {
     let dir = scratch_dir("progressive-preview");
     let text = std::fs::read_to_string(data("lone_tree.toml"))
         .unwrap()
-        .replace("tree_views = 6", "tree_views = 66");
+        .replace("tree_views = 6", "tree_views = 66")
+        .replace("[bake]\n", "[bake]\ntexel_resolution = 16\n");
     let path = dir.join("fir66.toml");
     std::fs::write(&path, text).unwrap();
     let scene = Scene::load(&path).unwrap();

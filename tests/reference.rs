@@ -2,15 +2,13 @@
 //! light where trees stand and nowhere else, and the frame it draws differs from the
 //! interactive `geometry` only there.
 
-mod common;
-
 use canopy::model::World;
 use canopy::render::sky_visibility::{SKY_DIRECTIONS, SkyVolume};
 use canopy::render::{FrameDesc, Reference, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
 
-use common::*;
+use crate::common::*;
 
 fn dense_stand() -> (Scene, World) {
     let (scene, world) = built(load_scene("dense_stand.toml"));

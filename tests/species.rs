@@ -2,7 +2,7 @@
 //! near, middle and far (issue 12: "species that read as what they are at 5 m, 50 m and
 //! 500 m"), and their crowns' side coverage across variants.
 
-mod common;
+use crate::common;
 
 use canopy::app::gallery::{PICTURE, render_prototype};
 use canopy::model::silhouette::crown_coverage;
@@ -42,7 +42,7 @@ fn every_variant_of_every_preset_keeps_its_crown_covered() {
 
 /// Writes `screenshots/species-distances.png`: the three presets (columns fir, pine,
 /// broadleaf) alone on flat ground from 5, 50 and 500 m (rows), as the species gallery
-/// draws them. Run with `cargo test --release --test species -- --ignored`.
+/// draws them. Run with `cargo test --release --test suite species:: -- --ignored`.
 #[test]
 #[ignore = "writes the species sheet's picture; run by hand"]
 fn species_sheet_at_three_distances() {

@@ -4,10 +4,6 @@
 //! come from the bench's own runner (`canopy::bench::run`), so a bench of the same flight on
 //! any scene reports the same metrics.
 
-mod common;
-
-use std::sync::OnceLock;
-
 use canopy::bench::flight::{FlightFrame, Knobs};
 use canopy::bench::run::{self, BenchOptions, Config};
 use canopy::format::Baked;
@@ -18,12 +14,11 @@ use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
 
-use common::*;
+use crate::common::*;
 
-/// The stand's bake, made once per test process.
+/// The stand's BTF image sets, made once per run.
 fn baked() -> &'static Baked {
-    static BAKED: OnceLock<Baked> = OnceLock::new();
-    BAKED.get_or_init(|| bake_btf(&btf_stand()))
+    btf_stand_btf()
 }
 
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {

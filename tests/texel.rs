@@ -2,7 +2,7 @@
 //! objects and agrees with the slab-by-slab bake the seeds describe; a lone fir drawn as a
 //! texel stays within a measured FLIP of the reference.
 
-mod common;
+use crate::common;
 
 use canopy::bake::texel::{TexelGrid, bake_volume, bake_volume_by_slabs, bake_volume_from};
 use canopy::format::{Baked, TexelVolume};
@@ -16,7 +16,7 @@ use canopy::scene::Scene;
 use canopy::sphere::DirectionSet;
 use glam::{Mat4, UVec3, Vec3};
 
-use common::*;
+use crate::common::*;
 
 fn lone_tree(species: &str) -> Scene {
     let mut scene = load_scene("lone_tree.toml");
@@ -31,20 +31,9 @@ fn lone_tree(species: &str) -> Scene {
     scene
 }
 
-/// The lone tree's bake (BTF, VCMs and texels).
-fn bake_of(scene: &Scene) -> Baked {
-    let ctx = gpu();
-    let world = scene.build_world().unwrap();
-    let cache = std::env::temp_dir().join(format!(
-        "canopy-texel-{}-{}.canopy",
-        scene.species[0].name,
-        std::process::id()
-    ));
-    let b = canopy::bake::load_or_bake_at(&cache, &ctx, scene, &world, &mut |_| {})
-        .unwrap()
-        .0;
-    let _ = std::fs::remove_file(&cache);
-    b
+/// The lone tree's bake (BTF, VCMs and texels), made once per run.
+fn bake_of(scene: &Scene) -> &'static Baked {
+    common::baked(scene)
 }
 
 /// A tree model holding only `mesh` in `bounds`.
@@ -340,7 +329,7 @@ impl LoneTree {
             ctx,
             scene,
             world,
-            baked,
+            baked: baked.clone(),
             renderer,
             centre,
         }
@@ -668,7 +657,7 @@ fn a_far_tile_stands_for_its_tree() {
 fn volumes_that_do_not_fit_the_scene_disable_only_the_texel_method() {
     let ctx = gpu();
     let (scene, world) = built(lone_tree("fir"));
-    let mut baked = bake_of(&scene);
+    let mut baked = bake_of(&scene).clone();
     baked.texels[0].species = 5;
     let mut r = Renderer::new(&ctx, &world).unwrap();
     r.attach_btf(&ctx, &baked, &world).unwrap();

@@ -2,7 +2,7 @@
 //! measured again, a looser target never picks a costlier one, and `--write` leaves a scene
 //! file that parses and starts from the picked knobs.
 
-mod common;
+use crate::common;
 
 use canopy::bench::command::{TuneRequest, run_tune};
 use canopy::bench::run::{self, BenchOptions};
@@ -14,8 +14,6 @@ use canopy::scene::Scene;
 #[test]
 fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
     let dir = common::scratch_dir("tune-test");
-    // The other test of this binary fails before it could read the environment.
-    unsafe { std::env::set_var("CANOPY_CACHE_DIR", dir.join("cache")) };
     let scene_path = dir.join("stand.toml");
     std::fs::copy(common::data("btf.toml"), &scene_path).unwrap();
     let target = TuneTarget::new(0.3, 2.0).unwrap();
@@ -33,6 +31,7 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
         write: true,
         bake: false,
         method: canopy::render::Method::Btf,
+        cache_dir: dir.join("cache"),
     };
     let o = run_tune(&req).unwrap();
     let i = o.chosen.expect("a loose target is met");
@@ -68,7 +67,9 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
     let world = scene.build_world().unwrap();
     let ctx = GpuContext::headless(AdapterPreference::Cpu).unwrap();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
-    let (baked, _) = canopy::bake::load_or_bake(&ctx, &scene, &world, &mut |_| {}).unwrap();
+    let cache = canopy::bake::cache::cache_path_in(&dir.join("cache"), &scene);
+    let (baked, _) =
+        canopy::bake::load_or_bake_at(&cache, &ctx, &scene, &world, &mut |_| {}).unwrap();
     renderer.attach_btf(&ctx, &baked, &world).unwrap();
     renderer
         .prepare_reference(
@@ -144,6 +145,7 @@ fn tune_searches_btf_or_impostor_and_writes_btf_only() {
         write,
         bake: false,
         method,
+        cache_dir: common::scratch_dir("tune-refused").join("cache"),
     };
     let e = run_tune(&req(canopy::render::Method::Texel, false))
         .err()

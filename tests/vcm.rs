@@ -4,10 +4,6 @@
 //! the main branches' and twigs' cube maps bring it closer to a sharp reference; and
 //! sweeping the sun in small steps changes the image in small steps.
 
-mod common;
-
-use std::sync::OnceLock;
-
 use canopy::bake;
 use canopy::format::Baked;
 use canopy::model::{TreeVcm, World};
@@ -15,7 +11,7 @@ use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
 
-use common::*;
+use crate::common::*;
 
 fn to_px(frame: &FrameDesc, w: u32, h: u32, p: Vec3) -> (i64, i64) {
     let ndc = frame
@@ -242,29 +238,12 @@ fn btf_with_vcm_darkens_a_tree_behind_another_about_as_much_as_geometry() {
 }
 
 /// The dense stand of tests/data and its bake (BTF + VCMs) with the tree-level cube maps
-/// laid out as `layout` says, each made once per process.
+/// laid out as `layout` says, each made once per run.
 fn dense_stand_as(layout: TreeVcm) -> (Scene, World, &'static Baked) {
-    static CELLS: OnceLock<Baked> = OnceLock::new();
-    static PER_TREE: OnceLock<Baked> = OnceLock::new();
     let mut scene = load_scene("dense_stand.toml");
     scene.bake.tree_vcm = layout;
     let world = scene.build_world().unwrap();
-    let once = match layout {
-        TreeVcm::Cells => &CELLS,
-        TreeVcm::PerTree => &PER_TREE,
-    };
-    let baked = once.get_or_init(|| {
-        let ctx = gpu();
-        let cache = std::env::temp_dir().join(format!(
-            "canopy-dense-{layout:?}-{}.canopy",
-            std::process::id()
-        ));
-        let b = bake::load_or_bake_at(&cache, &ctx, &scene, &world, &mut |_| {})
-            .unwrap()
-            .0;
-        let _ = std::fs::remove_file(cache);
-        b
-    });
+    let baked = baked(&scene);
     (scene, world, baked)
 }
 

@@ -2,12 +2,10 @@
 //! every direction, the terrain reaches past the distance where the fog hides 99 % of
 //! anything, so flying never shows a cliff or the void.
 
-mod common;
-
 use canopy::render::{FrameDesc, Method, Renderer};
 use canopy::scene::Scene;
 
-use common::*;
+use crate::common::*;
 
 #[test]
 fn the_terrain_reaches_past_the_fog_in_every_direction() {

@@ -118,7 +118,12 @@ pub fn cache_dir() -> PathBuf {
 
 /// The cache file of a scene.
 pub fn cache_path(scene: &Scene) -> PathBuf {
-    cache_dir().join(format!("{:016x}.canopy", scene_hash(scene)))
+    cache_path_in(&cache_dir(), scene)
+}
+
+/// Where `scene`'s bake is kept in the cache directory `dir`.
+pub fn cache_path_in(dir: &Path, scene: &Scene) -> PathBuf {
+    dir.join(format!("{:016x}.canopy", scene_hash(scene)))
 }
 
 /// Reads a scene's bake from `path` if it is there and valid for this scene. The error of a

@@ -84,7 +84,7 @@ fn renderer(
     scene: &Scene,
     world: &World,
     adapter: AdapterPreference,
-    bake: bool,
+    bake: Option<&Path>,
     progress: bool,
 ) -> Result<(GpuContext, Renderer)> {
     let ctx = GpuContext::headless(adapter)?;
@@ -95,27 +95,31 @@ fn renderer(
         crate::render::Reference::default().sky_directions,
         true,
     )?;
-    if bake {
+    if let Some(cache_dir) = bake {
         attach_bake(
             &ctx,
             &mut renderer,
             scene,
             world,
+            cache_dir,
             &bar(progress, 0, BAKE_BAR),
         )?;
     }
     Ok((ctx, renderer))
 }
 
-/// Loads `scene`'s bake from the cache or bakes it (its progress on `bar`) and attaches it.
+/// Loads `scene`'s bake from the cache in `cache_dir` or bakes it there (its progress on
+/// `bar`) and attaches it.
 fn attach_bake(
     ctx: &GpuContext,
     renderer: &mut Renderer,
     scene: &Scene,
     world: &World,
+    cache_dir: &Path,
     bar: &indicatif::ProgressBar,
 ) -> Result<()> {
-    let baked = crate::bake::load_or_bake(ctx, scene, world, &mut |p| show_bake(bar, p));
+    let path = crate::bake::cache::cache_path_in(cache_dir, scene);
+    let baked = crate::bake::load_or_bake_at(&path, ctx, scene, world, &mut |p| show_bake(bar, p));
     bar.finish_and_clear();
     renderer.attach_btf(ctx, &baked?.0, world)
 }
@@ -126,6 +130,7 @@ fn options(
     (width, height): (u32, u32),
     truth_supersample: u32,
     repeats: u32,
+    cache_dir: &Path,
 ) -> Result<BenchOptions> {
     crate::render::target::check_size(
         width.saturating_mul(truth_supersample.max(1)),
@@ -137,7 +142,7 @@ fn options(
         height,
         truth_supersample: truth_supersample.max(1),
         repeats: repeats.max(1),
-        cache_dir: crate::bake::cache::cache_dir(),
+        cache_dir: cache_dir.to_path_buf(),
         scene_content: scene_content(scene),
         reference: Some(crate::render::Reference::default()),
     })
@@ -204,14 +209,22 @@ pub fn run_command(req: &BenchRequest) -> Result<BenchOutcome> {
     let started = Instant::now();
     let (scene, world) = load(req.scene.as_deref())?;
     let (flight, n, configs) = plan(req, &scene, &world)?;
+    let cache_dir = crate::bake::cache::cache_dir();
     let opts = options(
         &scene,
         (req.width, req.height),
         req.truth_supersample,
         req.repeats,
+        &cache_dir,
     )?;
     let bake = configs.iter().any(|c| c.method.needs_bake());
-    let (ctx, mut renderer) = renderer(&scene, &world, req.adapter, bake, req.progress)?;
+    let (ctx, mut renderer) = renderer(
+        &scene,
+        &world,
+        req.adapter,
+        bake.then_some(cache_dir.as_path()),
+        req.progress,
+    )?;
     let frames = flight.frames(n);
     let m = Measure {
         ctx: &ctx,
@@ -283,6 +296,8 @@ pub struct TuneRequest {
     pub bake: bool,
     /// The method whose knobs are searched (`btf` or `impostor`).
     pub method: Method,
+    /// Where bakes are read and written (the CLI's: `bake::cache::cache_dir()`).
+    pub cache_dir: PathBuf,
 }
 
 /// What `canopy tune` found.
@@ -333,9 +348,16 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
         (req.width, req.height),
         req.truth_supersample,
         req.repeats,
+        &req.cache_dir,
     )?;
     let frames = flight.frames(req.frames);
-    let (ctx, mut renderer) = renderer(&scene, &world, req.adapter, !req.bake, req.progress)?;
+    let (ctx, mut renderer) = renderer(
+        &scene,
+        &world,
+        req.adapter,
+        (!req.bake).then_some(req.cache_dir.as_path()),
+        req.progress,
+    )?;
     let base = FrameDesc::from_scene(&scene);
     let m = Measure {
         ctx: &ctx,
@@ -381,6 +403,7 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
                 &mut renderer,
                 &s,
                 &world,
+                &req.cache_dir,
                 &bar(req.progress, 0, &template),
             )?;
             let bytes = renderer.btf_bytes();

@@ -66,6 +66,7 @@ pub fn tune(args: TuneArgs) -> anyhow::Result<()> {
         write: args.write,
         bake: args.bake,
         method: args.method,
+        cache_dir: crate::bake::cache::cache_dir(),
     };
     let o = crate::bench::command::run_tune(&req)?;
     if args.json {

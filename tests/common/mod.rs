@@ -3,8 +3,9 @@
 
 #![allow(dead_code)]
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 use canopy::format::Baked;
 use canopy::model::World;
@@ -53,13 +54,19 @@ pub fn btf_stand() -> Scene {
     load_scene("btf.toml")
 }
 
+/// The BTF test stand's image sets (no cube maps), baked once per run.
+pub fn btf_stand_btf() -> &'static Baked {
+    static BAKED: OnceLock<Baked> = OnceLock::new();
+    BAKED.get_or_init(|| bake_btf(&btf_stand()))
+}
+
 /// One fir on flat ground, sun from the south-east at 45 degrees
 /// (`tests/data/lone_tree.toml`).
 pub fn lone_fir() -> Scene {
     load_scene("lone_tree.toml")
 }
 
-/// The lone fir's BTF image sets, baked once per test process.
+/// The lone fir's BTF image sets, baked once per run.
 pub fn lone_fir_btf() -> &'static Baked {
     static BAKED: OnceLock<Baked> = OnceLock::new();
     BAKED.get_or_init(|| bake_btf(&lone_fir()))
@@ -92,6 +99,25 @@ pub fn scratch_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("canopy-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir
+}
+
+/// `scene`'s whole bake, made once per test run: every test that asks for the same scene
+/// and bake settings (as the cache keys them, by `scene_hash`) shares it. Different scenes
+/// bake at the same time; the same one is baked by the first test that asks, the others
+/// wait for it. The files go to one directory of the run's.
+pub fn baked(scene: &Scene) -> &'static Baked {
+    type Once = &'static OnceLock<Baked>;
+    static BAKES: Mutex<BTreeMap<u64, Once>> = Mutex::new(BTreeMap::new());
+    let key = canopy::bake::cache::scene_hash(scene);
+    let once: Once = *BAKES
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .entry(key)
+        .or_insert_with(|| Box::leak(Box::new(OnceLock::new())));
+    once.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("canopy-fixtures-{}", std::process::id()));
+        load_or_bake(scene, &canopy::bake::cache::cache_path_in(&dir, scene))
+    })
 }
 
 /// `scene`'s whole bake, read from `cache` or baked (on a fresh context) and written there.

@@ -433,10 +433,17 @@ pub(super) fn read_image(
             .with_guessed_format()
             .map_err(|e| format!("{label}: {e}"))
     };
+    // glTF 2.0's core images; other formats the bytes may look like are refused here.
     let format = reader()?.format();
-    if format.is_none() {
+    if !matches!(
+        format,
+        Some(image::ImageFormat::Png | image::ImageFormat::Jpeg)
+    ) {
+        let what = format.map_or("not a PNG or JPEG image".to_owned(), |f| {
+            format!("a {f:?} image, not PNG or JPEG")
+        });
         return Err(format!(
-            "{label}: not a PNG or JPEG image; re-export with PNG or JPEG textures"
+            "{label}: {what}; re-export with PNG or JPEG textures"
         ));
     }
     let (w, h) = reader()?

@@ -235,8 +235,9 @@ pub struct AfterCx<'a> {
 }
 
 /// One way of drawing the forest. The renderer holds one of each ([`super::registry`]) and
-/// runs the frame's steps through the one the frame names.
-pub trait RenderMethod {
+/// runs the frame's steps through the one the frame names, on the renderer's own threads
+/// (hence `Send`).
+pub trait RenderMethod: Send {
     /// The method this draws.
     fn method(&self) -> Method;
 

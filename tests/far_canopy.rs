@@ -3,16 +3,15 @@
 //! coverage and colour, from above and from the side), leave no gap and draw nothing twice
 //! where it takes over from the billboards, and keep clearings clear.
 
-mod common;
+use crate::common;
 
-use canopy::bake;
 use canopy::model::World;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
 use image::RgbaImage;
 
-use common::*;
+use crate::common::*;
 
 const SIZE: (u32, u32) = (192, 192);
 
@@ -26,12 +25,9 @@ fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
     let scene =
         Scene::load(&data("canopy_stand.toml")).expect("tests/data/canopy_stand.toml parses");
     let world = scene.build_world().unwrap();
-    let cache = std::env::temp_dir()
-        .join(format!("canopy-canopy-test-{}", std::process::id()))
-        .join("stand.canopy");
-    let (baked, _) = bake::load_or_bake_at(&cache, ctx, &scene, &world, &mut |_| {}).unwrap();
+    let baked = common::baked(&scene);
     let mut renderer = Renderer::new(ctx, &world).unwrap();
-    renderer.attach_btf(ctx, &baked, &world).unwrap();
+    renderer.attach_btf(ctx, baked, &world).unwrap();
     (scene, world, renderer)
 }
 
