@@ -33,9 +33,6 @@ pub enum Error {
     #[error("GPU error: {0}")]
     Gpu(String),
 
-    #[error("could not start the renderer's CPU threads: {0}")]
-    Threads(String),
-
     #[error("could not create a window surface: {0}")]
     CreateSurface(#[from] wgpu::CreateSurfaceError),
 

@@ -120,21 +120,6 @@ pub struct Renderer {
     frames_without_casters: u32,
     /// Unique among the renderers of this process (see [`Self::id`]).
     id: u64,
-    /// The threads of this renderer's CPU work (each frame's billboards and shading, the
-    /// sky visibility, the bake's upload). rayon hands work given from outside a pool to
-    /// its threads only when they have nothing else to do, so on the global pool a frame
-    /// waited for whatever else the process ran there (a bake beside the viewer, other
-    /// renderers): 12 times as long, measured, next to a bake.
-    cpu: std::sync::Arc<rayon::ThreadPool>,
-}
-
-/// A pool of one thread per core for a renderer's CPU work.
-fn cpu_pool() -> Result<std::sync::Arc<rayon::ThreadPool>> {
-    rayon::ThreadPoolBuilder::new()
-        .thread_name(|i| format!("canopy-render-{i}"))
-        .build()
-        .map(std::sync::Arc::new)
-        .map_err(|e| Error::Threads(e.to_string()))
 }
 
 /// The next [`Renderer::id`].
@@ -183,7 +168,6 @@ impl Renderer {
             studio_cascades: None,
             frames_without_casters: 0,
             id: NEXT_RENDERER_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
-            cpu: cpu_pool()?,
         })
     }
 
@@ -195,7 +179,7 @@ impl Renderer {
         baked: &crate::format::Baked,
         world: &World,
     ) -> Result<()> {
-        self.bake = self.cpu.install(|| Bake::load(ctx, baked, world))?;
+        self.bake = Bake::load(ctx, baked, world)?;
         if let Some(g) = &mut self.ground {
             g.invalidate();
         }
@@ -402,18 +386,6 @@ impl Renderer {
     /// compute passes, the sun cascades, the main pass (sky, then the method's draws) and
     /// the reference's trees; after the submission, the timings and what the method counted.
     pub fn render(
-        &mut self,
-        ctx: &GpuContext,
-        frame: &FrameDesc,
-        target: FrameTarget<'_>,
-        measure_gpu: bool,
-    ) -> Result<FrameStats> {
-        let cpu = std::sync::Arc::clone(&self.cpu);
-        cpu.install(|| self.render_on_own_threads(ctx, frame, target, measure_gpu))
-    }
-
-    /// [`Self::render`], on the renderer's own threads.
-    fn render_on_own_threads(
         &mut self,
         ctx: &GpuContext,
         frame: &FrameDesc,

@@ -59,9 +59,7 @@ impl Renderer {
                 "the reference needs something to draw: the world is empty".into(),
             ));
         }
-        let volume = self
-            .cpu
-            .install(|| SkyVolume::compute(world, &bounds, terrain, directions.max(1)));
+        let volume = SkyVolume::compute(world, &bounds, terrain, directions.max(1));
         self.attach_sky(ctx, &volume, directions)
     }
 

@@ -235,9 +235,8 @@ pub struct AfterCx<'a> {
 }
 
 /// One way of drawing the forest. The renderer holds one of each ([`super::registry`]) and
-/// runs the frame's steps through the one the frame names, on the renderer's own threads
-/// (hence `Send`).
-pub trait RenderMethod: Send {
+/// runs the frame's steps through the one the frame names.
+pub trait RenderMethod {
     /// The method this draws.
     fn method(&self) -> Method;
 
