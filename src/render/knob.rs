@@ -351,11 +351,30 @@ mod tests {
     #[test]
     fn numbers_are_checked_against_their_range_and_kind() {
         assert_eq!(COUNT.parse("3"), Ok(KnobValue::Number(3.0)));
+        assert_eq!(COUNT.parse("1"), Ok(KnobValue::Number(1.0)));
+        assert_eq!(COUNT.parse("10"), Ok(KnobValue::Number(10.0)));
+        assert!(COUNT.parse("0").unwrap_err().contains("1..=10"));
         assert!(COUNT.parse("3.5").unwrap_err().contains("whole number"));
         assert!(COUNT.parse("11").unwrap_err().contains("1..=10"));
         assert!(COUNT.parse("NaN").is_err());
         assert!(COUNT.parse("x").unwrap_err().contains("not a whole number"));
         assert_eq!(COUNT.flag(), "--count-thing");
+    }
+
+    #[test]
+    fn every_number_knob_takes_both_ends_of_its_range() {
+        for k in crate::render::method::all_knobs() {
+            if let KnobKind::Number { min, max, .. } = k.kind {
+                for v in [min, max] {
+                    assert_eq!(
+                        k.parse(&v.to_string()),
+                        Ok(KnobValue::Number(v)),
+                        "{}",
+                        k.flag()
+                    );
+                }
+            }
+        }
     }
 
     #[test]
