@@ -38,7 +38,7 @@ fn up_close_hybrid_draws_geometry_and_far_away_it_is_btf() {
     let (scene, world) = built(lone_broadleaf());
     let baked = bake_of(&scene);
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
-    renderer.attach_btf(&ctx, &baked, &world).unwrap();
+    renderer.attach_btf(&ctx, baked, &world).unwrap();
     renderer
         .prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
         .unwrap();

@@ -320,7 +320,7 @@ impl LoneTree {
             .transformed(Mat4::from_translation(tree.position))
             .center();
         let mut renderer = Renderer::new(&ctx, &world).unwrap();
-        renderer.attach_btf(&ctx, &baked, &world).unwrap();
+        renderer.attach_btf(&ctx, baked, &world).unwrap();
         assert!(renderer.has_texels());
         renderer
             .prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
@@ -681,7 +681,7 @@ fn texel_volumes_reach_the_gpu_when_first_drawn() {
     let (scene, world) = built(lone_tree("fir"));
     let baked = bake_of(&scene);
     let mut r = Renderer::new(&ctx, &world).unwrap();
-    r.attach_btf(&ctx, &baked, &world).unwrap();
+    r.attach_btf(&ctx, baked, &world).unwrap();
     assert!(r.has_texels());
     let on_gpu = |r: &Renderer| {
         r.memory_report(&ctx)
