@@ -3,8 +3,6 @@
 //! coverage and colour, from above and from the side), leave no gap and draw nothing twice
 //! where it takes over from the billboards, and keep clearings clear.
 
-use crate::common;
-
 use canopy::model::World;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
@@ -22,12 +20,8 @@ const SIZE: (u32, u32) = (192, 192);
 const STANDS_FOR_MAX_MEAN_FLIP: (f32, f32) = (0.12, 0.22);
 
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
-    let scene =
-        Scene::load(&data("canopy_stand.toml")).expect("tests/data/canopy_stand.toml parses");
-    let world = scene.build_world().unwrap();
-    let baked = common::baked(&scene);
-    let mut renderer = Renderer::new(ctx, &world).unwrap();
-    renderer.attach_btf(ctx, baked, &world).unwrap();
+    let scene = load_scene("canopy_stand.toml");
+    let (world, renderer) = baked_renderer(ctx, &scene);
     (scene, world, renderer)
 }
 

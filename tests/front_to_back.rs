@@ -2,8 +2,6 @@
 //! `src/render/layer.rs`): the picture of drawing them back to front over the frame, within
 //! a bound, on the GPU's sort and on the CPU's, with every billboard still drawn.
 
-use crate::common;
-
 use canopy::model::World;
 use canopy::render::{Camera, FrameDesc, FrameStats, GpuContext, Method, Reference, Renderer};
 use canopy::scene::Scene;
@@ -29,12 +27,8 @@ const MAX_TRUTH_LOSS: f32 = 0.002;
 const SIZE: (u32, u32) = (192, 128);
 
 fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
-    let scene =
-        Scene::load(&data("canopy_stand.toml")).expect("tests/data/canopy_stand.toml parses");
-    let world = scene.build_world().unwrap();
-    let baked = common::baked(&scene);
-    let mut renderer = Renderer::new(ctx, &world).unwrap();
-    renderer.attach_btf(ctx, baked, &world).unwrap();
+    let scene = load_scene("canopy_stand.toml");
+    let (world, renderer) = baked_renderer(ctx, &scene);
     (scene, world, renderer)
 }
 

@@ -4,7 +4,6 @@
 //! impostors where the bake has them. (The switch's cross-fade is judged in
 //! tests/stability.rs.)
 
-use canopy::format::Baked;
 use canopy::render::sky_visibility::SKY_DIRECTIONS;
 use canopy::render::{Camera, FrameDesc, Method, Reference, Renderer};
 use canopy::scene::Scene;
@@ -21,10 +20,6 @@ fn lone_broadleaf() -> Scene {
     scene
 }
 
-fn bake_of(scene: &Scene) -> &'static Baked {
-    baked(scene)
-}
-
 /// Measured on lavapipe (200x200, a broadleaf's crown from 7 m, sun 45 degrees), mean FLIP
 /// against the reference (x2 supersampled, sky visibility): hybrid 0.116 (0.132 while its
 /// ground shadow still came from the alpha map), the interactive `geometry` 0.145 (what is left is mostly aliasing at 1x and the sky visibility), btf
@@ -36,7 +31,7 @@ const NEAR_MARGIN: f32 = 0.01;
 fn up_close_hybrid_draws_geometry_and_far_away_it_is_btf() {
     let ctx = gpu();
     let (scene, world) = built(lone_broadleaf());
-    let baked = bake_of(&scene);
+    let baked = baked(&scene);
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     renderer.attach_btf(&ctx, baked, &world).unwrap();
     renderer

@@ -2,8 +2,6 @@
 //! the picture of each billboard blending its 3 lights itself, within a bound, with 9 image
 //! reads a fragment instead of 15; and they are made again only when the sun moves.
 
-use crate::common;
-
 use canopy::model::World;
 use canopy::render::btf::BtfStats;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
@@ -36,10 +34,7 @@ const SIZE: (u32, u32) = (192, 192);
 fn setup(ctx: &GpuContext, random_yaw: bool) -> (Scene, World, Renderer) {
     let mut scene = Scene::load(&data("btf.toml")).expect("tests/data/btf.toml parses");
     scene.forest.random_yaw = random_yaw;
-    let world = scene.build_world().unwrap();
-    let baked = common::baked(&scene);
-    let mut renderer = Renderer::new(ctx, &world).unwrap();
-    renderer.attach_btf(ctx, baked, &world).unwrap();
+    let (world, renderer) = baked_renderer(ctx, &scene);
     (scene, world, renderer)
 }
 

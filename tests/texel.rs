@@ -2,8 +2,6 @@
 //! objects and agrees with the slab-by-slab bake the seeds describe; a lone fir drawn as a
 //! texel stays within a measured FLIP of the reference.
 
-use crate::common;
-
 use canopy::bake::texel::{TexelGrid, bake_volume, bake_volume_by_slabs, bake_volume_from};
 use canopy::format::{Baked, TexelVolume};
 use canopy::model::mesh::{Aabb, Mesh, Vertex};
@@ -29,11 +27,6 @@ fn lone_tree(species: &str) -> Scene {
     }
     scene.species[0].name = species.into();
     scene
-}
-
-/// The lone tree's bake (BTF, VCMs and texels), made once per run.
-fn bake_of(scene: &Scene) -> &'static Baked {
-    common::baked(scene)
 }
 
 /// A tree model holding only `mesh` in `bounds`.
@@ -312,7 +305,7 @@ impl LoneTree {
         let ctx = gpu();
         let scene = lone_tree(species);
         let world = scene.build_world().unwrap();
-        let baked = bake_of(&scene);
+        let baked = baked(&scene);
         assert_eq!(baked.texels.len(), 1, "one species, one set of volumes");
         let tree = world.forest.instances[0];
         let centre = world.species[0]
@@ -657,7 +650,7 @@ fn a_far_tile_stands_for_its_tree() {
 fn volumes_that_do_not_fit_the_scene_disable_only_the_texel_method() {
     let ctx = gpu();
     let (scene, world) = built(lone_tree("fir"));
-    let mut baked = bake_of(&scene).clone();
+    let mut baked = baked(&scene).clone();
     baked.texels[0].species = 5;
     let mut r = Renderer::new(&ctx, &world).unwrap();
     r.attach_btf(&ctx, &baked, &world).unwrap();
@@ -679,7 +672,7 @@ fn volumes_that_do_not_fit_the_scene_disable_only_the_texel_method() {
 fn texel_volumes_reach_the_gpu_when_first_drawn() {
     let ctx = gpu();
     let (scene, world) = built(lone_tree("fir"));
-    let baked = bake_of(&scene);
+    let baked = baked(&scene);
     let mut r = Renderer::new(&ctx, &world).unwrap();
     r.attach_btf(&ctx, baked, &world).unwrap();
     assert!(r.has_texels());

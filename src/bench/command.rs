@@ -314,10 +314,8 @@ pub struct TuneOutcome {
     pub bakes: Vec<Option<(BakeChoice, u64)>>,
 }
 
-/// Measures the tune grid along the flight and picks the cheapest configuration meeting
-/// the target; writes it into the scene file when asked (atomically).
-pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
-    let started = Instant::now();
+/// Refuses a tune request that cannot run, before anything is loaded.
+fn check_tune(req: &TuneRequest) -> Result<()> {
     if req.write && req.scene.is_none() {
         return Err(Error::BadInput(
             "--write needs a scene file: the embedded default forest cannot be changed; save it to a file first".into(),
@@ -341,6 +339,14 @@ pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
             req.frames
         )));
     }
+    Ok(())
+}
+
+/// Measures the tune grid along the flight and picks the cheapest configuration meeting
+/// the target; writes it into the scene file when asked (atomically).
+pub fn run_tune(req: &TuneRequest) -> Result<TuneOutcome> {
+    let started = Instant::now();
+    check_tune(req)?;
     let (scene, world) = load(req.scene.as_deref())?;
     let flight = Flight::resolve(&req.flight, &FlightContext::from_world(&world))?;
     let opts = options(

@@ -120,6 +120,14 @@ pub fn baked(scene: &Scene) -> &'static Baked {
     })
 }
 
+/// `scene`'s world and a renderer for it with the scene's shared bake ([`baked`]) attached.
+pub fn baked_renderer(ctx: &GpuContext, scene: &Scene) -> (World, Renderer) {
+    let world = scene.build_world().unwrap();
+    let mut renderer = Renderer::new(ctx, &world).unwrap();
+    renderer.attach_btf(ctx, baked(scene), &world).unwrap();
+    (world, renderer)
+}
+
 /// `scene`'s whole bake, read from `cache` or baked (on a fresh context) and written there.
 pub fn load_or_bake(scene: &Scene, cache: &Path) -> Baked {
     let ctx = gpu();
