@@ -45,13 +45,24 @@ fn three(
     let mut f = *frame;
     f.btf.far_canopy = false;
     let off = renderer.render_image(ctx, &f, SIZE.0, SIZE.1, 1).unwrap().0;
+    let (on, tiles) = with_canopy(ctx, renderer, frame, canopy_px);
+    f.trees = false;
+    let bare = renderer.render_image(ctx, &f, SIZE.0, SIZE.1, 1).unwrap().0;
+    (off, on, bare, tiles)
+}
+
+/// The frame with the canopy on past `canopy_px`, and the canopy's tiles drawn.
+fn with_canopy(
+    ctx: &GpuContext,
+    renderer: &mut Renderer,
+    frame: &FrameDesc,
+    canopy_px: f32,
+) -> (RgbaImage, u32) {
+    let mut f = *frame;
     f.btf.far_canopy = true;
     f.btf.canopy_px = canopy_px;
     let (on, stats) = renderer.render_image(ctx, &f, SIZE.0, SIZE.1, 1).unwrap();
-    f.trees = false;
-    let bare = renderer.render_image(ctx, &f, SIZE.0, SIZE.1, 1).unwrap().0;
-    let tiles = stats.btf.map_or(0, |b| b.canopy_tiles);
-    (off, on, bare, tiles)
+    (on, stats.btf.map_or(0, |b| b.canopy_tiles))
 }
 
 /// Pixels where `a` differs from `bare`.
@@ -141,14 +152,16 @@ fn a_sweep_across_the_switch_leaves_no_gap_and_draws_nothing_twice() {
     // the band crosses the stand, the coverage must stay between the billboards' alone and
     // the canopy's alone (which covers about 0.85 of it from the side): below, a gap; above,
     // both drawn over each other.
-    let mut coverage = Vec::new();
-    let mut lum = Vec::new();
+    // The frames without the canopy and without trees are the same at every `px`: drawn
+    // once (each switch of the trees on or off builds the ground's shadow maps again).
     let (off, _, bare, _) = three(&ctx, &mut renderer, &frame, 64.0);
     let trees = mask(&off, &bare);
     let base = trees.iter().filter(|&&m| m).count() as f32;
     let base_lum = luminance(&off, &trees);
+    let mut coverage = Vec::new();
+    let mut lum = Vec::new();
     for px in [14.0, 18.0, 20.0, 22.0, 24.0, 28.0, 40.0] {
-        let (_, on, _, tiles) = three(&ctx, &mut renderer, &frame, px);
+        let (on, tiles) = with_canopy(&ctx, &mut renderer, &frame, px);
         let m = mask(&on, &bare);
         coverage.push(m.iter().filter(|&&m| m).count() as f32 / base);
         lum.push(luminance(&on, &m) / base_lum);

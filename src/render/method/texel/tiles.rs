@@ -661,6 +661,41 @@ mod tests {
         assert!((top.y - (a.corners[0] + a.lo + a.height)).abs() < 1e-4);
     }
 
+    /// The box culls tiles (frustum, distance): it must hold every point of the tile's
+    /// volume, and no more than the volume's extremes (a box too small drops tiles at the
+    /// frame's edge, one too large draws tiles nobody sees).
+    #[test]
+    fn a_tiles_box_is_the_tightest_one_holding_its_volume() {
+        let tile = Tile {
+            origin: Vec2::new(-64.0, 128.0),
+            size: TILE_SIZE,
+            corners: [3.0, -2.0, 7.5, 1.0],
+            lo: -0.5,
+            height: 21.0,
+            trees: vec![0],
+        };
+        let b = tile.bounds();
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let steps = 8;
+        for i in 0..=steps {
+            for j in 0..=steps {
+                for k in 0..=steps {
+                    let uvw = Vec3::new(i as f32, j as f32, k as f32) / steps as f32;
+                    let p = tile.world(uvw);
+                    assert!(
+                        p.cmpge(b.min - 1e-4).all() && p.cmple(b.max + 1e-4).all(),
+                        "{p} at {uvw} outside {b:?}"
+                    );
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+            }
+        }
+        // The bilinear ground's extremes are at the corners: the sampled extremes are exact.
+        assert!((lo - b.min).abs().max_element() < 1e-4, "{lo} vs {b:?}");
+        assert!((hi - b.max).abs().max_element() < 1e-4, "{hi} vs {b:?}");
+    }
+
     #[test]
     fn a_tile_volume_holds_its_trees_opacity_where_they_stand() {
         let terrain = Terrain::flat(128.0, 3);
