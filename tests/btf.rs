@@ -501,7 +501,7 @@ fn variants_are_baked_as_their_own_image_sets() {
 /// and is darker, never brighter, than without. (With the sun up, this stand's ground is
 /// already darker in btf than in the reference, through its soft alpha-map shadows, and
 /// the sky term takes it further: measured FLIP 0.1417 with it, 0.1374 without. On the
-/// default forest it helps in every view; see docs/RESULTS.md.)
+/// default forest it helps in every view; see docs/results/btf.md, "Ground sky visibility".)
 #[test]
 fn the_ground_sky_brings_the_ground_among_the_trees_closer_to_the_reference() {
     let ctx = gpu();

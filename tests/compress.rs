@@ -249,7 +249,7 @@ fn the_stand_drawn_from_bc7_is_close_to_rgba8_and_the_decoded_fallback_matches()
 /// Prints the bytes of a baked file by part, as stored and as they would be uncompressed,
 /// with the GPU bytes of its BTF images either way, and the same bake written and read
 /// again as this canopy writes it (sections deflated): `CANOPY_MEASURE_FILE=path cargo test
-/// --release --test suite compress::measure -- --ignored --nocapture` (docs/RESULTS.md, "Bake").
+/// --release --test suite compress::measure -- --ignored --nocapture` (docs/results/bake.md).
 #[test]
 #[ignore]
 fn measure() {

@@ -26,7 +26,7 @@ const SECONDS_PER_TEXEL_PASS: f64 = 0.12;
 /// and a share per 256² pixels rendered (resolution x supersample a side). Fitted to
 /// `canopy bake --json` of the lone fir (88,920 triangles, 12 x 12 frames) on lavapipe (2
 /// cores): 0.099, 0.122, 0.124 and 0.174 s a frame at 64², 128², 256² and 512² pixels
-/// rendered (docs/RESULTS.md, "Impostors: frames, frame size, bytes and bake time").
+/// rendered (docs/results/bake.md, "Impostors: frames, frame size, bytes and bake time").
 const SECONDS_PER_IMPOSTOR_FRAME: f64 = 0.01;
 const SECONDS_PER_IMPOSTOR_FRAME_TRIANGLE: f64 = 1.1e-6;
 const SECONDS_PER_IMPOSTOR_FRAME_PIXELS: f64 = 0.016;
@@ -379,7 +379,7 @@ mod tests {
         assert!(p.tree_vcm_bytes >= 1000 * 24_576);
         assert!(e.memory_bytes > VIEWER_BASE_BYTES + e.file_bytes);
         // Measured: 65 s without impostors (lavapipe, 2 cores); the impostors' 2 x 144
-        // frames estimated at 42 s (measured: 29 % of a bake, docs/RESULTS.md).
+        // frames estimated at 42 s (measured: 29 % of a bake, docs/results/bake.md).
         assert!(e.seconds > 60.0 && e.seconds < 130.0, "{}", e.seconds);
         assert!(available_memory().is_some_and(|m| m > 0));
     }
@@ -441,7 +441,7 @@ mod tests {
 
     /// Issue 13 item 6: the viewer opens the example forest at real density when given no
     /// scene, which it may only do while that forest bakes in at most 5 minutes on these
-    /// cores (measured: see the estimate's constants and docs/RESULTS.md).
+    /// cores (measured: see the estimate's constants and docs/results/bake.md).
     #[test]
     fn the_viewers_default_is_a_dense_forest_that_bakes_within_five_minutes() {
         let scene = crate::scene::Scene::viewer_scene();

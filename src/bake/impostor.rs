@@ -6,7 +6,7 @@
 //! dilates and mips each frame on its own ([`super::atlas`]).
 //!
 //! Cost: about 0.1 s a frame on lavapipe (2 cores) for a tree of 89k triangles, nearly
-//! whatever the frame's size (docs/RESULTS.md, "Impostors: frames, frame size, bytes and
+//! whatever the frame's size (docs/results/bake.md, "Impostors: frames, frame size, bytes and
 //! bake time"; the estimate's fit is in [`super::estimate`]).
 
 use glam::Vec3;

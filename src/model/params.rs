@@ -40,7 +40,7 @@ pub struct BakeParams {
     /// or `per-tree`, 8 cube maps for every tree (the thesis' layout, 48 KB a tree).
     pub tree_vcm: TreeVcm,
     /// Frames per side of each species' octahedral impostor (the `impostor` method): 0
-    /// bakes none, else 4..=32 (default 12, see docs/RESULTS.md).
+    /// bakes none, else 4..=32 (default 12, see docs/results/bake.md and impostor.md).
     pub impostor_frames: u32,
     /// Pixels a side of one impostor frame: 16, 32, 64, 128 or 256 (default 64).
     pub impostor_resolution: u32,

@@ -25,7 +25,7 @@ pub const TERRAIN_LODS: usize = 4;
 /// A coarse level is shaded from the terrain's maps (the full grid's colours, normals and
 /// heights, `render::terrain_maps`), so its spacing costs no detail inside the chunk; what
 /// bounds it is the height error (`tolerance_px`) and this, which keeps a coarse level's
-/// outline near (docs/RESULTS.md).
+/// outline near (docs/results/terrain.md).
 pub const SPACING_PX: f32 = 16.0;
 
 /// Sectors of the compass the horizon ring is cut into.

@@ -21,10 +21,10 @@ pub const MAX_SHADOW_MAP: u32 = 8192;
 /// `btf_sample` reads them, keeping half a texel inside the square at the level sampled.
 pub const ATLAS_SIDE: u32 = 4;
 
-/// Directions of the reference's sky visibility (docs/RESULTS.md says how the count was
+/// Directions of the reference's sky visibility (docs/results/geometry.md says how the count was
 /// chosen).
 pub const SKY_DIRECTIONS: u32 = 64;
 
 /// Default side of a tree's own sun map in the reference, in texels: about 1 cm for a 20 m
-/// fir (docs/RESULTS.md has the sizes measured against it).
+/// fir (docs/results/geometry.md has the sizes measured against it).
 pub const SELF_MAP_SIZE: u32 = 2048;

@@ -2,7 +2,7 @@
 //! its twig level is too coarse (cross-faded), and its tree level drawn as the bake's
 //! octahedral impostors where asked (`impostor_px`, when the bake has them): faster, and
 //! more accurate on the overview flight, less on the walk, at sunset and at the default
-//! start camera (docs/RESULTS.md, "hybrid with impostors"; off by default).
+//! start camera (docs/results/hybrid.md, "hybrid with impostors"; off by default).
 //!
 //! A tree's tree level becomes one impostor record (alpha-tested, depth-written, front to
 //! back) with the opacity the level choice gave it; the finer levels' billboards, blended,

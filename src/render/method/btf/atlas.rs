@@ -55,7 +55,7 @@ impl AtlasFormat {
 
 /// When set, a CPU (software) adapter gets the BC7 images as BC7 textures too. Off by
 /// default: lavapipe samples BC7 in software, 15 times slower than RGBA8 (the default
-/// forest's billboards took 28.6 s a frame against 1.8 s, docs/RESULTS.md "Bake",
+/// forest's billboards took 28.6 s a frame against 1.8 s, docs/results/bake.md,
 /// 2026-11-27), so a CPU adapter gets them decoded on load. The tests set it to compare
 /// the GPU's BC7 sampling with the decoded images. Read when a bake is attached.
 pub static BC7_ON_CPU_ADAPTERS: AtomicBool = AtomicBool::new(false);

@@ -31,7 +31,7 @@ use crate::render::consts::ATLAS_SIDE;
 use crate::render::timing::PassSpans;
 use crate::sphere::{Blend, DirectionSet};
 
-/// Yaw bins of the light blends. docs/RESULTS.md (2026-11-27, "Light blends") has the
+/// Yaw bins of the light blends. docs/results/btf.md (2026-11-27, "Light blends") has the
 /// picture's change and the memory at 4, 8 and 16 bins.
 pub const LIGHT_BINS: u32 = 16;
 

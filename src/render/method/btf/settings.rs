@@ -90,7 +90,7 @@ pub struct BtfSettings {
 /// stand.toml's overview 0.1295 / 0.1283 / 0.1329, sunset 0.2791 / 0.2817 / 0.2888.
 pub const LIGHT_GAIN: f32 = 0.5;
 
-/// Default [`BtfSettings::impostor_px`]: none. Measured (docs/RESULTS.md, "hybrid with
+/// Default [`BtfSettings::impostor_px`]: none. Measured (docs/results/hybrid.md, "hybrid with
 /// impostors"), the whole tree level as impostors is faster and gains on the overview
 /// flight, but costs 0.0035 mean FLIP on the walk, 0.0027 at sunset and 0.015 at the
 /// default start camera, so `hybrid` keeps `btf`'s tree billboards unless asked.
