@@ -4,7 +4,7 @@
 // tree level alone (no cross-fade) gets its billboard record here, as `Pusher::push` in
 // src/render/method/btf/prepare/ makes it on the CPU: the sphere-box frustum test, the 3
 // nearest view and light samples with their weights (descent through the subdivided
-// octahedron, `DirectionSet::blend` in src/sphere.rs), image-weight culling, the light gain,
+// octahedron, `DirectionSet::blend` in src/sphere/blend.rs), image-weight culling, the light gain,
 // the VCM factors read when the sun moved. Then a bitonic sort puts them back to front and
 // a gather copies them in that order for one indirect draw. `billboard_record.wgsl` is
 // prepended.
@@ -320,7 +320,7 @@ fn light_gain(ds: DirSet, b: Blend, d_in: vec3<f32>) -> f32 {
     return 1.0;
 }
 
-// `billboard_axes` in src/sphere.rs: the image axes (right, up) seen from `view`.
+// `billboard_axes` in src/sphere/billboard.rs: the image axes (right, up) seen from `view`.
 fn billboard_axes(view: vec3<f32>) -> array<vec3<f32>, 2> {
     let v = normalize_or(view, vec3<f32>(0.0, 0.0, 1.0));
     var hint = vec3<f32>(0.0, 1.0, 0.0);

@@ -106,12 +106,28 @@ fn the_canopy_stands_for_its_trees_from_above_and_from_the_side() {
     let ctx = gpu();
     let (scene, _, mut renderer) = setup(&ctx);
     let mut flips = [0.0f32; 2];
-    for (k, dir) in [Vec3::new(0.2, 1.0, -0.3), Vec3::new(0.3, 0.35, -1.0)]
-        .into_iter()
-        .enumerate()
-    {
-        let frame = frame_from(&scene, dir);
-        let (off, on, bare, tiles) = three(&ctx, &mut renderer, &frame, 64.0);
+    let frames =
+        [Vec3::new(0.2, 1.0, -0.3), Vec3::new(0.3, 0.35, -1.0)].map(|d| frame_from(&scene, d));
+    // Both views with trees, then both without (each switch of the trees on or off builds
+    // the ground's shadow maps again).
+    let with_trees = frames.map(|frame| {
+        let mut f = frame;
+        f.btf.far_canopy = false;
+        let off = renderer
+            .render_image(&ctx, &f, SIZE.0, SIZE.1, 1)
+            .unwrap()
+            .0;
+        let (on, tiles) = with_canopy(&ctx, &mut renderer, &frame, 64.0);
+        (off, on, tiles)
+    });
+    let bares = frames.map(|mut f| {
+        f.trees = false;
+        renderer
+            .render_image(&ctx, &f, SIZE.0, SIZE.1, 1)
+            .unwrap()
+            .0
+    });
+    for (k, ((off, on, tiles), bare)) in with_trees.into_iter().zip(bares).enumerate() {
         assert!(tiles > 0, "no canopy drawn");
         let trees = mask(&off, &bare);
         let canopy = mask(&on, &bare);
@@ -153,18 +169,35 @@ fn a_sweep_across_the_switch_leaves_no_gap_and_draws_nothing_twice() {
     // the canopy's alone (which covers about 0.85 of it from the side): below, a gap; above,
     // both drawn over each other.
     // The frames without the canopy and without trees are the same at every `px`: drawn
-    // once (each switch of the trees on or off builds the ground's shadow maps again).
-    let (off, _, bare, _) = three(&ctx, &mut renderer, &frame, 64.0);
+    // once, the one without trees last (each switch of the trees on or off builds the
+    // ground's shadow maps again).
+    let mut f = frame;
+    f.btf.far_canopy = false;
+    let off = renderer
+        .render_image(&ctx, &f, SIZE.0, SIZE.1, 1)
+        .unwrap()
+        .0;
+    let sweep: Vec<(f32, RgbaImage, u32)> = [14.0, 18.0, 20.0, 22.0, 24.0, 28.0, 40.0]
+        .into_iter()
+        .map(|px| {
+            let (on, tiles) = with_canopy(&ctx, &mut renderer, &frame, px);
+            (px, on, tiles)
+        })
+        .collect();
+    f.trees = false;
+    let bare = renderer
+        .render_image(&ctx, &f, SIZE.0, SIZE.1, 1)
+        .unwrap()
+        .0;
     let trees = mask(&off, &bare);
     let base = trees.iter().filter(|&&m| m).count() as f32;
     let base_lum = luminance(&off, &trees);
     let mut coverage = Vec::new();
     let mut lum = Vec::new();
-    for px in [14.0, 18.0, 20.0, 22.0, 24.0, 28.0, 40.0] {
-        let (on, tiles) = with_canopy(&ctx, &mut renderer, &frame, px);
-        let m = mask(&on, &bare);
+    for (px, on, tiles) in &sweep {
+        let m = mask(on, &bare);
         coverage.push(m.iter().filter(|&&m| m).count() as f32 / base);
-        lum.push(luminance(&on, &m) / base_lum);
+        lum.push(luminance(on, &m) / base_lum);
         eprintln!(
             "canopy below {px} px: {tiles} tiles, coverage {:.3}, luminance {:.3} of the billboards'",
             coverage.last().unwrap(),

@@ -133,11 +133,32 @@ fn the_viewer_recovers_from_a_lost_device() {
     assert!(img.width() > 100 && img.height() > 100);
 }
 
-/// Runs the viewer on `tests/data/small.toml` under a soak script of `seconds`, sampled
-/// every `sample_seconds`, with `actions` one per `every_frames` frames, and checks that it
-/// passed (its own judgement: resident and GPU memory grew by at most 5 % from the first
-/// interval wholly after the warm-up to the last) and reported every sample.
-fn soak(name: &str, seconds: u32, sample_seconds: u32, every_frames: u32, actions: &[&str]) {
+/// How a soak runs: the scene (in `tests/data/`), whether its bake is the run's shared one
+/// (else the viewer bakes it into the cache first), its length and sampling (s), and an
+/// action every `every_frames` frames.
+struct Soak<'a> {
+    name: &'a str,
+    scene: &'a str,
+    shared_bake: bool,
+    seconds: u32,
+    sample_seconds: u32,
+    every_frames: u32,
+    actions: &'a [&'a str],
+}
+
+/// Runs the viewer on `soak.scene` under a soak script and checks that it passed (its own
+/// judgement: resident and GPU memory grew by at most 5 % from the first interval wholly
+/// after the warm-up to the last) and reported every sample.
+fn soak(soak: Soak) {
+    let Soak {
+        name,
+        scene,
+        shared_bake,
+        seconds,
+        sample_seconds,
+        every_frames,
+        actions,
+    } = soak;
     let dir = common::scratch_dir(name);
     let report = dir.join("soak.csv");
     let script = dir.join("soak.toml");
@@ -149,9 +170,16 @@ fn soak(name: &str, seconds: u32, sample_seconds: u32, every_frames: u32, action
         ),
     )
     .unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_canopy"))
+    let mut viewer = Command::new(env!("CARGO_BIN_EXE_canopy"));
+    if shared_bake {
+        viewer.env(
+            "CANOPY_CACHE_DIR",
+            common::cache_holding(&common::load_scene(scene), &dir.join("cache")),
+        );
+    }
+    let o = viewer
         .arg("view")
-        .arg(common::data("small.toml"))
+        .arg(common::data(scene))
         .arg("--script")
         .arg(&script)
         .output()
@@ -170,20 +198,23 @@ fn soak(name: &str, seconds: u32, sample_seconds: u32, every_frames: u32, action
     assert!(out.contains("soak:"), "{out}");
 }
 
-/// The short soak of every run: for 24 s after the bake is on show the viewer flies, sweeps
-/// the sun, switches methods and texel modes, changes a knob, resizes and takes screenshots;
-/// memory sampled every 8 s must not grow (the warm-up: every action run twice).
+/// The short soak of every run: for 24 s the viewer flies over the BTF test stand (its bake
+/// the run's shared one, on show from the first frame), sweeps the sun, switches methods
+/// and texel modes, changes a knob, resizes and takes screenshots; memory sampled every 8 s
+/// must not grow (the warm-up: every action run twice).
 #[test]
 fn a_short_soak_does_not_grow() {
     if !display_or_skip() {
         return;
     }
-    soak(
-        "soak-short",
-        24,
-        8,
-        1,
-        &[
+    soak(Soak {
+        name: "soak-short",
+        scene: "btf.toml",
+        shared_bake: true,
+        seconds: 24,
+        sample_seconds: 8,
+        every_frames: 1,
+        actions: &[
             "fly",
             "sun",
             "method texel",
@@ -194,11 +225,12 @@ fn a_short_soak_does_not_grow() {
             "lod_scale 2",
             "method billboard",
         ],
-    );
+    });
 }
 
-/// The two-minute soak: every action of the viewer's scripts, for 120 s after the bake is
-/// on show, sampled every 40 s (the warm-up: the first 40 s, every action run twice, and
+/// The two-minute soak: every action of the viewer's scripts over the small scene (baked
+/// by the viewer into the cache first), for 120 s after the bake is on show, sampled every
+/// 40 s (the warm-up: the first 40 s, every action run twice, and
 /// lavapipe's pools settled: a resident peak up by at most 1 % on the interval before). A
 /// slow machine runs on until it has those intervals. Not in the default run (it takes
 /// 2-4 minutes); run it with
@@ -209,12 +241,14 @@ fn a_two_minute_soak_does_not_grow() {
     if !display_or_skip() {
         return;
     }
-    soak(
-        "soak",
-        120,
-        40,
-        2,
-        &[
+    soak(Soak {
+        name: "soak",
+        scene: "small.toml",
+        shared_bake: false,
+        seconds: 120,
+        sample_seconds: 40,
+        every_frames: 2,
+        actions: &[
             "fly",
             "sun",
             "method texel",
@@ -229,7 +263,7 @@ fn a_two_minute_soak_does_not_grow() {
             "lod_scale 1",
             "method billboard",
         ],
-    );
+    });
 }
 
 /// Live reload in the running viewer: a sun edit is applied without a bake, a tree-count

@@ -148,6 +148,19 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
         h.saturating_mul(args.supersample),
         None,
     )?;
+    // A named baked file is read and checked before any work: a file that cannot be used
+    // is refused at once.
+    let named_bake = match &args.baked {
+        Some(_) if !method.needs_bake() => {
+            return Err(crate::Error::BadInput(format!(
+                "--baked is for the methods that draw baked images (btf, billboard, texel, hybrid, impostor), not {}",
+                method.name()
+            ))
+            .into());
+        }
+        Some(path) => Some(crate::bake::open_baked(path, &scene)?),
+        None => None,
+    };
     let ctx = GpuContext::headless(adapter(args.cpu))?;
     log_memory(&ctx, "the GPU context is made");
     let mut renderer = Renderer::new(&ctx, &world)?;
@@ -169,16 +182,8 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
             t0.elapsed().as_secs_f64()
         );
     }
-    if let Some(path) = &args.baked {
-        if !method.needs_bake() {
-            return Err(crate::Error::BadInput(format!(
-                "--baked is for the methods that draw baked images (btf, billboard, texel, hybrid, impostor), not {}",
-                method.name()
-            ))
-            .into());
-        }
-        let baked = crate::bake::open_baked(path, &scene)?;
-        renderer.attach_btf(&ctx, &baked, &world)?;
+    if let Some(baked) = &named_bake {
+        renderer.attach_btf(&ctx, baked, &world)?;
     } else if method.needs_bake() {
         let bar = progress::bar(true, 0, progress::BAKE_BAR);
         let baked =

@@ -1,7 +1,7 @@
 //! Measuring a frame the way `canopy render` reports it: one untimed warm-up frame (it builds
 //! the pipelines), then a number of timed frames whose median is the frame time, then, for
 //! the methods with sun-dependent state, the cost of a sun move. [`FrameReport`] is what
-//! `render --json` prints; the bench measures its frames with the same code.
+//! `render --json` prints. The bench draws and times its frames itself (`bench/run.rs`).
 
 use image::RgbaImage;
 use serde::{Serialize, Serializer};

@@ -115,9 +115,30 @@ pub fn baked(scene: &Scene) -> &'static Baked {
         .entry(key)
         .or_insert_with(|| Box::leak(Box::new(OnceLock::new())));
     once.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("canopy-fixtures-{}", std::process::id()));
-        load_or_bake(scene, &canopy::bake::cache::cache_path_in(&dir, scene))
+        load_or_bake(
+            scene,
+            &canopy::bake::cache::cache_path_in(&fixtures_dir(), scene),
+        )
     })
+}
+
+/// The run's directory of shared bakes ([`baked`]).
+fn fixtures_dir() -> PathBuf {
+    std::env::temp_dir().join(format!("canopy-fixtures-{}", std::process::id()))
+}
+
+/// A fresh cache directory `dir` holding `scene`'s shared bake ([`baked`]), copied: a
+/// `canopy` process started with `CANOPY_CACHE_DIR` set to it finds the bake done.
+pub fn cache_holding(scene: &Scene, dir: &Path) -> PathBuf {
+    baked(scene);
+    std::fs::create_dir_all(dir).unwrap();
+    let name = canopy::bake::cache::cache_path_in(dir, scene);
+    std::fs::copy(
+        canopy::bake::cache::cache_path_in(&fixtures_dir(), scene),
+        &name,
+    )
+    .unwrap_or_else(|e| panic!("copying the shared bake to {}: {e}", name.display()));
+    dir.to_path_buf()
 }
 
 /// `scene`'s world and a renderer for it with the scene's shared bake ([`baked`]) attached.
@@ -147,7 +168,8 @@ pub fn rgb(img: &RgbaImage) -> image::RgbImage {
 }
 
 /// Compares `actual` with `tests/snapshots/{name}.png` by mean FLIP. With
-/// UPDATE_SNAPSHOTS=1 (or no reference yet) the reference is (re)written instead.
+/// UPDATE_SNAPSHOTS=1 the reference is (re)written instead; a missing reference fails the
+/// test with that advice.
 pub fn check_snapshot(name: &str, actual: &RgbaImage, max_mean_flip: f32) -> f32 {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/snapshots");
     let reference = dir.join(format!("{name}.png"));
