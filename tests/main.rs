@@ -5,6 +5,7 @@ mod common;
 
 mod btf;
 mod cli;
+mod cli_bake;
 mod compress;
 mod far_canopy;
 mod frame_memory;
