@@ -340,7 +340,9 @@ fn an_unwritable_output_path_is_an_error_and_leaves_nothing() {
 #[test]
 fn bench_writes_its_outputs_and_a_second_run_reuses_the_truth() {
     let out = tmp("bench");
-    let cache = tmp("bench-cache");
+    // The cache holds the stand's bake (the run's shared one): the bench renders, it does
+    // not bake.
+    let cache = common::cache_holding(&common::load_scene("btf.toml"), &tmp("bench-cache"));
     let scene = common::data("btf.toml");
     let run = || {
         let o = canopy()
