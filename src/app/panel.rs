@@ -76,6 +76,53 @@ pub fn controls(
 ) -> PanelActions {
     let mut actions = PanelActions::default();
     ui.heading("canopy");
+    frame_stats(ui, stats);
+    ui.separator();
+
+    ui.label("Method");
+    ui.horizontal(|ui| {
+        for m in Method::ALL {
+            ui.selectable_value(&mut frame.method, *m, m.name());
+        }
+    });
+    if let Some(progress) = &stats.bake_progress {
+        bake_progress(ui, stats, progress);
+    }
+    knob_controls(ui, frame);
+    if frame.method.is_btf()
+        && let Some(s) = &stats.btf
+    {
+        btf_stats(ui, frame, stats, s);
+    }
+    if frame.method == Method::Texel {
+        texel_stats(ui, stats);
+    }
+    if let (Method::Impostor | Method::Hybrid, Some(s)) = (frame.method, &stats.impostor) {
+        impostor_stats(ui, s);
+    }
+    ui.separator();
+
+    actions.sun_held = sun_controls(ui, frame);
+    ui.separator();
+
+    view_controls(ui, frame, stats);
+    ui.separator();
+
+    file_buttons(ui, &mut actions);
+    if let Some((text, is_error)) = message {
+        if *is_error {
+            ui.colored_label(egui::Color32::from_rgb(230, 80, 70), text);
+        } else {
+            ui.label(text);
+        }
+    }
+    ui.separator();
+    ui.small("WASD move · Q/E down/up · Shift faster · wheel: speed · right drag: look");
+    actions
+}
+
+/// The frame's times and counts, the frame-time plot, the adapter and the memory.
+fn frame_stats(ui: &mut egui::Ui, stats: &PanelStats) {
     egui::Grid::new("stats").num_columns(2).show(ui, |ui| {
         ui.label("frame (CPU)");
         ui.label(format!("{:.1} ms", stats.cpu_frame_ms));
@@ -116,131 +163,134 @@ pub fn controls(
     if let Some(m) = &stats.memory {
         memory(ui, m);
     }
-    ui.separator();
+}
 
-    ui.label("Method");
-    ui.horizontal(|ui| {
-        for m in Method::ALL {
-            ui.selectable_value(&mut frame.method, *m, m.name());
-        }
+/// A bake running in the background: what it does, a progress bar, its estimate.
+fn bake_progress(
+    ui: &mut egui::Ui,
+    stats: &PanelStats,
+    (done, total, what, left): &(u64, u64, String, Option<f64>),
+) {
+    let f = if *total > 0 {
+        *done as f32 / *total as f32
+    } else {
+        0.0
+    };
+    ui.label(match left {
+        Some(s) => format!("baking BTF images: {what}, about {s:.0} s left"),
+        None => format!("baking BTF images: {what}"),
     });
-    if let Some((done, total, what, left)) = &stats.bake_progress {
-        let f = if *total > 0 {
-            *done as f32 / *total as f32
-        } else {
-            0.0
-        };
-        ui.label(match left {
-            Some(s) => format!("baking BTF images: {what}, about {s:.0} s left"),
-            None => format!("baking BTF images: {what}"),
-        });
-        ui.add(egui::ProgressBar::new(f).show_percentage());
-        if let Some(e) = &stats.bake_estimate {
-            ui.small(e);
-        }
-        if stats.bake_partial {
-            ui.small(format!(
-                "drawn from the tree levels baked so far (nearer trees as geometry); still coming: {}; texel and impostor draw when it is done",
-                crate::bake::stages::STILL_COMING
-            ));
-        }
-        if stats.paused_for_bake {
-            ui.small("until it is done, the view is drawn less often, to leave the bake the cores");
-        }
+    ui.add(egui::ProgressBar::new(f).show_percentage());
+    if let Some(e) = &stats.bake_estimate {
+        ui.small(e);
     }
-    knob_controls(ui, frame);
-    if frame.method.is_btf()
-        && let Some(s) = &stats.btf
-    {
-        egui::Grid::new("btf stats").num_columns(2).show(ui, |ui| {
-            ui.label("billboards twig/branch/tree");
-            ui.label(format!(
-                "{} / {} / {}",
-                s.billboards.twig, s.billboards.branch, s.billboards.tree
-            ));
-            ui.end_row();
-            ui.label("trees twig/branch/tree");
-            ui.label(format!(
-                "{} / {} / {}",
-                s.trees_per_level.twig, s.trees_per_level.branch, s.trees_per_level.tree
-            ));
-            ui.end_row();
-            ui.label("trees cross-fading");
-            ui.label(s.faded_trees.to_string());
-            ui.end_row();
-            if frame.method == Method::Hybrid {
-                ui.label("trees as geometry");
-                ui.label(s.geometry_trees.to_string());
-                ui.end_row();
-                ui.label("tree level as impostors");
-                ui.label(match (frame.btf.impostor_px > 0.0, &stats.impostor) {
-                    (false, _) => "off".to_string(),
-                    (true, Some(_)) => format_count(u64::from(s.impostors)),
-                    (true, None) => "none baked ([bake] impostor_frames)".to_string(),
-                });
-                ui.end_row();
-            }
-            if s.gpu_billboards > 0 {
-                ui.label("built on the GPU");
-                ui.label(format_count(u64::from(s.gpu_billboards)));
-                ui.end_row();
-            }
-            if s.canopy_tiles > 0 {
-                ui.label("far canopy: tiles, trees");
-                ui.label(format!(
-                    "{}, {}",
-                    s.canopy_tiles,
-                    format_count(u64::from(s.canopy_trees))
-                ));
-                ui.end_row();
-            }
-            ui.label("images per billboard");
-            ui.label(format!("{:.2}", s.images_per_billboard()));
-            ui.end_row();
-            ui.label("fetches saved");
-            ui.label(format_count(s.fetches_saved));
-            ui.end_row();
-            ui.label("BTF memory");
-            ui.label(format!("{:.1} MB", stats.btf_bytes as f64 / 1e6));
-            ui.end_row();
-            ui.label("VCM");
-            ui.label(match stats.vcm_resolution {
-                Some(r) => format!(
-                    "{r}² x 6 faces x 8 corners, {:.1} MB",
-                    stats.vcm_bytes as f64 / 1e6
-                ),
-                None => "not baked".to_string(),
-            });
-            ui.end_row();
-            ui.label("sun update");
-            ui.label(match (stats.sun_update_ms, stats.sun_update_gpu_ms) {
-                (Some(cpu), Some(gpu)) => format!("{cpu:.1} ms CPU + {gpu:.1} ms GPU"),
-                (Some(cpu), None) => format!("{cpu:.1} ms CPU"),
-                (None, _) => "n/a".to_string(),
-            });
-            ui.end_row();
-        });
+    if stats.bake_partial {
+        ui.small(format!(
+            "drawn from the tree levels baked so far (nearer trees as geometry); still coming: {}; texel and impostor draw when it is done",
+            crate::bake::stages::STILL_COMING
+        ));
     }
-    if frame.method == Method::Texel {
-        texel_stats(ui, stats);
+    if stats.paused_for_bake {
+        ui.small("until it is done, the view is drawn less often, to leave the bake the cores");
     }
-    if let (Method::Impostor | Method::Hybrid, Some(s)) = (frame.method, &stats.impostor) {
-        egui::Grid::new("impostor stats")
-            .num_columns(2)
-            .show(ui, |ui| {
-                ui.label("impostors drawn");
-                ui.label(format_count(u64::from(s.impostors)));
-                ui.end_row();
-                ui.label("frames (px a frame)");
-                ui.label(format!("{0} x {0} ({1} px)", s.frames, s.frame_px));
-                ui.end_row();
-                ui.label("impostor atlases");
-                ui.label(format!("{:.1} MB", s.atlas_bytes as f64 / 1e6));
-                ui.end_row();
-            });
-    }
-    ui.separator();
+}
 
+/// What the btf method did last frame, and what its bake holds.
+fn btf_stats(
+    ui: &mut egui::Ui,
+    frame: &FrameDesc,
+    stats: &PanelStats,
+    s: &crate::render::btf::BtfStats,
+) {
+    egui::Grid::new("btf stats").num_columns(2).show(ui, |ui| {
+        ui.label("billboards twig/branch/tree");
+        ui.label(format!(
+            "{} / {} / {}",
+            s.billboards.twig, s.billboards.branch, s.billboards.tree
+        ));
+        ui.end_row();
+        ui.label("trees twig/branch/tree");
+        ui.label(format!(
+            "{} / {} / {}",
+            s.trees_per_level.twig, s.trees_per_level.branch, s.trees_per_level.tree
+        ));
+        ui.end_row();
+        ui.label("trees cross-fading");
+        ui.label(s.faded_trees.to_string());
+        ui.end_row();
+        if frame.method == Method::Hybrid {
+            ui.label("trees as geometry");
+            ui.label(s.geometry_trees.to_string());
+            ui.end_row();
+            ui.label("tree level as impostors");
+            ui.label(match (frame.btf.impostor_px > 0.0, &stats.impostor) {
+                (false, _) => "off".to_string(),
+                (true, Some(_)) => format_count(u64::from(s.impostors)),
+                (true, None) => "none baked ([bake] impostor_frames)".to_string(),
+            });
+            ui.end_row();
+        }
+        if s.gpu_billboards > 0 {
+            ui.label("built on the GPU");
+            ui.label(format_count(u64::from(s.gpu_billboards)));
+            ui.end_row();
+        }
+        if s.canopy_tiles > 0 {
+            ui.label("far canopy: tiles, trees");
+            ui.label(format!(
+                "{}, {}",
+                s.canopy_tiles,
+                format_count(u64::from(s.canopy_trees))
+            ));
+            ui.end_row();
+        }
+        ui.label("images per billboard");
+        ui.label(format!("{:.2}", s.images_per_billboard()));
+        ui.end_row();
+        ui.label("fetches saved");
+        ui.label(format_count(s.fetches_saved));
+        ui.end_row();
+        ui.label("BTF memory");
+        ui.label(format!("{:.1} MB", stats.btf_bytes as f64 / 1e6));
+        ui.end_row();
+        ui.label("VCM");
+        ui.label(match stats.vcm_resolution {
+            Some(r) => format!(
+                "{r}² x 6 faces x 8 corners, {:.1} MB",
+                stats.vcm_bytes as f64 / 1e6
+            ),
+            None => "not baked".to_string(),
+        });
+        ui.end_row();
+        ui.label("sun update");
+        ui.label(match (stats.sun_update_ms, stats.sun_update_gpu_ms) {
+            (Some(cpu), Some(gpu)) => format!("{cpu:.1} ms CPU + {gpu:.1} ms GPU"),
+            (Some(cpu), None) => format!("{cpu:.1} ms CPU"),
+            (None, _) => "n/a".to_string(),
+        });
+        ui.end_row();
+    });
+}
+
+/// What the impostor method drew in the last frame.
+fn impostor_stats(ui: &mut egui::Ui, s: &crate::render::method::impostor::ImpostorStats) {
+    egui::Grid::new("impostor stats")
+        .num_columns(2)
+        .show(ui, |ui| {
+            ui.label("impostors drawn");
+            ui.label(format_count(u64::from(s.impostors)));
+            ui.end_row();
+            ui.label("frames (px a frame)");
+            ui.label(format!("{0} x {0} ({1} px)", s.frames, s.frame_px));
+            ui.end_row();
+            ui.label("impostor atlases");
+            ui.label(format!("{:.1} MB", s.atlas_bytes as f64 / 1e6));
+            ui.end_row();
+        });
+}
+
+/// The sun and sky sliders; true while a slider that moves the sun is dragged.
+fn sun_controls(ui: &mut egui::Ui, frame: &mut FrameDesc) -> bool {
     ui.label("Sun (Ctrl + left drag in the view)");
     // Time of day: the sun rises in the east at 6 h, culminates in the south at noon (60°
     // up) and sets in the west at 18 h. Read back from the azimuth, so it follows drags.
@@ -255,11 +305,14 @@ pub fn controls(
         ui.add(egui::Slider::new(&mut frame.sun.azimuth_deg, 0.0..=360.0).text("azimuth °"));
     let elevation =
         ui.add(egui::Slider::new(&mut frame.sun.elevation_deg, -10.0..=90.0).text("elevation °"));
-    actions.sun_held = day.dragged() || azimuth.dragged() || elevation.dragged();
+    let sun_held = day.dragged() || azimuth.dragged() || elevation.dragged();
     ui.add(egui::Slider::new(&mut frame.sun.intensity, 0.0..=10.0).text("sun intensity"));
     ui.add(egui::Slider::new(&mut frame.sky.intensity, 0.0..=4.0).text("sky intensity"));
-    ui.separator();
+    sun_held
+}
 
+/// Shadows, fog, field of view, render scale and the overdraw view.
+fn view_controls(ui: &mut egui::Ui, frame: &mut FrameDesc, stats: &PanelStats) {
     ui.checkbox(&mut frame.shadows.enabled, "sun shadows");
     ui.add_enabled_ui(frame.shadows.enabled, |ui| {
         egui::ComboBox::from_label("shadow map")
@@ -305,8 +358,10 @@ pub fn controls(
             stats.render_size.0, stats.render_size.1
         ));
     }
-    ui.separator();
+}
 
+/// The screenshot, open, example scene, bench results and gallery buttons.
+fn file_buttons(ui: &mut egui::Ui, actions: &mut PanelActions) {
     ui.horizontal(|ui| {
         if ui.button("Screenshot (F12)").clicked() {
             actions.screenshot = true;
@@ -348,16 +403,6 @@ pub fn controls(
     {
         actions.open_gallery = true;
     }
-    if let Some((text, is_error)) = message {
-        if *is_error {
-            ui.colored_label(egui::Color32::from_rgb(230, 80, 70), text);
-        } else {
-            ui.label(text);
-        }
-    }
-    ui.separator();
-    ui.small("WASD move · Q/E down/up · Shift faster · wheel: speed · right drag: look");
-    actions
 }
 
 /// Sun azimuth and elevation (degrees) at `hour` on the time-of-day slider: east at 6 h,

@@ -196,38 +196,10 @@ pub fn speed_accuracy_chart(path: &Path, points: &[ChartPoint], size: (u32, u32)
             points.len()
         )));
     }
-    let (lo, hi) = usable.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), p| {
-        (lo.min(p.ms), hi.max(p.ms))
-    });
-    // At least a factor 4 wide, so the log axis has ticks to show.
-    let mid = (lo * hi).sqrt();
-    let half_ratio = (hi / lo).sqrt().max(2.0) * 1.25;
-    let (x0, x1) = (mid / half_ratio, mid * half_ratio);
+    let (x0, x1) = time_range(&usable);
     let ymax = usable.iter().map(|p| p.mean_flip).fold(0.0, f64::max);
     let y1 = if ymax > 0.0 { ymax * 1.15 } else { 0.1 };
-    let mut methods: Vec<&str> = Vec::new();
-    for p in &usable {
-        if !methods.contains(&p.method.as_str()) {
-            methods.push(&p.method);
-        }
-    }
-    // The render core's methods keep their colour from chart to chart; others follow.
-    let known = |m: &str| {
-        crate::render::Method::ALL
-            .iter()
-            .position(|x| x.name() == m)
-    };
-    let others: Vec<&str> = methods
-        .iter()
-        .copied()
-        .filter(|m| known(m).is_none())
-        .collect();
-    let colour = |m: &str| {
-        let i = known(m).unwrap_or_else(|| {
-            crate::render::Method::ALL.len() + others.iter().position(|x| *x == m).unwrap_or(0)
-        });
-        PALETTE[i % PALETTE.len()]
-    };
+    let methods = method_colours(&usable);
     let coords: Vec<(f64, f64)> = usable.iter().map(|p| (p.ms, p.mean_flip)).collect();
     let front = pareto_front(&coords);
     let left_out = points.len() - usable.len();
@@ -279,71 +251,16 @@ pub fn speed_accuracy_chart(path: &Path, points: &[ChartPoint], size: (u32, u32)
                 )
             });
         let radius = (f64::from(h.min(w)) / 130.0).max(3.0) as i32;
-        for m in &methods {
-            let c = colour(m);
-            let pts: Vec<(f64, f64)> = usable
-                .iter()
-                .filter(|p| p.method == *m)
-                .map(|p| (p.ms, p.mean_flip))
-                .collect();
-            chart
-                .draw_series(
-                    pts.into_iter()
-                        .map(|xy| Circle::new(xy, radius, ShapeStyle::from(&c).filled())),
-                )
-                .map_err(e)?
-                .label(m.to_string())
-                .legend(move |(x, y)| Circle::new((x + 10, y), radius, c.filled()));
-        }
-        let label_px = text(15.0).1;
-        let label_style = TextStyle::from((FONT, label_px)).color(&BLACK);
-        // The Pareto front's points are labelled, and every point when there are few (a
-        // handful of configurations reads better named than by colour alone).
-        let labelled: Vec<usize> = if usable.len() <= MAX_ALL_LABELLED {
-            (0..usable.len()).collect()
-        } else {
-            front.clone()
+        draw_points(&mut chart, &usable, &methods, radius)?;
+        let labels = PointLabels {
+            usable: &usable,
+            coords: &coords,
+            front: &front,
+            x_range: (x0, x1),
+            radius,
+            label_px: text(15.0).1,
         };
-        // Labels of points in the right fifth go to their left, so they stay inside. (The
-        // embedded font is monospaced: a character is 0.6 em wide.) Labels that would
-        // overlap an earlier one move down a line.
-        let boxes: Vec<LabelBox> = labelled
-            .iter()
-            .map(|&i| {
-                let label = &usable[i].label;
-                let width = (0.6 * label_px * label.chars().count() as f64) as i32;
-                let right = (coords[i].0 / x0).ln() / (x1 / x0).ln() > 0.8;
-                let dx = if right {
-                    -(radius + 3) - width
-                } else {
-                    radius + 3
-                };
-                let (px, py) = chart.backend_coord(&coords[i]);
-                LabelBox {
-                    x: px + dx,
-                    y: py - radius - label_px as i32,
-                    width,
-                    height: label_px as i32,
-                }
-            })
-            .collect();
-        let shifts = stack_labels(&boxes);
-        let anchors: Vec<(i32, i32)> = labelled
-            .iter()
-            .map(|&i| chart.backend_coord(&coords[i]))
-            .collect();
-        chart
-            .draw_series(labelled.iter().zip(&boxes).zip(&shifts).zip(&anchors).map(
-                |(((&i, b), &dy), &(px, py))| {
-                    EmptyElement::at(coords[i])
-                        + Text::new(
-                            usable[i].label.clone(),
-                            (b.x - px, b.y - py + dy),
-                            label_style.clone(),
-                        )
-                },
-            ))
-            .map_err(e)?;
+        draw_point_labels(&mut chart, &labels)?;
         chart
             .configure_series_labels()
             .position(SeriesLabelPosition::UpperRight)
@@ -354,6 +271,159 @@ pub fn speed_accuracy_chart(path: &Path, points: &[ChartPoint], size: (u32, u32)
             .map_err(e)?;
         Ok(())
     })
+}
+
+/// The frame time axis' ends for `usable`'s points: around their times, at least a factor
+/// 4 wide.
+fn time_range(usable: &[&ChartPoint]) -> (f64, f64) {
+    let (lo, hi) = usable.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), p| {
+        (lo.min(p.ms), hi.max(p.ms))
+    });
+    // At least a factor 4 wide, so the log axis has ticks to show.
+    let mid = (lo * hi).sqrt();
+    let half_ratio = (hi / lo).sqrt().max(2.0) * 1.25;
+    (mid / half_ratio, mid * half_ratio)
+}
+
+/// Draws `usable`'s points of `radius` pixels, one series per method of `methods` in its
+/// colour, with its legend entry.
+fn draw_points(
+    chart: &mut ChartContext<'_, BitMapBackend<'_>, SpeedAxes>,
+    usable: &[&ChartPoint],
+    methods: &[(&str, RGBColor)],
+    radius: i32,
+) -> std::result::Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+    for &(m, c) in methods {
+        let pts: Vec<(f64, f64)> = usable
+            .iter()
+            .filter(|p| p.method == m)
+            .map(|p| (p.ms, p.mean_flip))
+            .collect();
+        chart
+            .draw_series(
+                pts.into_iter()
+                    .map(|xy| Circle::new(xy, radius, ShapeStyle::from(&c).filled())),
+            )
+            .map_err(e)?
+            .label(m.to_string())
+            .legend(move |(x, y)| Circle::new((x + 10, y), radius, c.filled()));
+    }
+    Ok(())
+}
+
+/// Each method of `usable` in order of first appearance, with its colour.
+fn method_colours<'p>(usable: &[&'p ChartPoint]) -> Vec<(&'p str, RGBColor)> {
+    let mut methods: Vec<&str> = Vec::new();
+    for p in usable {
+        if !methods.contains(&p.method.as_str()) {
+            methods.push(&p.method);
+        }
+    }
+    // The render core's methods keep their colour from chart to chart; others follow.
+    let known = |m: &str| {
+        crate::render::Method::ALL
+            .iter()
+            .position(|x| x.name() == m)
+    };
+    let others: Vec<&str> = methods
+        .iter()
+        .copied()
+        .filter(|m| known(m).is_none())
+        .collect();
+    let colour = |m: &str| {
+        let i = known(m).unwrap_or_else(|| {
+            crate::render::Method::ALL.len() + others.iter().position(|x| *x == m).unwrap_or(0)
+        });
+        PALETTE[i % PALETTE.len()]
+    };
+    methods.iter().map(|&m| (m, colour(m))).collect()
+}
+
+/// The speed/accuracy chart's axes: frame time on a log axis with its ticks, mean FLIP.
+type SpeedAxes = plotters::coord::cartesian::Cartesian2d<
+    plotters::coord::combinators::WithKeyPoints<plotters::coord::combinators::LogCoord<f64>>,
+    plotters::coord::types::RangedCoordf64,
+>;
+
+/// What the speed/accuracy chart's point labels are placed by.
+struct PointLabels<'a> {
+    usable: &'a [&'a ChartPoint],
+    /// Each usable point's (frame time, mean FLIP).
+    coords: &'a [(f64, f64)],
+    /// The Pareto front's points (indices into `usable`).
+    front: &'a [usize],
+    /// The frame time axis' ends.
+    x_range: (f64, f64),
+    /// A point's radius (pixels).
+    radius: i32,
+    /// A label's text size (pixels).
+    label_px: f64,
+}
+
+/// Draws the labels of the speed/accuracy chart's points.
+fn draw_point_labels(
+    chart: &mut ChartContext<'_, BitMapBackend<'_>, SpeedAxes>,
+    labels: &PointLabels<'_>,
+) -> std::result::Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+    let PointLabels {
+        usable,
+        coords,
+        front,
+        x_range: (x0, x1),
+        radius,
+        label_px,
+    } = *labels;
+    let label_style = TextStyle::from((FONT, label_px)).color(&BLACK);
+    // The Pareto front's points are labelled, and every point when there are few (a
+    // handful of configurations reads better named than by colour alone).
+    let labelled: Vec<usize> = if usable.len() <= MAX_ALL_LABELLED {
+        (0..usable.len()).collect()
+    } else {
+        front.to_vec()
+    };
+    // Labels of points in the right fifth go to their left, so they stay inside. (The
+    // embedded font is monospaced: a character is 0.6 em wide.) Labels that would
+    // overlap an earlier one move down a line.
+    let boxes: Vec<LabelBox> = labelled
+        .iter()
+        .map(|&i| {
+            let label = &usable[i].label;
+            let width = (0.6 * label_px * label.chars().count() as f64) as i32;
+            let right = (coords[i].0 / x0).ln() / (x1 / x0).ln() > 0.8;
+            let dx = if right {
+                -(radius + 3) - width
+            } else {
+                radius + 3
+            };
+            let (px, py) = chart.backend_coord(&coords[i]);
+            LabelBox {
+                x: px + dx,
+                y: py - radius - label_px as i32,
+                width,
+                height: label_px as i32,
+            }
+        })
+        .collect();
+    let shifts = stack_labels(&boxes);
+    let anchors: Vec<(i32, i32)> = labelled
+        .iter()
+        .map(|&i| chart.backend_coord(&coords[i]))
+        .collect();
+    chart
+        .draw_series(labelled.iter().zip(&boxes).zip(&shifts).zip(&anchors).map(
+            |(((&i, b), &dy), &(px, py))| {
+                EmptyElement::at(coords[i])
+                    + Text::new(
+                        usable[i].label.clone(),
+                        (b.x - px, b.y - py + dy),
+                        label_style.clone(),
+                    )
+            },
+        ))
+        .map_err(e)?;
+    Ok(())
 }
 
 /// What one panel of the flight chart shows of a series.

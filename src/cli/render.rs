@@ -92,7 +92,80 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     args.bc7.apply();
     let scene = load_scene(args.scene.as_deref())?;
     let world = scene.build_world().map_err(crate::Error::from)?;
-    let mut frame = FrameDesc::from_scene(&scene);
+    let frame = frame_of(&args, &scene, &world)?;
+    let (w, h) = args.size;
+    crate::render::target::check_size(
+        w.saturating_mul(args.supersample),
+        h.saturating_mul(args.supersample),
+        None,
+    )?;
+    let named = named_bake(&args, &scene)?;
+    let ctx = GpuContext::headless(adapter(args.cpu))?;
+    log_memory(&ctx, "the GPU context is made");
+    let mut renderer = Renderer::new(&ctx, &world)?;
+    log_memory(&ctx, "the renderer is made");
+    if frame.ground_sky && canopy_shades_ground(method) {
+        let t0 = Instant::now();
+        renderer.prepare_sky(&ctx, &world)?;
+        log::info!(
+            "the ground's sky visibility in {:.1} s",
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    if let Some(r) = frame.reference {
+        let t0 = Instant::now();
+        renderer.prepare_reference(&ctx, &world, r.sky_directions, true)?;
+        log::info!(
+            "sky visibility from {} directions in {:.1} s",
+            r.sky_directions,
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    attach_bake(&args, named, &ctx, &scene, &world, &mut renderer)?;
+
+    let opts = MeasureOptions {
+        frames: args.frames,
+        supersample: args.supersample,
+    };
+    let bar = progress::bar(
+        true,
+        u64::from(args.frames) + 1,
+        "{msg} [{bar:30}] {pos}/{len} frames ({elapsed})",
+    );
+    bar.set_message(format!("rendering {w}x{h} with {}", method.name()));
+    let m =
+        measure::measure_frame_with(&mut renderer, &ctx, &frame, w, h, &opts, &mut || bar.inc(1));
+    bar.finish_and_clear();
+    let m = m?;
+    log_memory(&ctx, "the frames are drawn");
+    // Free heap pages given back before the memory is reported, as the viewer does every
+    // few seconds (`app::heap`), so that the report says what viewing holds.
+    crate::app::heap::trim();
+    log_memory(&ctx, "the heap's free pages are given back");
+    crate::imageio::save_png(&args.out, &m.image)?;
+    if args.json {
+        let mut report = FrameReport::new(&m, &frame, &opts, &renderer, &ctx);
+        report.out = Some(args.out.display().to_string());
+        report.memory = Some(renderer.memory_report(&ctx));
+        println!(
+            "{}",
+            serde_json::to_string(&report).context("encoding JSON")?
+        );
+    } else {
+        print_summary(&args, &m, &renderer, &ctx);
+    }
+    Ok(())
+}
+
+/// The frame `args` ask for in `scene`, refusing flags the method does not take; warns of
+/// knobs the method does not read and of a camera under the terrain of `world`.
+fn frame_of(
+    args: &RenderArgs,
+    scene: &crate::scene::Scene,
+    world: &crate::model::World,
+) -> anyhow::Result<FrameDesc> {
+    let method = args.method;
+    let mut frame = FrameDesc::from_scene(scene);
     frame.method = method;
     frame.shadows.map_size = args.shadow_map;
     args.knobs.apply_to(&mut frame);
@@ -142,112 +215,83 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
         frame.sun.azimuth_deg = az;
         frame.sun.elevation_deg = el;
     }
-    let (w, h) = args.size;
-    crate::render::target::check_size(
-        w.saturating_mul(args.supersample),
-        h.saturating_mul(args.supersample),
-        None,
-    )?;
-    // A named baked file is read and checked before any work: a file that cannot be used
-    // is refused at once.
-    let named_bake = match &args.baked {
-        Some(_) if !method.needs_bake() => {
-            return Err(crate::Error::BadInput(format!(
-                "--baked is for the methods that draw baked images (btf, billboard, texel, hybrid, impostor), not {}",
-                method.name()
-            ))
-            .into());
-        }
-        Some(path) => Some(crate::bake::open_baked(path, &scene)?),
-        None => None,
+    Ok(frame)
+}
+
+/// The `--baked` file, read and checked before any work (a file that cannot be used is
+/// refused at once); None without the flag.
+fn named_bake(
+    args: &RenderArgs,
+    scene: &crate::scene::Scene,
+) -> anyhow::Result<Option<crate::format::Baked>> {
+    let Some(path) = &args.baked else {
+        return Ok(None);
     };
-    let ctx = GpuContext::headless(adapter(args.cpu))?;
-    log_memory(&ctx, "the GPU context is made");
-    let mut renderer = Renderer::new(&ctx, &world)?;
-    log_memory(&ctx, "the renderer is made");
-    if frame.ground_sky && canopy_shades_ground(method) {
-        let t0 = Instant::now();
-        renderer.prepare_sky(&ctx, &world)?;
-        log::info!(
-            "the ground's sky visibility in {:.1} s",
-            t0.elapsed().as_secs_f64()
-        );
+    if !args.method.needs_bake() {
+        return Err(crate::Error::BadInput(format!(
+            "--baked is for the methods that draw baked images (btf, billboard, texel, hybrid, impostor), not {}",
+            args.method.name()
+        ))
+        .into());
     }
-    if let Some(r) = frame.reference {
-        let t0 = Instant::now();
-        renderer.prepare_reference(&ctx, &world, r.sky_directions, true)?;
-        log::info!(
-            "sky visibility from {} directions in {:.1} s",
-            r.sky_directions,
-            t0.elapsed().as_secs_f64()
-        );
-    }
-    if let Some(baked) = &named_bake {
-        renderer.attach_btf(&ctx, baked, &world)?;
-    } else if method.needs_bake() {
+    Ok(Some(crate::bake::open_baked(path, scene)?))
+}
+
+/// Gives `renderer` the bake its method draws: the `--baked` file (`named`), or the
+/// cache's (baked first where it has none).
+fn attach_bake(
+    args: &RenderArgs,
+    named: Option<crate::format::Baked>,
+    ctx: &GpuContext,
+    scene: &crate::scene::Scene,
+    world: &crate::model::World,
+    renderer: &mut Renderer,
+) -> anyhow::Result<()> {
+    if let Some(baked) = &named {
+        renderer.attach_btf(ctx, baked, world)?;
+    } else if args.method.needs_bake() {
         let bar = progress::bar(true, 0, progress::BAKE_BAR);
         let baked =
-            crate::bake::load_or_bake(&ctx, &scene, &world, &mut |p| progress::show_bake(&bar, p));
+            crate::bake::load_or_bake(ctx, scene, world, &mut |p| progress::show_bake(&bar, p));
         bar.finish_and_clear();
-        renderer.attach_btf(&ctx, &baked?.0, &world)?;
-        log_memory(&ctx, "the bake is attached");
-    }
-
-    let opts = MeasureOptions {
-        frames: args.frames,
-        supersample: args.supersample,
-    };
-    let bar = progress::bar(
-        true,
-        u64::from(args.frames) + 1,
-        "{msg} [{bar:30}] {pos}/{len} frames ({elapsed})",
-    );
-    bar.set_message(format!("rendering {w}x{h} with {}", method.name()));
-    let m =
-        measure::measure_frame_with(&mut renderer, &ctx, &frame, w, h, &opts, &mut || bar.inc(1));
-    bar.finish_and_clear();
-    let m = m?;
-    log_memory(&ctx, "the frames are drawn");
-    // Free heap pages given back before the memory is reported, as the viewer does every
-    // few seconds (`app::heap`), so that the report says what viewing holds.
-    crate::app::heap::trim();
-    log_memory(&ctx, "the heap's free pages are given back");
-    crate::imageio::save_png(&args.out, &m.image)?;
-    if args.json {
-        let mut report = FrameReport::new(&m, &frame, &opts, &renderer, &ctx);
-        report.out = Some(args.out.display().to_string());
-        report.memory = Some(renderer.memory_report(&ctx));
-        println!(
-            "{}",
-            serde_json::to_string(&report).context("encoding JSON")?
-        );
-    } else {
-        println!(
-            "wrote {} ({w}x{h}, {}): {:.2} ms/frame ({}, median of {}), CPU prepare {:.2} ms, {} trees, {} triangles, on {}",
-            args.out.display(),
-            method.name(),
-            m.frame_ms,
-            m.source.name(),
-            m.frames_timed,
-            m.prepare_ms,
-            m.stats.trees_drawn,
-            m.stats.triangles,
-            ctx.adapter_name()
-        );
-        if !m.passes.is_empty() {
-            let passes: Vec<String> = m
-                .passes
-                .iter()
-                .map(|p| format!("{} {:.2}", p.name, p.ms))
-                .collect();
-            println!("passes (GPU ms): {}", passes.join(", "));
-        }
-        println!("memory:");
-        for line in renderer.memory_report(&ctx).lines(1_000_000) {
-            println!("  {line}");
-        }
+        renderer.attach_btf(ctx, &baked?.0, world)?;
+        log_memory(ctx, "the bake is attached");
     }
     Ok(())
+}
+
+/// Prints what the frame `m` took and drew, its passes' times and the memory, in words.
+fn print_summary(
+    args: &RenderArgs,
+    m: &measure::FrameMeasurement,
+    renderer: &Renderer,
+    ctx: &GpuContext,
+) {
+    let (w, h) = args.size;
+    println!(
+        "wrote {} ({w}x{h}, {}): {:.2} ms/frame ({}, median of {}), CPU prepare {:.2} ms, {} trees, {} triangles, on {}",
+        args.out.display(),
+        args.method.name(),
+        m.frame_ms,
+        m.source.name(),
+        m.frames_timed,
+        m.prepare_ms,
+        m.stats.trees_drawn,
+        m.stats.triangles,
+        ctx.adapter_name()
+    );
+    if !m.passes.is_empty() {
+        let passes: Vec<String> = m
+            .passes
+            .iter()
+            .map(|p| format!("{} {:.2}", p.name, p.ms))
+            .collect();
+        println!("passes (GPU ms): {}", passes.join(", "));
+    }
+    println!("memory:");
+    for line in renderer.memory_report(ctx).lines(1_000_000) {
+        println!("  {line}");
+    }
 }
 
 /// Says in the log (debug) how much memory is resident, and how much the GPU has

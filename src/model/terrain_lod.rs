@@ -151,30 +151,8 @@ impl Terrain {
             vertices: base.vertices,
             indices: Vec::new(),
         };
-        // The horizon ring's triangles by the sector of the compass their centre lies in,
-        // so that the sectors behind the camera are not drawn.
         let horizon_src = base.indices.get(grid_indices..).unwrap_or(&[]);
-        let mut by_sector: Vec<Vec<u32>> = vec![Vec::new(); HORIZON_SECTORS];
-        for t in horizon_src.chunks_exact(3) {
-            let c = t
-                .iter()
-                .map(|&v| Vec3::from(mesh.vertices[v as usize].position))
-                .sum::<Vec3>()
-                / 3.0;
-            let turn = (c.z.atan2(c.x) / std::f32::consts::TAU).rem_euclid(1.0);
-            let k = ((turn * HORIZON_SECTORS as f32) as usize).min(HORIZON_SECTORS - 1);
-            by_sector[k].extend_from_slice(t);
-        }
-        let mut horizon = Vec::new();
-        for tris in by_sector.iter().filter(|t| !t.is_empty()) {
-            let start = mesh.indices.len() as u32;
-            let bounds = Aabb::from_points(
-                tris.iter()
-                    .map(|&v| Vec3::from(mesh.vertices[v as usize].position)),
-            );
-            mesh.indices.extend_from_slice(tris);
-            horizon.push((bounds, start..mesh.indices.len() as u32));
-        }
+        let horizon = horizon_sectors(&mut mesh, horizon_src);
         let horizon_end = mesh.indices.len() as u32;
         let ringed = !horizon.is_empty();
 
@@ -189,71 +167,14 @@ impl Terrain {
 
         // The largest error of each level, and the skirts' depth: the largest error of any
         // chunk at any level, plus a metre.
-        let mut errors = Vec::with_capacity(n * n);
-        for &(j0, j1) in &spans {
-            for &(i0, i1) in &spans {
-                let mut e = [0.0f32; TERRAIN_LODS];
-                for (l, el) in e.iter_mut().enumerate().skip(1) {
-                    *el = level_error(&h, (i0, i1), (j0, j1), 1 << l);
-                }
-                errors.push(e);
-            }
-        }
+        let errors = chunk_errors(&h, &spans);
         let skirt_depth = errors
             .iter()
             .flat_map(|e| e.iter().copied())
             .fold(0.0f32, f32::max)
             + 1.0;
 
-        // A lowered copy of every grid point on a chunk line (made on first use).
-        let mut skirt_of: HashMap<u32, u32> = HashMap::new();
-        let mut skirt_vertex = |mesh: &mut Mesh, v: u32| -> u32 {
-            *skirt_of.entry(v).or_insert_with(|| {
-                let mut copy = mesh.vertices[v as usize];
-                copy.position[1] -= skirt_depth;
-                mesh.vertices.push(copy);
-                (mesh.vertices.len() - 1) as u32
-            })
-        };
-        // Level l's vertex at grid point (i, j): the grid's own at level 0; coarser, a copy
-        // at the same place whose normal and colour are the grid's filtered over the
-        // level's spacing (tent weights), as a texture's coarser mip would hold them, so
-        // that a coarse chunk shows the average of the detail it skips.
-        let mut level_of: HashMap<(usize, usize, usize), u32> = HashMap::new();
-        let mut at = |mesh: &mut Mesh, l: usize, i: usize, j: usize| -> u32 {
-            let own = (j * res + i) as u32;
-            if l == 0 {
-                return own;
-            }
-            *level_of.entry((l, i, j)).or_insert_with(|| {
-                let step = 1i64 << l;
-                let mut normal = Vec3::ZERO;
-                let mut color = Vec3::ZERO;
-                let mut weight = 0.0f32;
-                for dj in 1 - step..step {
-                    for di in 1 - step..step {
-                        let (x, z) = (i as i64 + di, j as i64 + dj);
-                        if x < 0 || z < 0 || x >= res as i64 || z >= res as i64 {
-                            continue;
-                        }
-                        let w = (1.0 - di.abs() as f32 / step as f32)
-                            * (1.0 - dj.abs() as f32 / step as f32);
-                        let v = &mesh.vertices[z as usize * res + x as usize];
-                        normal += w * Vec3::from(v.normal);
-                        color += w * Vec3::from(v.color);
-                        weight += w;
-                    }
-                }
-                let mut v = mesh.vertices[own as usize];
-                v.normal = normal.try_normalize().unwrap_or(Vec3::Y).to_array();
-                v.color = (color / weight.max(1e-6)).to_array();
-                mesh.vertices.push(v);
-                (mesh.vertices.len() - 1) as u32
-            })
-        };
-
-        // The largest error of the coarse quads around each coarse vertex.
-        let mut quad_lift: HashMap<u32, f32> = HashMap::new();
+        let mut levels = LevelMesh::new(mesh, res, skirt_depth);
         // Level 0's surfaces first (with the horizon, the terrain whole: `full`), then its
         // skirts, then each coarser level with its skirts chunk by chunk.
         let mut ranges: Vec<[Range<u32>; TERRAIN_LODS]> = vec![Default::default(); n * n];
@@ -265,62 +186,19 @@ impl Terrain {
             let step = 1usize << l;
             for (cj, &(j0, j1)) in spans.iter().enumerate() {
                 for (ci, &(i0, i1)) in spans.iter().enumerate() {
-                    let start = mesh.indices.len() as u32;
+                    let start = levels.mesh.indices.len() as u32;
                     let xs = samples(i0, i1, step);
                     let zs = samples(j0, j1, step);
                     if surface {
-                        for w in zs.windows(2) {
-                            for u in xs.windows(2) {
-                                let v00 = at(&mut mesh, l, u[0], w[0]);
-                                let v10 = at(&mut mesh, l, u[1], w[0]);
-                                let v01 = at(&mut mesh, l, u[0], w[1]);
-                                let v11 = at(&mut mesh, l, u[1], w[1]);
-                                mesh.indices
-                                    .extend_from_slice(&[v00, v01, v10, v10, v01, v11]);
-                                if l > 0 {
-                                    let e = quad_error(&h, (u[0], u[1]), (w[0], w[1]));
-                                    for v in [v00, v10, v01, v11] {
-                                        let slot = quad_lift.entry(v).or_insert(0.0);
-                                        *slot = slot.max(e);
-                                    }
-                                }
-                            }
-                        }
+                        levels.surface(&h, l, &xs, &zs);
                     }
                     if skirts {
-                        // Along the four edges, both windings.
                         // The square's own border needs one only where the horizon ring
                         // meets it (at full detail); without a ring it would show.
                         let inner = |k: usize| ringed || (k != 0 && k != cells);
-                        let edges: [(bool, Vec<u32>); 4] = [
-                            (
-                                inner(j0),
-                                xs.iter().map(|&i| at(&mut mesh, l, i, j0)).collect(),
-                            ),
-                            (
-                                inner(j1),
-                                xs.iter().map(|&i| at(&mut mesh, l, i, j1)).collect(),
-                            ),
-                            (
-                                inner(i0),
-                                zs.iter().map(|&j| at(&mut mesh, l, i0, j)).collect(),
-                            ),
-                            (
-                                inner(i1),
-                                zs.iter().map(|&j| at(&mut mesh, l, i1, j)).collect(),
-                            ),
-                        ];
-                        for (_, edge) in edges.iter().filter(|(needed, _)| *needed) {
-                            for pair in edge.windows(2) {
-                                let (a, b) = (pair[0], pair[1]);
-                                let a2 = skirt_vertex(&mut mesh, a);
-                                let b2 = skirt_vertex(&mut mesh, b);
-                                mesh.indices
-                                    .extend_from_slice(&[a, b, a2, b, b2, a2, a, a2, b, b, a2, b2]);
-                            }
-                        }
+                        levels.skirts(l, (&xs, &zs), (i0, i1), (j0, j1), inner);
                     }
-                    let range = start..mesh.indices.len() as u32;
+                    let range = start..levels.mesh.indices.len() as u32;
                     match (l, surface) {
                         (0, true) => {
                             level0_end = range.end;
@@ -333,42 +211,15 @@ impl Terrain {
             }
         }
         let full = 0..level0_end;
-
-        // What `shaders/geometry.wgsl` reads in a terrain vertex's uv: in x, 0 at level 0
-        // and -(1 + e) at a coarser level, e being the height error of the coarse quads
-        // around the vertex, by which its point is raised for the terrain's own shadows (a
-        // surface that cuts below the hills would be shadowed by them in the terrain's
-        // depth map), the sign saying that the vertex is a coarse level's (shaded from the
-        // terrain's maps, which keep the detail its grid points skip);
-        // in y, how far a skirt hangs below the edge it hangs from, which it is shaded as.
-        for &v in level_of.values() {
-            let e = quad_lift.get(&v).copied().unwrap_or(0.0);
-            mesh.vertices[v as usize].uv[0] = -(1.0 + e);
-        }
-        for (&top, &skirt) in &skirt_of {
-            let edge = mesh.vertices[top as usize].uv;
-            mesh.vertices[skirt as usize].uv = [edge[0], skirt_depth];
-        }
+        let mesh = levels.finish();
 
         let half = 0.5 * self.size;
         let step = self.cell_size();
         let mut chunks = Vec::with_capacity(n * n);
         for (cj, &(j0, j1)) in spans.iter().enumerate() {
             for (ci, &(i0, i1)) in spans.iter().enumerate() {
-                let mut lo = f32::INFINITY;
-                let mut hi = f32::NEG_INFINITY;
-                for j in j0..=j1 {
-                    for i in i0..=i1 {
-                        lo = lo.min(h(i, j));
-                        hi = hi.max(h(i, j));
-                    }
-                }
-                let bounds = Aabb::new(
-                    Vec3::new(-half + i0 as f32 * step, lo, -half + j0 as f32 * step),
-                    Vec3::new(-half + i1 as f32 * step, hi, -half + j1 as f32 * step),
-                );
                 chunks.push(TerrainChunk {
-                    bounds,
+                    bounds: chunk_bounds(&h, (half, step), (i0, i1), (j0, j1)),
                     ranges: ranges[cj * n + ci].clone(),
                     skirts0: skirts0[cj * n + ci].clone(),
                     error: errors[cj * n + ci],
@@ -384,6 +235,222 @@ impl Terrain {
                 cell: step,
             },
         }
+    }
+}
+
+/// The box of the chunk `is` x `js` (skirts excluded), the grid's corner at `-half` and
+/// its points `step` apart.
+fn chunk_bounds(
+    h: &impl Fn(usize, usize) -> f32,
+    (half, step): (f32, f32),
+    (i0, i1): (usize, usize),
+    (j0, j1): (usize, usize),
+) -> Aabb {
+    let mut lo = f32::INFINITY;
+    let mut hi = f32::NEG_INFINITY;
+    for j in j0..=j1 {
+        for i in i0..=i1 {
+            lo = lo.min(h(i, j));
+            hi = hi.max(h(i, j));
+        }
+    }
+    Aabb::new(
+        Vec3::new(-half + i0 as f32 * step, lo, -half + j0 as f32 * step),
+        Vec3::new(-half + i1 as f32 * step, hi, -half + j1 as f32 * step),
+    )
+}
+
+/// Appends the horizon ring's triangles `horizon_src` to `mesh`'s indices by the sector of
+/// the compass their centre lies in, so that the sectors behind the camera are not drawn;
+/// each sector's bounds and index range.
+fn horizon_sectors(mesh: &mut Mesh, horizon_src: &[u32]) -> Vec<(Aabb, Range<u32>)> {
+    let mut by_sector: Vec<Vec<u32>> = vec![Vec::new(); HORIZON_SECTORS];
+    for t in horizon_src.chunks_exact(3) {
+        let c = t
+            .iter()
+            .map(|&v| Vec3::from(mesh.vertices[v as usize].position))
+            .sum::<Vec3>()
+            / 3.0;
+        let turn = (c.z.atan2(c.x) / std::f32::consts::TAU).rem_euclid(1.0);
+        let k = ((turn * HORIZON_SECTORS as f32) as usize).min(HORIZON_SECTORS - 1);
+        by_sector[k].extend_from_slice(t);
+    }
+    let mut horizon = Vec::new();
+    for tris in by_sector.iter().filter(|t| !t.is_empty()) {
+        let start = mesh.indices.len() as u32;
+        let bounds = Aabb::from_points(
+            tris.iter()
+                .map(|&v| Vec3::from(mesh.vertices[v as usize].position)),
+        );
+        mesh.indices.extend_from_slice(tris);
+        horizon.push((bounds, start..mesh.indices.len() as u32));
+    }
+    horizon
+}
+
+/// The largest error of each level of each chunk (rows of `spans` by z, then by x).
+fn chunk_errors(
+    h: &impl Fn(usize, usize) -> f32,
+    spans: &[(usize, usize)],
+) -> Vec<[f32; TERRAIN_LODS]> {
+    let mut errors = Vec::with_capacity(spans.len() * spans.len());
+    for &(j0, j1) in spans {
+        for &(i0, i1) in spans {
+            let mut e = [0.0f32; TERRAIN_LODS];
+            for (l, el) in e.iter_mut().enumerate().skip(1) {
+                *el = level_error(h, (i0, i1), (j0, j1), 1 << l);
+            }
+            errors.push(e);
+        }
+    }
+    errors
+}
+
+/// The terrain mesh while its levels' surfaces and skirts are appended, with the vertices
+/// made for them.
+struct LevelMesh {
+    mesh: Mesh,
+    res: usize,
+    skirt_depth: f32,
+    /// A lowered copy of every grid point on a chunk line (made on first use).
+    skirt_of: HashMap<u32, u32>,
+    /// Each coarser level's copy of a grid point, by level and grid point.
+    level_of: HashMap<(usize, usize, usize), u32>,
+    /// The largest error of the coarse quads around each coarse vertex.
+    quad_lift: HashMap<u32, f32>,
+}
+
+impl LevelMesh {
+    fn new(mesh: Mesh, res: usize, skirt_depth: f32) -> Self {
+        LevelMesh {
+            mesh,
+            res,
+            skirt_depth,
+            skirt_of: HashMap::new(),
+            level_of: HashMap::new(),
+            quad_lift: HashMap::new(),
+        }
+    }
+
+    /// The lowered copy of vertex `v`, made on first use.
+    fn skirt_vertex(&mut self, v: u32) -> u32 {
+        let mesh = &mut self.mesh;
+        let skirt_depth = self.skirt_depth;
+        *self.skirt_of.entry(v).or_insert_with(|| {
+            let mut copy = mesh.vertices[v as usize];
+            copy.position[1] -= skirt_depth;
+            mesh.vertices.push(copy);
+            (mesh.vertices.len() - 1) as u32
+        })
+    }
+
+    /// Level l's vertex at grid point (i, j): the grid's own at level 0; coarser, a copy
+    /// at the same place whose normal and colour are the grid's filtered over the
+    /// level's spacing (tent weights), as a texture's coarser mip would hold them, so
+    /// that a coarse chunk shows the average of the detail it skips.
+    fn at(&mut self, l: usize, i: usize, j: usize) -> u32 {
+        let res = self.res;
+        let mesh = &mut self.mesh;
+        let own = (j * res + i) as u32;
+        if l == 0 {
+            return own;
+        }
+        *self.level_of.entry((l, i, j)).or_insert_with(|| {
+            let step = 1i64 << l;
+            let mut normal = Vec3::ZERO;
+            let mut color = Vec3::ZERO;
+            let mut weight = 0.0f32;
+            for dj in 1 - step..step {
+                for di in 1 - step..step {
+                    let (x, z) = (i as i64 + di, j as i64 + dj);
+                    if x < 0 || z < 0 || x >= res as i64 || z >= res as i64 {
+                        continue;
+                    }
+                    let w = (1.0 - di.abs() as f32 / step as f32)
+                        * (1.0 - dj.abs() as f32 / step as f32);
+                    let v = &mesh.vertices[z as usize * res + x as usize];
+                    normal += w * Vec3::from(v.normal);
+                    color += w * Vec3::from(v.color);
+                    weight += w;
+                }
+            }
+            let mut v = mesh.vertices[own as usize];
+            v.normal = normal.try_normalize().unwrap_or(Vec3::Y).to_array();
+            v.color = (color / weight.max(1e-6)).to_array();
+            mesh.vertices.push(v);
+            (mesh.vertices.len() - 1) as u32
+        })
+    }
+
+    /// Level `l`'s surface over the grid points `xs` x `zs`.
+    fn surface(&mut self, h: &impl Fn(usize, usize) -> f32, l: usize, xs: &[usize], zs: &[usize]) {
+        for w in zs.windows(2) {
+            for u in xs.windows(2) {
+                let v00 = self.at(l, u[0], w[0]);
+                let v10 = self.at(l, u[1], w[0]);
+                let v01 = self.at(l, u[0], w[1]);
+                let v11 = self.at(l, u[1], w[1]);
+                self.mesh
+                    .indices
+                    .extend_from_slice(&[v00, v01, v10, v10, v01, v11]);
+                if l > 0 {
+                    let e = quad_error(h, (u[0], u[1]), (w[0], w[1]));
+                    for v in [v00, v10, v01, v11] {
+                        let slot = self.quad_lift.entry(v).or_insert(0.0);
+                        *slot = slot.max(e);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Level `l`'s skirts along the four edges of the chunk `is` x `js` (its grid points
+    /// `xs` and `zs` at that level), where `inner` says an edge's line needs one.
+    fn skirts(
+        &mut self,
+        l: usize,
+        (xs, zs): (&[usize], &[usize]),
+        (i0, i1): (usize, usize),
+        (j0, j1): (usize, usize),
+        inner: impl Fn(usize) -> bool,
+    ) {
+        // Along the four edges, both windings.
+        let edges: [(bool, Vec<u32>); 4] = [
+            (inner(j0), xs.iter().map(|&i| self.at(l, i, j0)).collect()),
+            (inner(j1), xs.iter().map(|&i| self.at(l, i, j1)).collect()),
+            (inner(i0), zs.iter().map(|&j| self.at(l, i0, j)).collect()),
+            (inner(i1), zs.iter().map(|&j| self.at(l, i1, j)).collect()),
+        ];
+        for (_, edge) in edges.iter().filter(|(needed, _)| *needed) {
+            for pair in edge.windows(2) {
+                let (a, b) = (pair[0], pair[1]);
+                let a2 = self.skirt_vertex(a);
+                let b2 = self.skirt_vertex(b);
+                self.mesh
+                    .indices
+                    .extend_from_slice(&[a, b, a2, b, b2, a2, a, a2, b, b, a2, b2]);
+            }
+        }
+    }
+
+    /// The mesh with its level and skirt vertices' uvs set.
+    fn finish(mut self) -> Mesh {
+        // What `shaders/geometry.wgsl` reads in a terrain vertex's uv: in x, 0 at level 0
+        // and -(1 + e) at a coarser level, e being the height error of the coarse quads
+        // around the vertex, by which its point is raised for the terrain's own shadows (a
+        // surface that cuts below the hills would be shadowed by them in the terrain's
+        // depth map), the sign saying that the vertex is a coarse level's (shaded from the
+        // terrain's maps, which keep the detail its grid points skip);
+        // in y, how far a skirt hangs below the edge it hangs from, which it is shaded as.
+        for &v in self.level_of.values() {
+            let e = self.quad_lift.get(&v).copied().unwrap_or(0.0);
+            self.mesh.vertices[v as usize].uv[0] = -(1.0 + e);
+        }
+        for (&top, &skirt) in &self.skirt_of {
+            let edge = self.mesh.vertices[top as usize].uv;
+            self.mesh.vertices[skirt as usize].uv = [edge[0], self.skirt_depth];
+        }
+        self.mesh
     }
 }
 

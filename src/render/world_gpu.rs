@@ -14,6 +14,9 @@ use crate::model::mesh::{Aabb, Mesh};
 use crate::model::terrain_lod::{ChunkedTerrain, TerrainLayout, TerrainView};
 use crate::{Error, Result};
 
+mod species;
+use species::SpeciesUpload;
+
 /// Largest forest the GPU buffers are sized for: the scene file's own limit.
 pub const MAX_TREES: usize = crate::model::params::MAX_TREES as usize;
 
@@ -299,119 +302,31 @@ impl WorldGpu {
         .ok_or_else(|| Error::BadInput("the terrain has no triangles".into()))?;
         let mut mesh_bytes = terrain.mesh.bytes() + maps.bytes;
         let mut species = Vec::with_capacity(world.species.len());
-        let mut uploaded = Vec::new();
+        let mut upload = SpeciesUpload {
+            ctx,
+            parts_layout,
+            plain,
+            white: &white,
+            sampler: &sampler,
+            uploaded: Vec::new(),
+        };
         for tree in &world.species {
-            let twigs = tree.twigs_in_tree_frame();
-            let limbs = &tree.tree_branches;
-            // A procedural part is one set; an imported tree's parts are one set per material,
-            // each with its texture.
-            let mut part_sets = |kind: PartKind,
-                                 what: &str,
-                                 mesh: &Mesh,
-                                 instances: &[Mat4],
-                                 look: PartLook|
-             -> Vec<PartSet> {
-                let Some(surf) = tree.surfaces.as_deref() else {
-                    return PartSet::new(
-                        ctx,
-                        parts_layout,
-                        kind,
-                        &format!("{} {what}", tree.name),
-                        mesh,
-                        instances,
-                        look,
-                    )
-                    .into_iter()
-                    .collect();
-                };
-                let runs = match kind {
-                    PartKind::Trunk => &surf.trunk,
-                    PartKind::Limbs => &surf.limb,
-                    PartKind::Twigs => &surf.twig,
-                };
-                let (meshes, textures) = split_surfaces(ctx, mesh, runs, surf, &mut uploaded);
-                runs.iter()
-                    .zip(meshes)
-                    .zip(textures)
-                    .filter_map(|((range, mesh), texture)| {
-                        let m = surf.materials.get(range.material as usize)?;
-                        PartSet::new(
-                            ctx,
-                            parts_layout,
-                            kind,
-                            &format!("{} {what} {}", tree.name, m.name),
-                            &mesh,
-                            instances,
-                            PartLook {
-                                two_sided: m.double_sided,
-                                texture: texture.as_ref().unwrap_or(&white),
-                                sampler: &sampler,
-                                alpha_cutoff: m.alpha_cutoff,
-                                textured: texture.is_some() || m.alpha_cutoff > 0.0,
-                                ..plain
-                            },
-                        )
-                    })
-                    .collect()
-            };
-            let mut parts = part_sets(
-                PartKind::Trunk,
-                "trunk",
-                &tree.trunk,
-                &[Mat4::IDENTITY],
-                plain,
-            );
-            parts.extend(part_sets(
-                PartKind::Limbs,
-                "limbs",
-                &tree.branch_limb,
-                limbs,
-                plain,
-            ));
-            parts.extend(part_sets(
-                PartKind::Twigs,
-                "twigs",
-                &tree.twig,
-                &twigs,
-                PartLook {
-                    two_sided: true,
-                    ..plain
-                },
-            ));
-            mesh_bytes += parts
+            let s = upload.species(tree);
+            mesh_bytes += s
+                .parts
                 .iter()
                 .map(|p| p.mesh.bytes() + 64 * u64::from(p.count))
                 .sum::<u64>();
-            species.push(SpeciesGpu {
-                name: tree.name.clone(),
-                parts,
-            });
+            species.push(s);
         }
 
-        let mut tree_species = Vec::with_capacity(n);
-        let mut tree_data = Vec::with_capacity(n);
-        let mut tree_bounds = Vec::with_capacity(n);
-        let mut scene_bounds = world.terrain.bounds();
-        let mut forest_bounds = Aabb::EMPTY;
-        for inst in &world.forest.instances {
-            let Some(model) = world.species.get(inst.species as usize) else {
-                return Err(Error::BadInput(format!(
-                    "a tree refers to species {} but the scene has {}",
-                    inst.species,
-                    world.species.len()
-                )));
-            };
-            let m = inst.transform();
-            let b = model.tree_bounds.transformed(m);
-            scene_bounds = scene_bounds.union(b);
-            forest_bounds = forest_bounds.union(b);
-            tree_species.push(inst.species);
-            tree_data.push(TreeGpu {
-                model: m.to_cols_array_2d(),
-                tint: inst.tint.extend(1.0).to_array(),
-            });
-            tree_bounds.push(b);
-        }
+        let PlacedTrees {
+            species: tree_species,
+            data: tree_data,
+            bounds: tree_bounds,
+            scene_bounds,
+            forest_bounds,
+        } = place_trees(world)?;
 
         // Terrain identity + the camera list + one list per shadow cascade.
         let capacity = 1 + (1 + super::consts::CASCADES) * n.max(1);
@@ -705,51 +620,50 @@ impl TreeInstances {
     }
 }
 
-/// A part of an imported tree cut into one mesh per surface range (each with only the
-/// vertices it uses), and each range's material texture uploaded (each image once over
-/// `uploaded`).
-fn split_surfaces(
-    ctx: &GpuContext,
-    part: &Mesh,
-    runs: &[crate::model::tree::SurfaceRange],
-    surfaces: &crate::model::tree::Surfaces,
-    uploaded: &mut Vec<(*const crate::model::gltf::Rgba8Image, wgpu::TextureView)>,
-) -> (Vec<Mesh>, Vec<Option<wgpu::TextureView>>) {
-    let mut meshes = Vec::with_capacity(runs.len());
-    let mut textures = Vec::with_capacity(runs.len());
-    for r in runs {
-        let first = r.first as usize;
-        let indices = part
-            .indices
-            .get(first..first + r.count as usize)
-            .unwrap_or(&[]);
-        let mut remap = std::collections::HashMap::new();
-        let mut mesh = Mesh::default();
-        for &i in indices {
-            let Some(v) = part.vertices.get(i as usize) else {
-                continue;
-            };
-            let j = *remap.entry(i).or_insert_with(|| mesh.push_vertex(*v));
-            mesh.indices.push(j);
-        }
-        meshes.push(mesh);
-        let image = surfaces
-            .materials
-            .get(r.material as usize)
-            .and_then(|m| m.texture.as_ref());
-        textures.push(image.map(|img| {
-            let key = std::sync::Arc::as_ptr(img);
-            match uploaded.iter().find(|(k, _)| *k == key) {
-                Some((_, view)) => view.clone(),
-                None => {
-                    let view = super::material::upload(ctx, "material", img);
-                    uploaded.push((key, view.clone()));
-                    view
-                }
-            }
-        }));
+/// Every tree of `world` placed: its species, instance record and bounds, and the bounds
+/// of the scene and of the trees alone.
+struct PlacedTrees {
+    species: Vec<u32>,
+    data: Vec<TreeGpu>,
+    bounds: Vec<Aabb>,
+    scene_bounds: Aabb,
+    forest_bounds: Aabb,
+}
+
+/// Places every tree of `world`, refused where one refers to a species the scene lacks.
+fn place_trees(world: &World) -> Result<PlacedTrees> {
+    let n = world.forest.instances.len();
+    let mut tree_species = Vec::with_capacity(n);
+    let mut tree_data = Vec::with_capacity(n);
+    let mut tree_bounds = Vec::with_capacity(n);
+    let mut scene_bounds = world.terrain.bounds();
+    let mut forest_bounds = Aabb::EMPTY;
+    for inst in &world.forest.instances {
+        let Some(model) = world.species.get(inst.species as usize) else {
+            return Err(Error::BadInput(format!(
+                "a tree refers to species {} but the scene has {}",
+                inst.species,
+                world.species.len()
+            )));
+        };
+        let m = inst.transform();
+        let b = model.tree_bounds.transformed(m);
+        scene_bounds = scene_bounds.union(b);
+        forest_bounds = forest_bounds.union(b);
+        tree_species.push(inst.species);
+        tree_data.push(TreeGpu {
+            model: m.to_cols_array_2d(),
+            tint: inst.tint.extend(1.0).to_array(),
+        });
+        tree_bounds.push(b);
     }
-    (meshes, textures)
+    Ok(PlacedTrees {
+        species: tree_species,
+        data: tree_data,
+        bounds: tree_bounds,
+        scene_bounds,
+        forest_bounds,
+    })
 }
 
 /// Appends one list's instance records to `data`, species by species, each species' run

@@ -245,7 +245,7 @@ pub fn import_slice(bytes: &[u8], dir: &Path, options: ImportOptions) -> Res<Imp
     let blob = blob.map(<[u8]>::to_vec);
     let doc = ::gltf::Document::from_json(parsed.document.into_json())
         .map_err(|e| format!("invalid glTF: {e}"))?;
-    let mut warnings = ignored_features(&doc);
+    let warnings = ignored_features(&doc);
 
     let buffers = load_buffers(&doc, blob, dir)?;
     let scene = doc
@@ -259,9 +259,68 @@ pub fn import_slice(bytes: &[u8], dir: &Path, options: ImportOptions) -> Res<Imp
             UpAxis::Y => Mat4::IDENTITY,
             UpAxis::Z => Mat4::from_rotation_x(-std::f32::consts::FRAC_PI_2),
         };
+    let (instances, placements) = mesh_instances(&scene, frame)?;
+
+    let mut reader = TreeReader {
+        doc: &doc,
+        buffers: &buffers,
+        dir,
+        materials: Vec::new(),
+        material_of: std::collections::HashMap::new(),
+        images: Default::default(),
+        meshes: Default::default(),
+        per_material: Vec::new(),
+        triangles: 0,
+        vertices: 0,
+        warnings,
+    };
+    for (node, mesh, transform, _) in &instances {
+        reader.place(node, mesh, *transform)?;
+    }
+    let TreeReader {
+        materials,
+        meshes,
+        per_material,
+        triangles,
+        warnings,
+        ..
+    } = reader;
+    if triangles == 0 {
+        return Err("the default scene has no triangles".into());
+    }
+    // The mesh's triangles in its own frame, by material.
+    let local = |mesh: usize| {
+        let mut out = vec![Mesh::default(); materials.len()];
+        for (m, part) in meshes.get(&mesh).into_iter().flatten() {
+            out[*m].append(part, Mat4::IDENTITY);
+        }
+        out
+    };
+    let levels = levels::find(&placements, &local, &materials);
+    // One mesh, sorted by material; foliage flagged.
+    let whole = levels::Part::combine(&per_material, &materials);
+    Ok(ImportedTree {
+        mesh: whole.mesh,
+        triangle_materials: whole.triangle_materials,
+        materials,
+        warnings,
+        levels,
+    })
+}
+
+/// A node instance that draws a mesh: the node, its mesh, its transform in the tree frame
+/// and the nearest ancestor instance that draws one.
+type Instance<'a> = (::gltf::Node<'a>, ::gltf::Mesh<'a>, Mat4, Option<usize>);
+
+/// Which node instances of `scene` draw which mesh, in file order of their nodes, and their
+/// placements; `frame` turns the file's frame into the tree frame.
+fn mesh_instances<'a>(
+    scene: &::gltf::Scene<'a>,
+    frame: Mat4,
+) -> Res<(Vec<Instance<'a>>, Vec<levels::Placement>)> {
     // Which node instances draw which mesh, with their transforms in the tree frame and the
     // nearest ancestor instance that draws one.
-    let mut found: Vec<(::gltf::Node<'_>, ::gltf::Mesh<'_>, Mat4, Option<usize>)> = Vec::new();
+    let mut found: Vec<Instance<'a>> = Vec::new();
     let mut stack: Vec<(::gltf::Node<'_>, Mat4, usize, Option<usize>)> =
         scene.nodes().map(|n| (n, frame, 0, None)).collect();
     let mut visits = 0usize;
@@ -314,77 +373,59 @@ pub fn import_slice(bytes: &[u8], dir: &Path, options: ImportOptions) -> Res<Imp
             parent: holder.map(|h| rank[h]),
         })
         .collect();
+    Ok((instances, placements))
+}
 
-    let mut materials = Vec::new();
-    let mut material_of = std::collections::HashMap::new();
-    let mut images: std::collections::HashMap<usize, Arc<Rgba8Image>> = Default::default();
-    // Each mesh read once: its primitives in its own frame, with their materials.
-    let mut meshes: std::collections::HashMap<usize, Vec<(usize, Mesh)>> = Default::default();
-    let mut per_material: Vec<Mesh> = Vec::new();
-    let mut triangles = 0u64;
-    let mut vertices = 0u64;
-    for (node, mesh, transform, _) in &instances {
-        if let std::collections::hash_map::Entry::Vacant(slot) = meshes.entry(mesh.index()) {
-            let mut parts = Vec::new();
-            for prim in mesh.primitives() {
-                let at = format!(
-                    "{} mesh {} primitive {}",
-                    node_name(node),
-                    mesh_name(mesh),
-                    prim.index()
-                );
-                let key = prim.material().index();
-                let m = match material_of.get(&key) {
-                    Some(&m) => m,
-                    None => {
-                        let mat =
-                            read_material(&doc, &prim.material(), &buffers, dir, &mut images)?;
-                        materials.push(mat);
-                        per_material.push(Mesh::default());
-                        material_of.insert(key, materials.len() - 1);
-                        materials.len() - 1
-                    }
-                };
-                let uv_set = prim
-                    .material()
-                    .pbr_metallic_roughness()
-                    .base_color_texture()
-                    .map(|info| {
-                        info.texture_transform()
-                            .and_then(|t| t.tex_coord())
-                            .unwrap_or(info.tex_coord())
-                    })
-                    .unwrap_or(0);
-                let mut part = read_primitive(&prim, &buffers, uv_set, &at, &mut warnings)?;
-                let part_transform = transform_uv(&prim.material());
-                let base = Vec3::from_slice(&materials[m].base_color[..3]);
-                for v in &mut part.vertices {
-                    v.color = (Vec3::from(v.color) * base).to_array();
-                    v.uv = part_transform(Vec2::from(v.uv)).to_array();
-                }
-                parts.push((m, part));
-            }
-            slot.insert(parts);
+/// A tree's meshes and materials while its node instances are read.
+struct TreeReader<'a> {
+    doc: &'a ::gltf::Document,
+    buffers: &'a [Vec<u8>],
+    dir: &'a Path,
+    materials: Vec<Material>,
+    /// Index in `materials` of each of the file's materials read.
+    material_of: std::collections::HashMap<Option<usize>, usize>,
+    images: std::collections::HashMap<usize, Arc<Rgba8Image>>,
+    /// Each mesh read once: its primitives in its own frame, with their materials.
+    meshes: std::collections::HashMap<usize, Vec<(usize, Mesh)>>,
+    /// Every instance's triangles in the tree frame, by material.
+    per_material: Vec<Mesh>,
+    triangles: u64,
+    vertices: u64,
+    warnings: Vec<String>,
+}
+
+impl TreeReader<'_> {
+    /// Appends the instance of `mesh` at `node`, placed by `transform`, to the tree (the
+    /// mesh read on its first instance), refusing a tree over the size limits.
+    fn place(
+        &mut self,
+        node: &::gltf::Node<'_>,
+        mesh: &::gltf::Mesh<'_>,
+        transform: Mat4,
+    ) -> Res<()> {
+        if !self.meshes.contains_key(&mesh.index()) {
+            let parts = self.read_mesh(node, mesh)?;
+            self.meshes.insert(mesh.index(), parts);
         }
-        for (p, (m, part)) in meshes[&mesh.index()].iter().enumerate() {
+        for (p, (m, part)) in self.meshes[&mesh.index()].iter().enumerate() {
             let at = format!("{} mesh {} primitive {p}", node_name(node), mesh_name(mesh));
-            triangles += part.triangle_count() as u64;
-            vertices += part.vertices.len() as u64;
-            if vertices > MAX_VERTICES {
+            self.triangles += part.triangle_count() as u64;
+            self.vertices += part.vertices.len() as u64;
+            if self.vertices > MAX_VERTICES {
                 return Err(format!(
                     "the tree has over {MAX_VERTICES} vertices (at {at}); canopy imports at most \
                      {MAX_VERTICES}: decimate it (Blender: Decimate modifier) or use a lower LOD"
                 ));
             }
-            if triangles > MAX_TRIANGLES {
+            if self.triangles > MAX_TRIANGLES {
                 return Err(format!(
                     "the tree has over {MAX_TRIANGLES} triangles (at {at}); canopy imports at most \
                      {MAX_TRIANGLES}: decimate it (Blender: Decimate modifier) or use a lower LOD"
                 ));
             }
-            let target = &mut per_material[*m];
+            let target = &mut self.per_material[*m];
             let first = target.vertices.len();
-            target.append(part, *transform);
+            target.append(part, transform);
             for v in &target.vertices[first..] {
                 let p = Vec3::from(v.position);
                 if !p.is_finite() {
@@ -401,28 +442,62 @@ pub fn import_slice(bytes: &[u8], dir: &Path, options: ImportOptions) -> Res<Imp
                 }
             }
         }
+        Ok(())
     }
-    if triangles == 0 {
-        return Err("the default scene has no triangles".into());
-    }
-    // The mesh's triangles in its own frame, by material.
-    let local = |mesh: usize| {
-        let mut out = vec![Mesh::default(); materials.len()];
-        for (m, part) in meshes.get(&mesh).into_iter().flatten() {
-            out[*m].append(part, Mat4::IDENTITY);
+
+    /// The primitives of `mesh` (first met at `node`) in its own frame, with their
+    /// materials (read on first use).
+    fn read_mesh(
+        &mut self,
+        node: &::gltf::Node<'_>,
+        mesh: &::gltf::Mesh<'_>,
+    ) -> Res<Vec<(usize, Mesh)>> {
+        let mut parts = Vec::new();
+        for prim in mesh.primitives() {
+            let at = format!(
+                "{} mesh {} primitive {}",
+                node_name(node),
+                mesh_name(mesh),
+                prim.index()
+            );
+            let key = prim.material().index();
+            let m = match self.material_of.get(&key) {
+                Some(&m) => m,
+                None => {
+                    let mat = read_material(
+                        self.doc,
+                        &prim.material(),
+                        self.buffers,
+                        self.dir,
+                        &mut self.images,
+                    )?;
+                    self.materials.push(mat);
+                    self.per_material.push(Mesh::default());
+                    self.material_of.insert(key, self.materials.len() - 1);
+                    self.materials.len() - 1
+                }
+            };
+            let uv_set = prim
+                .material()
+                .pbr_metallic_roughness()
+                .base_color_texture()
+                .map(|info| {
+                    info.texture_transform()
+                        .and_then(|t| t.tex_coord())
+                        .unwrap_or(info.tex_coord())
+                })
+                .unwrap_or(0);
+            let mut part = read_primitive(&prim, self.buffers, uv_set, &at, &mut self.warnings)?;
+            let part_transform = transform_uv(&prim.material());
+            let base = Vec3::from_slice(&self.materials[m].base_color[..3]);
+            for v in &mut part.vertices {
+                v.color = (Vec3::from(v.color) * base).to_array();
+                v.uv = part_transform(Vec2::from(v.uv)).to_array();
+            }
+            parts.push((m, part));
         }
-        out
-    };
-    let levels = levels::find(&placements, &local, &materials);
-    // One mesh, sorted by material; foliage flagged.
-    let whole = levels::Part::combine(&per_material, &materials);
-    Ok(ImportedTree {
-        mesh: whole.mesh,
-        triangle_materials: whole.triangle_materials,
-        materials,
-        warnings,
-        levels,
-    })
+        Ok(parts)
+    }
 }
 
 fn node_name(node: &::gltf::Node<'_>) -> String {

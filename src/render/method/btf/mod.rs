@@ -6,6 +6,7 @@
 //! file): one instanced draw samples a single texture array holding every image set.
 
 mod atlas;
+mod atlas_fill;
 mod billboard;
 pub mod far;
 pub mod far_canopy;
@@ -23,8 +24,8 @@ use std::collections::HashMap;
 use glam::Vec3;
 
 pub use crate::render::consts::ATLAS_SIDE;
-use atlas::{AtlasFormat, upload_image};
 pub use atlas::{BC7_ON_CPU_ADAPTERS, atlas_layers};
+use atlas_fill::{Atlas, allocate_atlas, upload_images};
 pub use billboard::{BillboardGpu, BillboardMode, NO_LIGHT_BLEND};
 pub use prepare::{
     BtfFrame, BtfScene, LevelChoice, NearDrawGpu, PrepareView, SortedBillboards, choose_level,
@@ -33,6 +34,7 @@ pub use settings::{
     BtfSettings, BtfStats, CANOPY_COLOR, FETCHES_AT_MOST, GEOMETRY_COLOR, LOD_COLORS, PlaneMode,
 };
 
+use crate::Result;
 use crate::format::Baked;
 use crate::lod::LevelTexels;
 use crate::model::World;
@@ -43,7 +45,6 @@ use crate::render::method::interface::DrawCx;
 use crate::render::pipelines::storage_buffer_of;
 use crate::render::timing::PassSpans;
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
-use crate::{Error, Result};
 use pipelines_btf::{btf_layout, make_bind_group};
 
 /// Draws made in the main pass after a BTF frame's meshes and before its billboards.
@@ -83,6 +84,16 @@ pub struct BtfAssets {
     pub bytes: u64,
 }
 
+/// One frame's request to [`BtfAssets::prepare`], as its parts take it.
+struct FrameRequest<'a> {
+    world: &'a WorldGpu,
+    view: PrepareView<'a>,
+    settings: &'a BtfSettings,
+    trees_on: bool,
+    hybrid: bool,
+    lights: [Vec3; 3],
+}
+
 impl BtfAssets {
     /// Drops the render pipelines built so far (they are built again on next use).
     pub fn forget_pipelines(&mut self) {
@@ -117,78 +128,15 @@ impl BtfAssets {
 
     pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
         let mut scene = BtfScene::new(baked, world)?;
-        let res = scene.resolution();
-        let images = scene.layer_count();
-        let layers = atlas_layers(images);
-        let max_layers = u64::from(ctx.device.limits().max_texture_array_layers);
-        if layers > max_layers {
-            return Err(Error::BadInput(format!(
-                "the BTF needs {images} images ({layers} texture layers of {} each) but this GPU allows {max_layers} layers; bake with fewer views or lights, or fewer species variants",
-                ATLAS_SIDE * ATLAS_SIDE
-            )));
-        }
-        let side = res * ATLAS_SIDE;
-        if side > ctx.device.limits().max_texture_dimension_2d {
-            return Err(Error::BadInput(format!(
-                "the BTF atlas needs {side}² texture layers but this GPU allows {}; bake at a lower resolution",
-                ctx.device.limits().max_texture_dimension_2d
-            )));
-        }
-        // Each image has its own mip chain inside its square: down to one texel, or to 4
-        // texels for BC7 images (`AtlasFormat::choose`).
-        let encodings: Vec<_> = scene.image_sets(baked).map(|(_, s)| s.encoding).collect();
-        let format = AtlasFormat::choose(res, &encodings, atlas::bc7_textures(ctx));
-        // The tree level's light blends take layers after the baked images, where the GPU
-        // allows them and the array can be drawn into (a BC7 array cannot).
-        let blends = if format.bc7 {
-            log::info!(
-                "tree-level billboards blend their lights themselves: the BTF images are BC7, which cannot be drawn into"
-            );
-            0
-        } else {
-            scene.light_blend_count(light_blend::LIGHT_BINS)
-        };
-        let blend_layers = atlas_layers(blends);
-        let allocate =
-            |blend_layers: u64| atlas::allocate_array(ctx, format, side, layers, blend_layers);
-        let fits = blend_layers > 0 && layers + blend_layers <= max_layers && layers > 0;
-        let (texture, blends) = match fits.then(|| allocate(blend_layers)) {
-            Some(Ok(t)) => (t, blends),
-            other => {
-                if let Some(Err(e)) = other {
-                    log::warn!("tree-level billboards blend their lights themselves: {e}");
-                } else if blend_layers > 0 {
-                    log::warn!(
-                        "tree-level billboards blend their lights themselves: the light blends' {blend_layers} layers pass this GPU's {max_layers}"
-                    );
-                }
-                (allocate(0)?, 0)
-            }
-        };
-        let mut bytes = 0u64;
-        let mut means = vec![[0.0f32; 4]; images as usize];
-        let lut = crate::color::srgb_lut();
-        // wgpu holds each write's staging copy until the GPU has done it: submitted every
-        // `FLUSH_BYTES`, the staging copies of the whole array (107 MB for the example
-        // forest's images decoded to RGBA8) are never held at once.
-        const FLUSH_BYTES: u64 = 16 << 20;
-        let mut unflushed = 0u64;
-        for (base, set) in scene.image_sets(baked) {
-            for (i, img) in set.images().enumerate() {
-                let (b, mean) =
-                    upload_image(ctx, &texture, base + i as u32, set, img, format, &lut);
-                bytes += b;
-                unflushed += b;
-                if unflushed >= FLUSH_BYTES {
-                    ctx.queue.submit(std::iter::empty());
-                    let _ = ctx.device.poll(wgpu::PollType::wait_indefinitely());
-                    unflushed = 0;
-                }
-                if let Some(m) = means.get_mut((base + i as u32) as usize) {
-                    *m = mean;
-                }
-            }
-        }
+        let atlas = allocate_atlas(ctx, &scene, baked)?;
+        let (bytes, means) = upload_images(ctx, &scene, baked, &atlas);
+        let Atlas {
+            texture,
+            format,
+            layers,
+            blends,
+            ..
+        } = atlas;
         let t0 = std::time::Instant::now();
         let canopy_map = far_canopy::map::CanopyMap::of_world(world);
         log::debug!(
@@ -372,108 +320,16 @@ impl BtfAssets {
                 }),
             );
         }
-        let far = self
-            .far
-            .as_mut()
-            .and_then(Option::as_mut)
-            .filter(|_| settings.gpu_far);
-        if let Some(f) = far {
-            let t0 = std::time::Instant::now();
-            // The far canopy, on the GPU the first time the knob asks for it (once: the
-            // map is not kept on the CPU).
-            if settings.far_canopy
-                && let Some(m) = self.canopy_map.take()
-            {
-                self.canopy = far_canopy::CanopyGpu::new(ctx, &m, &self.sampler)
-                    .map_err(|e| log::warn!("no far canopy: {e}"))
-                    .ok();
-            }
-            let canopy_frame = self.canopy.as_ref().and_then(|c| c.frame(settings, lights));
-            let (near, shade_ms) = f.prepare(
-                ctx,
-                &self.scene,
-                &world.tree_data,
-                &world.tree_bounds,
-                &view,
-                settings,
-                trees_on,
-                canopy_frame.as_ref(),
-            );
-            let canopy_tiles = match (f.canopy_band(), self.canopy.as_mut()) {
-                (Some(band), Some(c)) if trees_on => c.prepare(
-                    ctx,
-                    camera.position,
-                    frustum,
-                    band,
-                    settings.show_lod.then_some(CANOPY_COLOR),
-                    f.canopy_colours(),
-                ),
-                _ => 0,
-            };
-            log::debug!(
-                "btf prepare: far canopy {:?} m, {canopy_tiles} tiles",
-                f.canopy_band()
-            );
-            let t1 = std::time::Instant::now();
-            // Unsorted: the GPU sorts them with the far trees' billboards. With `gpu_near`
-            // the CPU only chooses their levels, and the GPU expands them.
-            let (mut out, records, draws, slots) = if settings.gpu_near {
-                self.scene.prepare_near(
-                    &world.tree_data,
-                    &world.tree_species,
-                    &near,
-                    &view,
-                    settings,
-                    hybrid,
-                    f.expand_limit(),
-                )
-            } else {
-                let (out, records) =
-                    self.scene
-                        .prepare_sorted(&world.tree_data, &near, &view, settings, 0, hybrid);
-                (out, records, Vec::new(), 0)
-            };
-            let t2 = std::time::Instant::now();
-            let uploaded = f.upload_near(ctx, &records, &draws, slots);
-            let ms = |a: std::time::Instant, b: std::time::Instant| (b - a).as_secs_f64() * 1e3;
-            log::debug!(
-                "btf prepare: near trees found in {:.2} ms (VCM factors uploaded in {shade_ms:.2}), \
-                 {} near trees' levels in {:.2} ms ({} CPU records, {} draws, {slots} slots), \
-                 uploaded in {:.2} ms",
-                ms(t0, t1) - shade_ms,
-                near.iter().map(Vec::len).sum::<usize>(),
-                ms(t1, t2),
-                records.len(),
-                draws.len(),
-                ms(t2, std::time::Instant::now()),
-            );
-            match uploaded {
-                Ok(true) => {
-                    out.far = true;
-                    out.layer_batches = f.layer_batches();
-                    out.stats.canopy_tiles = canopy_tiles;
-                    return (out, shade_ms);
-                }
-                Ok(false) => {}
-                Err(e) => log::warn!("this frame's trees stay on the CPU: {e}"),
-            }
-            if !trees_on {
-                return (out, shade_ms);
-            }
-            // Too many near billboards for one binding (or one dispatch) with the trees'
-            // slots: this frame is the CPU's alone, which keeps the nearest.
-            let all = world.cull(frustum);
-            let (mut out, sorted) = self.scene.prepare_sorted(
-                &world.tree_data,
-                &all,
-                &view,
-                settings,
-                self.max_capacity,
-                hybrid,
-            );
-            out.layer_batches = front_to_back::cpu_layer_batches(settings, sorted.len());
-            self.upload_sorted(ctx, &sorted, out.layer_batches > 0);
-            return (out, shade_ms);
+        let request = FrameRequest {
+            world,
+            view,
+            settings,
+            trees_on,
+            hybrid,
+            lights,
+        };
+        if let Some(frame) = self.prepare_far(ctx, &request) {
+            return frame;
         }
         if let Some(Some(f)) = self.far.as_mut() {
             f.clear();
@@ -490,17 +346,136 @@ impl BtfAssets {
                 &culled[..]
             }
         };
-        let (mut out, sorted) = self.scene.prepare_sorted(
-            &world.tree_data,
-            visible,
-            &view,
+        (self.prepare_on_cpu(ctx, &request, visible), 0.0)
+    }
+
+    /// [`Self::prepare`] with the far trees on the GPU, where it takes them (None where it
+    /// does not): the near trees prepared here, the far canopy's tiles chosen. Where the
+    /// near trees' records do not fit, the frame is the CPU's alone.
+    fn prepare_far(
+        &mut self,
+        ctx: &GpuContext,
+        request: &FrameRequest<'_>,
+    ) -> Option<(BtfFrame, f64)> {
+        let &FrameRequest {
+            world,
+            ref view,
             settings,
-            self.max_capacity,
+            trees_on,
             hybrid,
+            lights,
+        } = request;
+        let f = self
+            .far
+            .as_mut()
+            .and_then(Option::as_mut)
+            .filter(|_| settings.gpu_far)?;
+        let t0 = std::time::Instant::now();
+        // The far canopy, on the GPU the first time the knob asks for it (once: the
+        // map is not kept on the CPU).
+        if settings.far_canopy
+            && let Some(m) = self.canopy_map.take()
+        {
+            self.canopy = far_canopy::CanopyGpu::new(ctx, &m, &self.sampler)
+                .map_err(|e| log::warn!("no far canopy: {e}"))
+                .ok();
+        }
+        let canopy_frame = self.canopy.as_ref().and_then(|c| c.frame(settings, lights));
+        let (near, shade_ms) = f.prepare(
+            ctx,
+            &self.scene,
+            &world.tree_data,
+            &world.tree_bounds,
+            view,
+            settings,
+            trees_on,
+            canopy_frame.as_ref(),
         );
-        out.layer_batches = front_to_back::cpu_layer_batches(settings, sorted.len());
+        let canopy_tiles = match (f.canopy_band(), self.canopy.as_mut()) {
+            (Some(band), Some(c)) if trees_on => c.prepare(
+                ctx,
+                view.camera.position,
+                view.frustum,
+                band,
+                settings.show_lod.then_some(CANOPY_COLOR),
+                f.canopy_colours(),
+            ),
+            _ => 0,
+        };
+        log::debug!(
+            "btf prepare: far canopy {:?} m, {canopy_tiles} tiles",
+            f.canopy_band()
+        );
+        let t1 = std::time::Instant::now();
+        // Unsorted: the GPU sorts them with the far trees' billboards. With `gpu_near`
+        // the CPU only chooses their levels, and the GPU expands them.
+        let (mut out, records, draws, slots) = if settings.gpu_near {
+            self.scene.prepare_near(
+                &world.tree_data,
+                &world.tree_species,
+                &near,
+                view,
+                settings,
+                hybrid,
+                f.expand_limit(),
+            )
+        } else {
+            let (out, records) =
+                self.scene
+                    .prepare_sorted(&world.tree_data, &near, view, settings, 0, hybrid);
+            (out, records, Vec::new(), 0)
+        };
+        let t2 = std::time::Instant::now();
+        let uploaded = f.upload_near(ctx, &records, &draws, slots);
+        let ms = |a: std::time::Instant, b: std::time::Instant| (b - a).as_secs_f64() * 1e3;
+        log::debug!(
+            "btf prepare: near trees found in {:.2} ms (VCM factors uploaded in {shade_ms:.2}), \
+             {} near trees' levels in {:.2} ms ({} CPU records, {} draws, {slots} slots), \
+             uploaded in {:.2} ms",
+            ms(t0, t1) - shade_ms,
+            near.iter().map(Vec::len).sum::<usize>(),
+            ms(t1, t2),
+            records.len(),
+            draws.len(),
+            ms(t2, std::time::Instant::now()),
+        );
+        match uploaded {
+            Ok(true) => {
+                out.far = true;
+                out.layer_batches = f.layer_batches();
+                out.stats.canopy_tiles = canopy_tiles;
+                return Some((out, shade_ms));
+            }
+            Ok(false) => {}
+            Err(e) => log::warn!("this frame's trees stay on the CPU: {e}"),
+        }
+        if !trees_on {
+            return Some((out, shade_ms));
+        }
+        // Too many near billboards for one binding (or one dispatch) with the trees'
+        // slots: this frame is the CPU's alone, which keeps the nearest.
+        let all = world.cull(view.frustum);
+        Some((self.prepare_on_cpu(ctx, request, &all), shade_ms))
+    }
+
+    /// Prepares the trees of `visible` on the CPU, sorted, and uploads their billboards.
+    fn prepare_on_cpu(
+        &mut self,
+        ctx: &GpuContext,
+        request: &FrameRequest<'_>,
+        visible: &[Vec<u32>],
+    ) -> BtfFrame {
+        let (mut out, sorted) = self.scene.prepare_sorted(
+            &request.world.tree_data,
+            visible,
+            &request.view,
+            request.settings,
+            self.max_capacity,
+            request.hybrid,
+        );
+        out.layer_batches = front_to_back::cpu_layer_batches(request.settings, sorted.len());
         self.upload_sorted(ctx, &sorted, out.layer_batches > 0);
-        (out, 0.0)
+        out
     }
 
     /// Whether this frame's far trees go to the GPU (the renderer then needs no cull).

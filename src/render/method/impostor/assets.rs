@@ -39,6 +39,120 @@ fn same_layout(a: &Impostor, b: &Impostor) -> bool {
         == (b.layout, b.frames, b.resolution, b.mip_levels)
 }
 
+/// Each of the `n` species' impostor in `baked`, refused where one is missing or where
+/// they do not share one layout.
+fn impostors_by_species(baked: &Baked, n: usize) -> Result<Vec<&Impostor>> {
+    let mut by_species: Vec<Option<&Impostor>> = vec![None; n];
+    for imp in &baked.impostors {
+        if let Some(slot) = by_species.get_mut(imp.species as usize) {
+            *slot = Some(imp);
+        }
+    }
+    let Some(Some(first)) = by_species.first().copied() else {
+        return Err(Error::BadInput(
+            "this bake has no octahedral impostors: set `[bake] impostor_frames` (e.g. 12) in the scene file and bake again".into(),
+        ));
+    };
+    let mut list = Vec::with_capacity(n);
+    for (sp, imp) in by_species.iter().enumerate() {
+        let imp = imp.ok_or_else(|| {
+            Error::BadInput(format!(
+                "the bake has no impostor for species {sp}: bake the scene again"
+            ))
+        })?;
+        if !same_layout(first, imp) {
+            return Err(Error::BadInput(format!(
+                "the impostor of species {sp} has another layout than species 0's: bake the scene again"
+            )));
+        }
+        list.push(imp);
+    }
+    Ok(list)
+}
+
+/// The side of the atlases of `n` species' impostors laid out as `first`, refused where
+/// this GPU cannot hold them or their stored levels do not halve evenly.
+fn atlas_side(ctx: &GpuContext, first: &Impostor, n: usize) -> Result<u32> {
+    let side = first.frames * first.resolution;
+    let limits = ctx.device.limits();
+    if side > limits.max_texture_dimension_2d || n as u32 > limits.max_texture_array_layers {
+        return Err(Error::BadInput(format!(
+            "the impostor atlases need {n} layers of {side}² but this GPU allows {} of {}²; bake with fewer impostor frames or a smaller impostor_resolution",
+            limits.max_texture_array_layers, limits.max_texture_dimension_2d
+        )));
+    }
+    // Each stored level is the texture's level of the same index.
+    for m in 0..first.mip_levels {
+        let (_, level_side) = first.level(m).ok_or_else(|| {
+            Error::BadInput("an impostor record's levels do not match its size".into())
+        })?;
+        if level_side != (side >> m).max(1) {
+            return Err(Error::BadInput(format!(
+                "the impostor frames of {} px do not halve evenly down to level {m}: bake with a power-of-two impostor_resolution",
+                first.resolution
+            )));
+        }
+    }
+    Ok(side)
+}
+
+/// The albedo and normal-depth atlases of `side`² with `list`'s impostors written in, one
+/// layer each, and their bytes.
+fn upload_atlases(
+    ctx: &GpuContext,
+    list: &[&Impostor],
+    side: u32,
+) -> Result<(wgpu::Texture, wgpu::Texture, u64)> {
+    let n = list.len();
+    let first = list[0];
+    let make = |label: &str, format: wgpu::TextureFormat| {
+        ctx.checked("allocating the impostor atlases", || {
+            ctx.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width: side,
+                    height: side,
+                    depth_or_array_layers: n as u32,
+                },
+                mip_level_count: first.mip_levels,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            })
+        })
+    };
+    let albedo = make("impostor albedo", wgpu::TextureFormat::Rgba8UnormSrgb)?;
+    let normal = make("impostor normal depth", wgpu::TextureFormat::Rgba8Unorm)?;
+    let mut bytes = 0u64;
+    for (layer, imp) in list.iter().enumerate() {
+        for m in 0..imp.mip_levels {
+            let Some((at, s)) = imp.level(m) else {
+                continue;
+            };
+            let len = 4 * (s as usize) * (s as usize);
+            for (texture, data) in [(&albedo, &imp.albedo), (&normal, &imp.normal_depth)] {
+                let level = data.get(at..at + len).ok_or_else(|| {
+                    Error::BadInput(format!(
+                        "the impostor of species {layer} is shorter than its levels: bake the scene again"
+                    ))
+                })?;
+                crate::render::pipelines::write_rgba8(
+                    &ctx.queue,
+                    texture,
+                    m,
+                    UVec3::new(0, 0, layer as u32),
+                    level,
+                    UVec3::new(s, s, 1),
+                );
+                bytes += len as u64;
+            }
+        }
+    }
+    Ok((albedo, normal, bytes))
+}
+
 impl ImpostorAssets {
     /// Drops the pipeline built so far.
     pub fn forget_pipeline(&mut self) {
@@ -49,96 +163,10 @@ impl ImpostorAssets {
     /// bake has none or not one per species.
     pub fn new(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
         let n = world.species.len();
-        let mut by_species: Vec<Option<&Impostor>> = vec![None; n];
-        for imp in &baked.impostors {
-            if let Some(slot) = by_species.get_mut(imp.species as usize) {
-                *slot = Some(imp);
-            }
-        }
-        let Some(Some(first)) = by_species.first().copied() else {
-            return Err(Error::BadInput(
-                "this bake has no octahedral impostors: set `[bake] impostor_frames` (e.g. 12) in the scene file and bake again".into(),
-            ));
-        };
-        let mut list = Vec::with_capacity(n);
-        for (sp, imp) in by_species.iter().enumerate() {
-            let imp = imp.ok_or_else(|| {
-                Error::BadInput(format!(
-                    "the bake has no impostor for species {sp}: bake the scene again"
-                ))
-            })?;
-            if !same_layout(first, imp) {
-                return Err(Error::BadInput(format!(
-                    "the impostor of species {sp} has another layout than species 0's: bake the scene again"
-                )));
-            }
-            list.push(imp);
-        }
-        let side = first.frames * first.resolution;
-        let limits = ctx.device.limits();
-        if side > limits.max_texture_dimension_2d || n as u32 > limits.max_texture_array_layers {
-            return Err(Error::BadInput(format!(
-                "the impostor atlases need {n} layers of {side}² but this GPU allows {} of {}²; bake with fewer impostor frames or a smaller impostor_resolution",
-                limits.max_texture_array_layers, limits.max_texture_dimension_2d
-            )));
-        }
-        // Each stored level is the texture's level of the same index.
-        for m in 0..first.mip_levels {
-            let (_, level_side) = first.level(m).ok_or_else(|| {
-                Error::BadInput("an impostor record's levels do not match its size".into())
-            })?;
-            if level_side != (side >> m).max(1) {
-                return Err(Error::BadInput(format!(
-                    "the impostor frames of {} px do not halve evenly down to level {m}: bake with a power-of-two impostor_resolution",
-                    first.resolution
-                )));
-            }
-        }
-        let make = |label: &str, format: wgpu::TextureFormat| {
-            ctx.checked("allocating the impostor atlases", || {
-                ctx.device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: wgpu::Extent3d {
-                        width: side,
-                        height: side,
-                        depth_or_array_layers: n as u32,
-                    },
-                    mip_level_count: first.mip_levels,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                    view_formats: &[],
-                })
-            })
-        };
-        let albedo = make("impostor albedo", wgpu::TextureFormat::Rgba8UnormSrgb)?;
-        let normal = make("impostor normal depth", wgpu::TextureFormat::Rgba8Unorm)?;
-        let mut bytes = 0u64;
-        for (layer, imp) in list.iter().enumerate() {
-            for m in 0..imp.mip_levels {
-                let Some((at, s)) = imp.level(m) else {
-                    continue;
-                };
-                let len = 4 * (s as usize) * (s as usize);
-                for (texture, data) in [(&albedo, &imp.albedo), (&normal, &imp.normal_depth)] {
-                    let level = data.get(at..at + len).ok_or_else(|| {
-                        Error::BadInput(format!(
-                            "the impostor of species {layer} is shorter than its levels: bake the scene again"
-                        ))
-                    })?;
-                    crate::render::pipelines::write_rgba8(
-                        &ctx.queue,
-                        texture,
-                        m,
-                        UVec3::new(0, 0, layer as u32),
-                        level,
-                        UVec3::new(s, s, 1),
-                    );
-                    bytes += len as u64;
-                }
-            }
-        }
+        let list = impostors_by_species(baked, n)?;
+        let first = list[0];
+        let side = atlas_side(ctx, first, n)?;
+        let (albedo, normal, bytes) = upload_atlases(ctx, &list, side)?;
         let array = |t: &wgpu::Texture| {
             t.create_view(&wgpu::TextureViewDescriptor {
                 dimension: Some(wgpu::TextureViewDimension::D2Array),

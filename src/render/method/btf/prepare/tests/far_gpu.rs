@@ -106,36 +106,67 @@ fn weight_of(index: [u32; 3], weight: [f32; 3], i: u32) -> f32 {
 #[test]
 fn the_gpu_builds_the_far_trees_records_the_cpu_would_back_to_front() {
     // A crowd 90 to 400 m away: every tree past the tree level's fade band.
-    gpu_against_cpu(90.0, false, false, true, u64::MAX, false, None, false);
+    gpu_against_cpu(FarCase {
+        z_min: 90.0,
+        ..Default::default()
+    });
 }
 
 #[test]
 fn near_trees_made_on_the_cpu_are_sorted_with_the_far_ones() {
     // From 4 m: trees at every level, fading, the near ones' billboards made on the
     // CPU and sorted with the far ones' on the GPU.
-    gpu_against_cpu(4.0, true, false, true, u64::MAX, false, None, false);
+    gpu_against_cpu(FarCase {
+        z_min: 4.0,
+        near: true,
+        ..Default::default()
+    });
 }
 
 #[test]
 fn near_trees_expanded_on_the_gpu_are_what_the_cpu_would_make() {
     // The same, the near trees' billboards expanded and shaded on the GPU: their parts'
     // cube maps read towards the sun in each part's frame, and the parents' factors.
-    gpu_against_cpu(4.0, true, true, true, u64::MAX, false, None, false);
+    gpu_against_cpu(FarCase {
+        z_min: 4.0,
+        near: true,
+        gpu_near: true,
+        ..Default::default()
+    });
     // And without cube maps (every factor 1), with the level overlay (a main-branch
     // draw's twigs in the main branch's colour).
-    gpu_against_cpu(4.0, true, true, false, u64::MAX, true, None, false);
+    gpu_against_cpu(FarCase {
+        z_min: 4.0,
+        near: true,
+        gpu_near: true,
+        vcm: false,
+        overlay: true,
+        ..Default::default()
+    });
 }
 
 #[test]
 fn record_buffers_a_larger_frame_grew_are_given_back_and_the_frame_stays_right() {
-    gpu_against_cpu(4.0, true, true, true, u64::MAX, false, None, true);
+    gpu_against_cpu(FarCase {
+        z_min: 4.0,
+        near: true,
+        gpu_near: true,
+        shrink: true,
+        ..Default::default()
+    });
 }
 
 #[test]
 fn past_the_gpus_room_the_farther_near_trees_billboards_are_made_on_the_cpu() {
     // Room for some of the near trees' billboards only: the nearest trees' go to the
     // GPU, the others' are made on the CPU, and together they are the CPU's frame.
-    gpu_against_cpu(4.0, true, true, true, 300, false, None, false);
+    gpu_against_cpu(FarCase {
+        z_min: 4.0,
+        near: true,
+        gpu_near: true,
+        budget: 300,
+        ..Default::default()
+    });
 }
 
 #[test]
@@ -143,27 +174,55 @@ fn near_slots_past_one_bindings_room_go_to_a_second_binding() {
     // A first binding of 100 slots (lavapipe's holds 524,288 records, which a frame of
     // 100,000 trees at 1280x720 passes): the next 100 go to the second, the farther
     // near trees' billboards to the CPU, and together they are the CPU's frame.
-    gpu_against_cpu(4.0, true, true, true, 200, false, Some(100), false);
+    gpu_against_cpu(FarCase {
+        z_min: 4.0,
+        near: true,
+        gpu_near: true,
+        budget: 200,
+        near_room: Some(100),
+        ..Default::default()
+    });
 }
 
-/// Trees from `z_min` to 400 m ahead; the GPU's billboards, back to front, are the
-/// CPU's (`near`: some trees are near; `gpu_near`: their billboards are expanded on the
-/// GPU, at most `budget` slots of them; `vcm`: with cube maps of random opacity;
-/// `overlay`: tinted by level; `shrink`: the record buffers grown by a larger frame
-/// before, given back by this one).
-#[allow(clippy::too_many_arguments)]
-fn gpu_against_cpu(
+/// What a [`gpu_against_cpu`] case varies.
+#[derive(Clone, Copy, Debug)]
+struct FarCase {
+    /// The trees stand from `z_min` to 400 m ahead.
     z_min: f32,
+    /// Some trees are near.
     near: bool,
+    /// The near trees' billboards are expanded on the GPU, at most `budget` slots of them.
     gpu_near: bool,
-    vcm: bool,
     budget: u64,
+    /// With cube maps of random opacity.
+    vcm: bool,
+    /// Tinted by level.
     overlay: bool,
+    /// The room of the GPU's first binding of near slots, when not the device's.
     near_room: Option<u64>,
+    /// The record buffers grown by a larger frame before, given back by this one.
     shrink: bool,
-) {
-    // The tree level at 66 views and 6 lights, as the default bake; trees of mixed yaw
-    // and scale.
+}
+
+impl Default for FarCase {
+    /// Trees from 90 m, none near, with cube maps, no budget, no overlay.
+    fn default() -> Self {
+        FarCase {
+            z_min: 90.0,
+            near: false,
+            gpu_near: false,
+            budget: u64::MAX,
+            vcm: true,
+            overlay: false,
+            near_room: None,
+            shrink: false,
+        }
+    }
+}
+
+/// The scene of [`gpu_against_cpu`] (`vcm`: with cube maps of random opacity).
+fn far_scene(vcm: bool) -> BtfScene {
+    // The tree level at 66 views and 6 lights, as the default bake.
     let mut scene = scene();
     scene.views.tree = DirectionSet::with_count(66).unwrap();
     scene.views.branch = DirectionSet::with_count(18).unwrap();
@@ -178,6 +237,11 @@ fn gpu_against_cpu(
             300,
         ));
     }
+    scene
+}
+
+/// 300 trees of mixed yaw and scale from `z_min` to 400 m ahead, denser near the camera.
+fn crowd(z_min: f32) -> Vec<TreeGpu> {
     let mut trees = Vec::new();
     let mut rng = 7u32;
     let mut next = || {
@@ -197,6 +261,24 @@ fn gpu_against_cpu(
             tint: [next(), next(), next(), 1.0],
         });
     }
+    trees
+}
+
+/// Trees from `case.z_min` to 400 m ahead; the GPU's billboards, back to front, are the
+/// CPU's (see [`FarCase`]).
+fn gpu_against_cpu(case: FarCase) {
+    let FarCase {
+        z_min,
+        near,
+        gpu_near,
+        budget,
+        vcm,
+        overlay,
+        near_room,
+        shrink,
+    } = case;
+    let mut scene = far_scene(vcm);
+    let trees = crowd(z_min);
     let camera = Camera::look_at(Vec3::new(0.0, 6.0, -2.0), Vec3::new(0.0, 0.0, 200.0), 60.0);
     let frustum = camera.frustum(16.0 / 9.0);
     let view = PrepareView {
@@ -250,9 +332,6 @@ fn gpu_against_cpu(
             "record {k} is nearer than the next"
         );
     }
-    let close = |a: [f32; 3], b: [f32; 3], tol: f32| {
-        (Vec3::from(a) - Vec3::from(b)).abs().max_element() <= tol
-    };
     for (k, g) in gpu.iter().enumerate() {
         // Its match among the CPU's records (the same object seen the same way).
         let m = cpu
@@ -265,60 +344,69 @@ fn gpu_against_cpu(
             })
             .unwrap_or_else(|| panic!("record {k} is not the CPU's: {g:?}"));
         let c = cpu.swap_remove(m);
-        assert!(
-            close(g.center, c.center, 1e-3),
-            "record {k}: centre {g:?} against {c:?}"
-        );
-        assert!((g.radius - c.radius).abs() < 1e-4);
-        assert!(
-            close(g.plane_right, c.plane_right, 1e-4),
-            "record {k}: {g:?} against {c:?}"
-        );
-        assert!(close(g.plane_up, c.plane_up, 1e-4));
-        assert!(close(g.obj_right, c.obj_right, 1e-4));
-        assert!(close(g.obj_up, c.obj_up, 1e-4));
-        // The same weight on each of `n` directions, whatever the order of the three.
-        let same_weights =
-            |what: &str, n: u32, g: ([u32; 3], [f32; 3]), c: ([u32; 3], [f32; 3])| {
-                for i in 0..n {
-                    let (wg, wc) = (weight_of(g.0, g.1, i), weight_of(c.0, c.1, i));
-                    assert!(
-                        (wg - wc).abs() < 1e-3,
-                        "record {k} {what} {i}: {wg} against {wc}"
-                    );
-                }
-            };
-        same_weights(
-            "view",
-            66,
-            (g.view_index, g.view_weight),
-            (c.view_index, c.view_weight),
-        );
-        same_weights(
-            "light",
-            6,
-            (g.light_index, g.light_weight),
-            (c.light_index, c.light_weight),
-        );
-        assert_eq!(
-            (g.layer_base, g.view_count, g.light_count, g.planes, g.mode),
-            (c.layer_base, c.view_count, c.light_count, c.planes, c.mode)
-        );
-        assert_eq!((g.opacity, g.tint), (c.opacity, c.tint));
-        assert_eq!(g.light_blend, c.light_blend, "record {k}: light blend");
-        assert!(close(g.vcm_box_origin, c.vcm_box_origin, 1e-5));
-        assert!(close(g.vcm_box_scale, c.vcm_box_scale, 1e-5));
-        let factors = |r: &BillboardGpu| {
-            let mut v = r.vcm_direct.concat();
-            v.extend(r.vcm_sky.concat());
-            v.extend([r.parent_direct, r.parent_sky]);
-            v
-        };
-        for (i, (fg, fc)) in factors(g).into_iter().zip(factors(&c)).enumerate() {
+        assert_same_record(k, g, &c);
+    }
+}
+
+/// Whether `a` and `b` differ by at most `tol` in each coordinate.
+fn close(a: [f32; 3], b: [f32; 3], tol: f32) -> bool {
+    (Vec3::from(a) - Vec3::from(b)).abs().max_element() <= tol
+}
+
+/// The GPU's record `k`, `g`, is the CPU's `c`.
+fn assert_same_record(k: usize, g: &BillboardGpu, c: &BillboardGpu) {
+    assert!(
+        close(g.center, c.center, 1e-3),
+        "record {k}: centre {g:?} against {c:?}"
+    );
+    assert!((g.radius - c.radius).abs() < 1e-4);
+    assert!(
+        close(g.plane_right, c.plane_right, 1e-4),
+        "record {k}: {g:?} against {c:?}"
+    );
+    assert!(close(g.plane_up, c.plane_up, 1e-4));
+    assert!(close(g.obj_right, c.obj_right, 1e-4));
+    assert!(close(g.obj_up, c.obj_up, 1e-4));
+    // The same weight on each of `n` directions, whatever the order of the three.
+    let same_weights = |what: &str, n: u32, g: ([u32; 3], [f32; 3]), c: ([u32; 3], [f32; 3])| {
+        for i in 0..n {
+            let (wg, wc) = (weight_of(g.0, g.1, i), weight_of(c.0, c.1, i));
             assert!(
-                (fg - fc).abs() < 1e-3,
-                "record {k} factor {i}: {fg} against {fc}"
+                (wg - wc).abs() < 1e-3,
+                "record {k} {what} {i}: {wg} against {wc}"
             );
         }
+    };
+    same_weights(
+        "view",
+        66,
+        (g.view_index, g.view_weight),
+        (c.view_index, c.view_weight),
+    );
+    same_weights(
+        "light",
+        6,
+        (g.light_index, g.light_weight),
+        (c.light_index, c.light_weight),
+    );
+    assert_eq!(
+        (g.layer_base, g.view_count, g.light_count, g.planes, g.mode),
+        (c.layer_base, c.view_count, c.light_count, c.planes, c.mode)
+    );
+    assert_eq!((g.opacity, g.tint), (c.opacity, c.tint));
+    assert_eq!(g.light_blend, c.light_blend, "record {k}: light blend");
+    assert!(close(g.vcm_box_origin, c.vcm_box_origin, 1e-5));
+    assert!(close(g.vcm_box_scale, c.vcm_box_scale, 1e-5));
+    let factors = |r: &BillboardGpu| {
+        let mut v = r.vcm_direct.concat();
+        v.extend(r.vcm_sky.concat());
+        v.extend([r.parent_direct, r.parent_sky]);
+        v
+    };
+    for (i, (fg, fc)) in factors(g).into_iter().zip(factors(c)).enumerate() {
+        assert!(
+            (fg - fc).abs() < 1e-3,
+            "record {k} factor {i}: {fg} against {fc}"
+        );
     }
 }
