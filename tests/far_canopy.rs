@@ -42,13 +42,25 @@ fn three(
     frame: &FrameDesc,
     canopy_px: f32,
 ) -> (RgbaImage, RgbaImage, RgbaImage, u32) {
+    let off = without_canopy(ctx, renderer, frame);
+    let (on, tiles) = with_canopy(ctx, renderer, frame, canopy_px);
+    let bare = without_trees(ctx, renderer, frame);
+    (off, on, bare, tiles)
+}
+
+/// The frame with the canopy off: a billboard for every tree.
+fn without_canopy(ctx: &GpuContext, renderer: &mut Renderer, frame: &FrameDesc) -> RgbaImage {
     let mut f = *frame;
     f.btf.far_canopy = false;
-    let off = renderer.render_image(ctx, &f, SIZE.0, SIZE.1, 1).unwrap().0;
-    let (on, tiles) = with_canopy(ctx, renderer, frame, canopy_px);
+    renderer.render_image(ctx, &f, SIZE.0, SIZE.1, 1).unwrap().0
+}
+
+/// The frame without trees (nor canopy): the ground alone.
+fn without_trees(ctx: &GpuContext, renderer: &mut Renderer, frame: &FrameDesc) -> RgbaImage {
+    let mut f = *frame;
+    f.btf.far_canopy = false;
     f.trees = false;
-    let bare = renderer.render_image(ctx, &f, SIZE.0, SIZE.1, 1).unwrap().0;
-    (off, on, bare, tiles)
+    renderer.render_image(ctx, &f, SIZE.0, SIZE.1, 1).unwrap().0
 }
 
 /// The frame with the canopy on past `canopy_px`, and the canopy's tiles drawn.
@@ -111,22 +123,11 @@ fn the_canopy_stands_for_its_trees_from_above_and_from_the_side() {
     // Both views with trees, then both without (each switch of the trees on or off builds
     // the ground's shadow maps again).
     let with_trees = frames.map(|frame| {
-        let mut f = frame;
-        f.btf.far_canopy = false;
-        let off = renderer
-            .render_image(&ctx, &f, SIZE.0, SIZE.1, 1)
-            .unwrap()
-            .0;
+        let off = without_canopy(&ctx, &mut renderer, &frame);
         let (on, tiles) = with_canopy(&ctx, &mut renderer, &frame, 64.0);
         (off, on, tiles)
     });
-    let bares = frames.map(|mut f| {
-        f.trees = false;
-        renderer
-            .render_image(&ctx, &f, SIZE.0, SIZE.1, 1)
-            .unwrap()
-            .0
-    });
+    let bares = frames.map(|f| without_trees(&ctx, &mut renderer, &f));
     for (k, ((off, on, tiles), bare)) in with_trees.into_iter().zip(bares).enumerate() {
         assert!(tiles > 0, "no canopy drawn");
         let trees = mask(&off, &bare);
@@ -171,12 +172,7 @@ fn a_sweep_across_the_switch_leaves_no_gap_and_draws_nothing_twice() {
     // The frames without the canopy and without trees are the same at every `px`: drawn
     // once, the one without trees last (each switch of the trees on or off builds the
     // ground's shadow maps again).
-    let mut f = frame;
-    f.btf.far_canopy = false;
-    let off = renderer
-        .render_image(&ctx, &f, SIZE.0, SIZE.1, 1)
-        .unwrap()
-        .0;
+    let off = without_canopy(&ctx, &mut renderer, &frame);
     let sweep: Vec<(f32, RgbaImage, u32)> = [14.0, 18.0, 20.0, 22.0, 24.0, 28.0, 40.0]
         .into_iter()
         .map(|px| {
@@ -184,11 +180,7 @@ fn a_sweep_across_the_switch_leaves_no_gap_and_draws_nothing_twice() {
             (px, on, tiles)
         })
         .collect();
-    f.trees = false;
-    let bare = renderer
-        .render_image(&ctx, &f, SIZE.0, SIZE.1, 1)
-        .unwrap()
-        .0;
+    let bare = without_trees(&ctx, &mut renderer, &frame);
     let trees = mask(&off, &bare);
     let base = trees.iter().filter(|&&m| m).count() as f32;
     let base_lum = luminance(&off, &trees);
