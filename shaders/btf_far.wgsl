@@ -1,17 +1,16 @@
-// (Over 800 lines: every far-tree compute pass shares this one set of bindings and the
-// record layout `far.rs` mirrors, so they stay in one file.)
 // The `btf` method's far trees on the GPU: every visible tree far enough to be drawn at the
 // tree level alone (no cross-fade) gets its billboard record here, as `Pusher::push` in
 // src/render/method/btf/prepare/ makes it on the CPU: the sphere-box frustum test, the 3
 // nearest view and light samples with their weights (descent through the subdivided
-// octahedron, `DirectionSet::blend` in src/sphere/blend.rs), image-weight culling, the light gain,
-// the VCM factors read when the sun moved. Then a bitonic sort puts them back to front and
-// a gather copies them in that order for one indirect draw. `billboard_record.wgsl` is
-// prepended.
+// octahedron, `DirectionSet::blend` in src/sphere/blend.rs), image-weight culling, the
+// light gain, the VCM factors read when the sun moved. Then a bitonic sort puts them back
+// to front and a gather copies them in that order for one indirect draw.
+// `billboard_record.wgsl` is prepended, `btf_far_canopy.wgsl` appended.
 //
-// Over 800 lines: the entry points share the tree records, the tables and the sort keys
-// declared here, and WGSL has no include to split them across files without prepending
-// each part to every module (as `billboard_record.wgsl` is).
+// Over 800 lines: every entry point shares the tree records, the tables, the sort keys and
+// the bindings declared here (mirrored by src/render/method/btf/far/gpu_types.rs), and
+// WGSL has no include to split them across files without prepending each part to every
+// module (as `billboard_record.wgsl` is).
 
 // One tree instance: `TreeGpu`'s model and tint, its species, its bounds in the world (7
 // rows of `tables`, from `params.trees_at`).
