@@ -47,6 +47,29 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
         pts[k] = q;
         texs[k] = t;
     }
+    let s = shade_billboard(b, pts, texs, in.world);
+    count_fragment(in.clip, s.reads);
+    return s.color;
+}
+
+// A billboard's colour at one point, premultiplied, with the images read for it: `pts` and
+// `texs` are each view sample's point on the billboard (object frame, radii; w 0 where
+// that view's plane is missed) and its image coordinates with their screen gradients;
+// `world` is the point in the world (for the fog). The fragment pass and the tile
+// compositor (`compositor.wgsl`) both shade through it.
+struct Shaded {
+    color: vec4<f32>,
+    reads: u32,
+}
+
+fn shade_billboard(
+    b: Billboard,
+    pts_in: array<vec4<f32>, 3>,
+    texs_in: array<ViewTexcoords, 3>,
+    world: vec3<f32>,
+) -> Shaded {
+    let pts = pts_in;
+    let texs = texs_in;
     let lights = b.light_count;
     let base = b.layer_base;
     var color = vec3<f32>(0.0);
@@ -94,7 +117,6 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
         alpha += wv * amb.a;
         shadow += wv * amb.a * f.x;
     }
-    count_fragment(in.clip, reads);
     if b.mode == MODE_SUN_FACTOR {
         color = vec3<f32>(shadow);
     } else if b.mode == MODE_TINT {
@@ -102,6 +124,6 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
     } else {
         color *= b.tint;
     }
-    let dist = length(frame.camera_pos - in.world);
-    return vec4<f32>(fog_and_exposure(color, alpha, dist), alpha) * b.opacity;
+    let dist = length(frame.camera_pos - world);
+    return Shaded(vec4<f32>(fog_and_exposure(color, alpha, dist), alpha) * b.opacity, reads);
 }

@@ -6,6 +6,7 @@ mod common;
 mod btf;
 mod cli;
 mod cli_bake;
+mod compositor;
 mod compress;
 mod far_canopy;
 mod frame_memory;

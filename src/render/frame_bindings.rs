@@ -104,7 +104,8 @@ impl DepthTarget {
                 "depth",
                 glam::UVec3::new(width, height, 1),
                 DEPTH_FORMAT,
-                wgpu::TextureUsages::RENDER_ATTACHMENT,
+                // Read by the tile compositor.
+                wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
             )
         })?;
         Ok(Self {

@@ -370,6 +370,7 @@ impl Renderer {
             && let Some(layer) = &self.layer
         {
             let cx = AfterCx {
+                ctx,
                 frame_group: &bindings.bind_group,
                 depth,
                 layer,

@@ -117,7 +117,10 @@ impl TreeLayer {
                     "trees' layer",
                     glam::UVec3::new(width, height, 1),
                     LAYER_FORMAT,
-                    wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+                    // Written by the tile compositor too.
+                    wgpu::TextureUsages::RENDER_ATTACHMENT
+                        | wgpu::TextureUsages::TEXTURE_BINDING
+                        | wgpu::TextureUsages::STORAGE_BINDING,
                 )
             })?;
             let view = texture.create_view(&Default::default());
@@ -207,6 +210,11 @@ impl TreeLayer {
             occlusion_query_set: None,
             multiview_mask: None,
         }))
+    }
+
+    /// The layer's texture (None before [`Self::ensure`]).
+    pub fn view(&self) -> Option<&wgpu::TextureView> {
+        self.target.as_ref().map(|t| &t.view)
     }
 
     /// Gives the pixels the layer has made opaque the near plane's depth.

@@ -288,6 +288,21 @@ pub struct BtfReport {
     pub vcm_resolution: Option<u32>,
     #[serde(flatten)]
     pub sun_update: SunUpdate,
+    /// What the tile compositor did in the last frame (absent where it was off).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub compositor: Option<CompositorReport>,
+}
+
+/// The tile compositor's counts in a [`BtfReport`], per pixel of the frame.
+#[derive(Clone, Debug, Serialize)]
+pub struct CompositorReport {
+    /// Billboard layers shaded a pixel.
+    pub layers_per_pixel: f64,
+    /// Billboards tested a pixel (their rectangle holds it).
+    pub tests_per_pixel: f64,
+    /// Share of the pixels that stopped (opaque) before their tile's list ended.
+    pub pixels_stopped: f64,
+    pub tiles: u32,
 }
 
 impl FrameReport {
@@ -311,6 +326,20 @@ impl FrameReport {
             vcm_bytes: renderer.vcm_bytes(),
             vcm_resolution: renderer.vcm_resolution(),
             sun_update: m.sun_update.unwrap_or_default(),
+            compositor: frame
+                .btf
+                .compositor
+                .then(|| renderer.compositor_counters(ctx).ok().flatten())
+                .flatten()
+                .map(|c| {
+                    let pixels = f64::from(m.image.width() * m.image.height()).max(1.0);
+                    CompositorReport {
+                        layers_per_pixel: f64::from(c.layers) / pixels,
+                        tests_per_pixel: f64::from(c.tests) / pixels,
+                        pixels_stopped: f64::from(c.pixels_stopped) / pixels,
+                        tiles: c.tiles,
+                    }
+                }),
         });
         Self {
             method: frame.method.name(),

@@ -12,6 +12,7 @@
 //! renderer in `reference.rs`.
 
 pub mod camera;
+pub mod compositor;
 pub mod consts;
 pub mod context;
 pub mod frame;
@@ -240,6 +241,18 @@ impl Renderer {
     /// GPU bytes of the btf method's far-tree buffers (0 until the GPU builds far trees).
     pub fn far_bytes(&self) -> u64 {
         self.bake.btf.as_ref().map_or(0, |b| b.far_bytes())
+    }
+
+    /// What the tile compositor counted in the last frame that went through it (blocking;
+    /// None before any).
+    pub fn compositor_counters(
+        &self,
+        ctx: &GpuContext,
+    ) -> Result<Option<compositor::CompositorCounters>> {
+        match self.bake.btf.as_ref().and_then(|b| b.compositor()) {
+            Some(c) => c.read_counters(ctx).map(Some),
+            None => Ok(None),
+        }
     }
 
     /// GPU bytes of the btf method's far canopy (0 before it is first drawn).

@@ -253,7 +253,8 @@ impl Layouts {
         let frame = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame"),
             entries: &[
-                uniform_entry(0, vf),
+                // Seen by the tile compositor's compute passes too.
+                uniform_entry(0, vf | wgpu::ShaderStages::COMPUTE),
                 texture_entry(
                     1,
                     wgpu::TextureSampleType::Depth,
@@ -273,7 +274,7 @@ impl Layouts {
                 // The overdraw view's counters (src/render/overdraw.rs).
                 buffer_entry(
                     8,
-                    wgpu::ShaderStages::FRAGMENT,
+                    wgpu::ShaderStages::FRAGMENT | wgpu::ShaderStages::COMPUTE,
                     wgpu::BufferBindingType::Storage { read_only: false },
                 ),
             ],

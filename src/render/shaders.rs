@@ -44,6 +44,7 @@ const BLIT: &str = include_str!("../../shaders/blit.wgsl");
 const IMPOSTOR: &str = include_str!("../../shaders/impostor.wgsl");
 const OVERDRAW: &str = include_str!("../../shaders/overdraw.wgsl");
 const LAYER: &str = include_str!("../../shaders/layer.wgsl");
+const COMPOSITOR: &str = include_str!("../../shaders/compositor.wgsl");
 
 /// A mesh pass's module: frame uniforms, instancing, then the pass's own file.
 fn with_instancing(pass: &str) -> String {
@@ -91,6 +92,7 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("blit", blit()),
         ("overdraw", overdraw()),
         ("layer", layer()),
+        ("compositor", compositor()),
     ]
 }
 
@@ -113,6 +115,12 @@ pub fn sky() -> String {
 
 pub fn btf() -> String {
     with_billboards(BTF)
+}
+
+/// The tile compositor (src/render/compositor.rs): the btf pass's billboards and their
+/// shading, then its file.
+pub fn compositor() -> String {
+    with_billboards(&format!("{BTF}\n{COMPOSITOR}"))
 }
 
 /// The `btf` method's far trees, built, sorted and gathered in compute passes: the

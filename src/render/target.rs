@@ -188,6 +188,31 @@ pub fn downsample(img: &RgbaImage, factor: u32) -> RgbaImage {
     })
 }
 
+/// The first `size` bytes of `buffer` (which allows copies from it), blocking.
+pub(crate) fn read_buffer(
+    ctx: &super::GpuContext,
+    buffer: &wgpu::Buffer,
+    size: u64,
+) -> crate::Result<Vec<u8>> {
+    if size == 0 {
+        return Ok(Vec::new());
+    }
+    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("readback"),
+        });
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+    ctx.queue.submit([encoder.finish()]);
+    map_read(ctx, &staging)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -148,6 +148,7 @@ pub fn prepare(
         billboards: records.len() as u32,
         far: false,
         layer_batches: 0,
+        compositor: None,
         records,
         stats,
     }

@@ -225,6 +225,7 @@ pub struct DrawCx<'a> {
 /// What the core lends a method after the main pass: the frame's depth and the trees'
 /// layer, to draw blended trees front to back into ([`crate::render::layer`]).
 pub struct AfterCx<'a> {
+    pub ctx: &'a GpuContext,
     pub frame_group: &'a wgpu::BindGroup,
     pub depth: &'a crate::render::frame_bindings::DepthTarget,
     pub layer: &'a crate::render::layer::TreeLayer,

@@ -4,6 +4,7 @@
 
 use super::settings::BtfSettings;
 use super::{BtfAssets, BtfFrame, far};
+use crate::render::compositor::CompositorInput;
 use crate::render::frame::FrameStats;
 use crate::render::method::interface::AfterCx;
 
@@ -26,6 +27,37 @@ impl BtfAssets {
             .as_ref()
             .and_then(Option::as_ref)
             .filter(|_| bf.far);
+        if let Some(stop_below) = bf.compositor
+            && let Some(c) = &self.compositor
+        {
+            let (records, count) = match far.and_then(|f| f.compositor_records()) {
+                Some((group, buffer, word)) => (group, (buffer, word)),
+                None => (
+                    &self.bind_group,
+                    (c.set_cpu_count(cx.ctx, bf.billboards), 0),
+                ),
+            };
+            let max_records = match far {
+                Some(f) => f.sorted_capacity(),
+                None => u64::from(bf.billboards),
+            };
+            let input = CompositorInput {
+                records,
+                count,
+                max_records: max_records.min(u64::from(u32::MAX)) as u32,
+            };
+            c.encode(
+                cx.ctx,
+                encoder,
+                cx.frame_group,
+                &input,
+                (cx.depth, cx.layer),
+                (cx.target, cx.format),
+                stop_below,
+                cx.spans,
+            );
+            return;
+        }
         let span = cx.spans.open("billboards");
         for k in 0..batches {
             let Some(mut pass) = cx.layer.batch_pass(

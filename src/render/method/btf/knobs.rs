@@ -112,6 +112,23 @@ pub static KNOBS: &[Knob] = &[
         |d, v| d.btf.front_to_back = v,
     ),
     Knob::toggle(
+        "compositor",
+        "billboards composited by tiles",
+        "composite the billboards front to back in compute, one workgroup per 16x16-pixel tile, stopping where a pixel is opaque; off: the rasteriser draws them",
+        |d| d.btf.compositor,
+        |d, v| d.btf.compositor = v,
+    ),
+    Knob::number(
+        "stop_below",
+        "compositor stops below",
+        "with the compositor: a pixel stops where what is behind it would add less than this share of its colour (0: never)",
+        (0.0, 0.5),
+        |d| d.btf.stop_below,
+        |d, v| d.btf.stop_below = v,
+    )
+    .slider(0.0, 0.05, false)
+    .when(|d| d.btf.compositor),
+    Knob::toggle(
         "far_canopy",
         "far canopy",
         "past the distance where a typical crown is narrower than canopy_px pixels, draw the forest as one layer over the ground (its trees' colours, seen from above) instead of a billboard per tree",

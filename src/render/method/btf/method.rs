@@ -352,6 +352,9 @@ impl RenderMethod for BtfMethod {
         self.pipeline = billboard_pipeline(bake, ctx, layouts, format);
         self.layer_pipeline = layer_pipeline(bake, ctx, layouts);
         if let Some(b) = bake.btf.as_mut() {
+            if let Some(bf) = &self.frame {
+                b.ensure_compositor(ctx, &layouts.frame, bf);
+            }
             b.ensure_canopy_pipeline(&ctx.device, &layouts.frame, format);
         }
         Ok(())

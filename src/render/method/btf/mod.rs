@@ -80,6 +80,8 @@ pub struct BtfAssets {
     /// The forest seen from above, for the far canopy, until a frame wants it on the GPU.
     canopy_map: Option<far_canopy::map::CanopyMap>,
     canopy: Option<far_canopy::CanopyGpu>,
+    /// The tile compositor, built the first time a frame asks for it.
+    compositor: Option<crate::render::compositor::Compositor>,
     /// Bytes of the texture array, mipmaps included.
     pub bytes: u64,
 }
@@ -100,6 +102,7 @@ impl BtfAssets {
         self.pipelines.clear();
         self.opacity_pipeline = None;
         self.layer_pipeline = None;
+        self.compositor = None;
         if let Some(c) = self.canopy.as_mut() {
             c.forget_pipeline();
         }
@@ -221,6 +224,7 @@ impl BtfAssets {
             means,
             canopy_map,
             canopy: None,
+            compositor: None,
             bytes,
         })
     }
@@ -443,6 +447,8 @@ impl BtfAssets {
             Ok(true) => {
                 out.far = true;
                 out.layer_batches = f.layer_batches();
+                out.compositor =
+                    (settings.compositor && out.layer_batches > 0).then_some(settings.stop_below);
                 out.stats.canopy_tiles = canopy_tiles;
                 return Some((out, shade_ms));
             }
@@ -474,8 +480,37 @@ impl BtfAssets {
             request.hybrid,
         );
         out.layer_batches = front_to_back::cpu_layer_batches(request.settings, sorted.len());
+        out.compositor = (request.settings.compositor && out.layer_batches > 0)
+            .then_some(request.settings.stop_below);
         self.upload_sorted(ctx, &sorted, out.layer_batches > 0);
         out
+    }
+
+    /// Builds the tile compositor (once) and makes room in it for `bf`'s billboards, where
+    /// `bf` goes through it.
+    pub fn ensure_compositor(
+        &mut self,
+        ctx: &GpuContext,
+        frame_layout: &wgpu::BindGroupLayout,
+        bf: &BtfFrame,
+    ) {
+        if bf.compositor.is_none() {
+            return;
+        }
+        let layout = &self.layout;
+        let c = self.compositor.get_or_insert_with(|| {
+            crate::render::compositor::Compositor::new(&ctx.device, frame_layout, layout)
+        });
+        let records = match self.far.as_ref().and_then(Option::as_ref) {
+            Some(f) if bf.far => f.sorted_capacity(),
+            _ => u64::from(bf.billboards),
+        };
+        c.reserve(ctx, records);
+    }
+
+    /// The tile compositor (None before a frame asked for it).
+    pub fn compositor(&self) -> Option<&crate::render::compositor::Compositor> {
+        self.compositor.as_ref()
     }
 
     /// Whether this frame's far trees go to the GPU (the renderer then needs no cull).

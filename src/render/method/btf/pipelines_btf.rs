@@ -101,15 +101,25 @@ fn billboard_pipeline(
     )
 }
 
-/// The btf pass's bind group: billboards, view axes, the image atlas and its sampler.
+/// The btf pass's bind group: billboards, view axes, the image atlas and its sampler (seen
+/// by the tile compositor's compute passes too).
 pub(super) fn btf_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    let all = wgpu::ShaderStages::VERTEX_FRAGMENT | wgpu::ShaderStages::COMPUTE;
+    let compute_too = |mut e: wgpu::BindGroupLayoutEntry| {
+        e.visibility |= wgpu::ShaderStages::COMPUTE;
+        e
+    };
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("btf"),
         entries: &[
-            storage_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
-            storage_entry(1, wgpu::ShaderStages::VERTEX_FRAGMENT),
-            texture_entry(2, FILTERABLE, wgpu::TextureViewDimension::D2Array),
-            sampler_entry(3, wgpu::SamplerBindingType::Filtering),
+            storage_entry(0, all),
+            storage_entry(1, all),
+            compute_too(texture_entry(
+                2,
+                FILTERABLE,
+                wgpu::TextureViewDimension::D2Array,
+            )),
+            compute_too(sampler_entry(3, wgpu::SamplerBindingType::Filtering)),
         ],
     })
 }

@@ -82,6 +82,12 @@ pub struct BtfSettings {
     /// opaque the farther ones are skipped ([`crate::render::layer`]); off: back to front
     /// over the frame.
     pub front_to_back: bool,
+    /// The billboards are composited front to back in compute, by screen tiles
+    /// ([`crate::render::compositor`]), instead of rasterised.
+    pub compositor: bool,
+    /// With `compositor`: a pixel stops compositing where it lets through less than this
+    /// (0: never).
+    pub stop_below: f32,
 }
 
 /// The default [`BtfSettings::light_gain`]. Bench, 320x180, 3 frames, mean FLIP against
@@ -118,6 +124,8 @@ impl Default for BtfSettings {
             canopy_px: CANOPY_PX,
             impostor_px: IMPOSTOR_PX,
             front_to_back: false,
+            compositor: false,
+            stop_below: crate::render::compositor::STOP_BELOW,
         }
     }
 }

@@ -312,6 +312,18 @@ impl FarGpu {
         Ok(records)
     }
 
+    /// Records the sorted buffer may hold this frame.
+    pub fn sorted_capacity(&self) -> u64 {
+        self.sorted_slots.min(self.limit)
+    }
+
+    /// The sorted records for the tile compositor: their bind group (the btf pass's), and
+    /// the buffer and word holding their count; None without a frame.
+    pub fn compositor_records(&self) -> Option<(&wgpu::BindGroup, &wgpu::Buffer, u32)> {
+        self.frame.as_ref()?;
+        Some((&self.draw_bind_group, &self.draw_args, 1))
+    }
+
     /// The batches this frame's billboards are drawn in, front to back, into the trees'
     /// layer (0: one draw, back to front over the frame).
     pub fn layer_batches(&self) -> u32 {

@@ -231,9 +231,13 @@ impl FarGpu {
 
 /// The batches the billboards are drawn in for the trees' layer: [`LAYER_BATCHES`] front to
 /// back; one where the draws cannot start past instance 0 (`first_instance` false: indirect
-/// draws without `INDIRECT_FIRST_INSTANCE`); 0 (back to front) without `front_to_back`.
+/// draws without `INDIRECT_FIRST_INSTANCE`); 0 (back to front) without `front_to_back` or
+/// the compositor (which takes them front to back too).
 pub fn layer_batches(settings: &BtfSettings, first_instance: bool) -> u32 {
-    match (settings.front_to_back, first_instance) {
+    match (
+        settings.front_to_back || settings.compositor,
+        first_instance,
+    ) {
         (false, _) => 0,
         (true, true) => LAYER_BATCHES,
         (true, false) => 1,

@@ -4,30 +4,10 @@
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use crate::Result;
 use crate::render::GpuContext;
 use crate::render::timing::MappedRead;
 
-/// The first `size` bytes of `buffer` (which allows copies from it), blocking.
-pub(super) fn read_buffer(ctx: &GpuContext, buffer: &wgpu::Buffer, size: u64) -> Result<Vec<u8>> {
-    if size == 0 {
-        return Ok(Vec::new());
-    }
-    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("far readback"),
-        size,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let mut encoder = ctx
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("far readback"),
-        });
-    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
-    ctx.queue.submit([encoder.finish()]);
-    crate::render::target::map_read(ctx, &staging)
-}
+pub(super) use crate::render::target::read_buffer;
 
 /// The build passes' counts of billboards made (far; near per level), copied out after a
 /// frame and read when the GPU has done it, without stalling (as the frame timer's

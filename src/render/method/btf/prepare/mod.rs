@@ -105,6 +105,9 @@ pub struct BtfFrame {
     /// The billboards are drawn front to back into the trees' layer in this many batches
     /// (0: back to front over the frame, in the main pass).
     pub layer_batches: u32,
+    /// The billboards, front to back, go through the tile compositor instead of batches,
+    /// a pixel stopping below this transmittance (`BtfSettings::stop_below`).
+    pub compositor: Option<f32>,
     pub stats: BtfStats,
 }
 
@@ -584,6 +587,7 @@ impl BtfScene {
             billboards: 0,
             far: false,
             layer_batches: 0,
+            compositor: None,
             records: Vec::new(),
             stats: BtfStats {
                 vcm: self.vcm.is_some() && settings.vcm,
