@@ -47,7 +47,7 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
         pts[k] = q;
         texs[k] = t;
     }
-    let s = shade_billboard(b, pts, texs, in.world);
+    let s = shade_billboard(b, pts, texs, in.world, 3u);
     count_fragment(in.clip, s.reads);
     return s.color;
 }
@@ -55,8 +55,10 @@ fn fs_billboard(in: BillboardOut) -> @location(0) vec4<f32> {
 // A billboard's colour at one point, premultiplied, with the images read for it: `pts` and
 // `texs` are each view sample's point on the billboard (object frame, radii; w 0 where
 // that view's plane is missed) and its image coordinates with their screen gradients;
-// `world` is the point in the world (for the fog). The fragment pass and the tile
-// compositor (`compositor.wgsl`) both shade through it.
+// `world` is the point in the world (for the fog); the first `views` view samples are
+// blended (3: all, the method itself; 1: the first alone, at full weight, the tile
+// compositor's cheap shade behind the layers that decide a pixel). The fragment pass and
+// the tile compositor (`compositor.wgsl`) both shade through it.
 struct Shaded {
     color: vec4<f32>,
     reads: u32,
@@ -67,17 +69,20 @@ fn shade_billboard(
     pts_in: array<vec4<f32>, 3>,
     texs_in: array<ViewTexcoords, 3>,
     world: vec3<f32>,
+    views: u32,
 ) -> Shaded {
     let pts = pts_in;
     let texs = texs_in;
+    let alone = views < 3u;
     let lights = b.light_count;
     let base = b.layer_base;
     var color = vec3<f32>(0.0);
     var alpha = 0.0;
     var shadow = 0.0;
     var reads = 0u;
-    for (var k = 0; k < 3; k++) {
-        let wv = b.view_weight[k];
+    // A loop of `views` turns: a CPU driver runs the turns some invocation takes.
+    for (var k = 0; k < i32(views); k++) {
+        let wv = select(b.view_weight[k], 1.0, alone);
         if wv <= 0.0 || pts[k].w == 0.0 {
             continue;
         }

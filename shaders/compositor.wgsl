@@ -36,6 +36,12 @@ struct CompositorParams {
     count_word: u32,
     // Billboards `rects` holds room for (no more are composited).
     capacity: u32,
+    // Layers are shaded in full while the pixel lets through more than this; behind, by
+    // their heaviest view sample alone.
+    full_above: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
     // Words of bits per tile in `tile_bits` (capacity / 32, rounded up), then of the
     // summary (a bit per word of bits: words / 32, rounded up).
     words: u32,
@@ -226,7 +232,18 @@ fn record_hit(i: u32, rays: PixelRays, depth: f32) -> QuadHit {
 
 // The billboard `b` shaded where the pixel's rays met it (`h`, from `record_hit`): its
 // premultiplied colour and the images read.
-fn shade_hit(b: Billboard, h: QuadHit, rays: PixelRays) -> Shaded {
+fn shade_hit(b_in: Billboard, h: QuadHit, rays: PixelRays, full: bool) -> Shaded {
+    var b = b_in;
+    // The cheap shade: the heaviest view sample first, alone.
+    for (var cheap = !full; cheap; cheap = false) {
+        let w = b.view_weight;
+        var k = select(0u, 1u, w.y > w.x);
+        k = select(k, 2u, w.z > max(w.x, w.y));
+        let first = b.view_index[k];
+        b.view_index[k] = b.view_index.x;
+        b.view_index.x = first;
+        b.view_weight = vec3<f32>(1.0, 0.0, 0.0);
+    }
     let crossed = b.planes == 3u;
     let scale = select(1.0, h.half / b.radius, crossed);
     let p = (h.q.x * b.obj_right + h.q.y * b.obj_up) * scale;
@@ -259,7 +276,7 @@ fn shade_hit(b: Billboard, h: QuadHit, rays: PixelRays) -> Shaded {
         }
     }
     let world = frame.camera_pos + h.q.z * rays.d;
-    return shade_billboard(b, pts, texs, world);
+    return shade_billboard(b, pts, texs, world, select(1u, 3u, full));
 }
 
 var<workgroup> tile_taken: u32;
@@ -332,7 +349,7 @@ fn composite(@builtin(local_invocation_id) local: vec3<u32>) {
                 break;
             }
             let i = hits[k];
-            let l = shade_hit(billboards[i], record_hit(i, rays, depth), rays);
+            let l = shade_hit(billboards[i], record_hit(i, rays, depth), rays, through > cp.full_above);
             layers += 1u;
             count_fragment(vec4<f32>(centre, 0.0, 1.0), l.reads);
             color += through * l.color.rgb;

@@ -29,6 +29,19 @@ pub const TILE: u32 = 16;
 /// would add less than 1/256 of its own colour (below one step of an 8-bit output).
 pub const STOP_BELOW: f32 = 1.0 / 256.0;
 
+/// The default [`CompositorKnobs::full_above`]: every layer in full (measured below).
+pub const FULL_ABOVE: f32 = 0.0;
+
+/// What the compositor's knobs ask of a frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CompositorKnobs {
+    /// A pixel stops where it lets through less than this (0: never).
+    pub stop_below: f32,
+    /// Layers are shaded in full while the pixel lets through more than this, behind by
+    /// their heaviest view sample alone (0: every layer in full).
+    pub full_above: f32,
+}
+
 /// Words of the counters buffer (`COUNTER_*` in `compositor.wgsl`).
 const COUNTER_WORDS: usize = 6;
 
@@ -55,6 +68,8 @@ struct ParamsGpu {
     stop_below: f32,
     count_word: u32,
     capacity: u32,
+    full_above: f32,
+    _pad: [u32; 3],
     words: u32,
 }
 
@@ -281,7 +296,7 @@ impl Compositor {
         input: &CompositorInput<'_>,
         (depth, layer): (&DepthTarget, &TreeLayer),
         (target, format): (&wgpu::TextureView, wgpu::TextureFormat),
-        stop_below: f32,
+        knobs: CompositorKnobs,
         spans: &PassSpans,
     ) {
         let Some(layer_view) = layer.view() else {
@@ -297,9 +312,11 @@ impl Compositor {
         let params = ParamsGpu {
             size: [width, height],
             tiles,
-            stop_below: stop_below.max(0.0),
+            stop_below: knobs.stop_below.max(0.0),
             count_word: input.count.1,
             capacity,
+            full_above: knobs.full_above.max(0.0),
+            _pad: [0; 3],
             words: capacity.div_ceil(32),
         };
         ctx.queue

@@ -27,7 +27,7 @@ impl BtfAssets {
             .as_ref()
             .and_then(Option::as_ref)
             .filter(|_| bf.far);
-        if let Some(stop_below) = bf.compositor
+        if let Some(knobs) = bf.compositor
             && let Some(c) = &self.compositor
         {
             let (records, count) = match far.and_then(|f| f.compositor_records()) {
@@ -53,7 +53,7 @@ impl BtfAssets {
                 &input,
                 (cx.depth, cx.layer),
                 (cx.target, cx.format),
-                stop_below,
+                knobs,
                 cx.spans,
             );
             return;

@@ -128,6 +128,16 @@ pub static KNOBS: &[Knob] = &[
     )
     .slider(0.0, 0.05, false)
     .when(|d| d.btf.compositor),
+    Knob::number(
+        "full_above",
+        "compositor: full shade above",
+        "with the compositor: billboards are shaded in full (3 views) while the pixel lets through more than this, behind by their heaviest view alone (0: all in full)",
+        (0.0, 1.0),
+        |d| d.btf.full_above,
+        |d, v| d.btf.full_above = v,
+    )
+    .slider(0.0, 1.0, false)
+    .when(|d| d.btf.compositor),
     Knob::toggle(
         "far_canopy",
         "far canopy",

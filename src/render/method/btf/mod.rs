@@ -447,8 +447,8 @@ impl BtfAssets {
             Ok(true) => {
                 out.far = true;
                 out.layer_batches = f.layer_batches();
-                out.compositor =
-                    (settings.compositor && out.layer_batches > 0).then_some(settings.stop_below);
+                out.compositor = (settings.compositor && out.layer_batches > 0)
+                    .then_some(settings.compositor_knobs());
                 out.stats.canopy_tiles = canopy_tiles;
                 return Some((out, shade_ms));
             }
@@ -481,7 +481,7 @@ impl BtfAssets {
         );
         out.layer_batches = front_to_back::cpu_layer_batches(request.settings, sorted.len());
         out.compositor = (request.settings.compositor && out.layer_batches > 0)
-            .then_some(request.settings.stop_below);
+            .then_some(request.settings.compositor_knobs());
         self.upload_sorted(ctx, &sorted, out.layer_batches > 0);
         out
     }

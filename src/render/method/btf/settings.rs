@@ -88,6 +88,9 @@ pub struct BtfSettings {
     /// With `compositor`: a pixel stops compositing where it lets through less than this
     /// (0: never).
     pub stop_below: f32,
+    /// With `compositor`: layers are shaded in full while the pixel lets through more than
+    /// this, behind by their heaviest view sample alone (0: all in full).
+    pub full_above: f32,
 }
 
 /// The default [`BtfSettings::light_gain`]. Bench, 320x180, 3 frames, mean FLIP against
@@ -126,11 +129,20 @@ impl Default for BtfSettings {
             front_to_back: false,
             compositor: false,
             stop_below: crate::render::compositor::STOP_BELOW,
+            full_above: crate::render::compositor::FULL_ABOVE,
         }
     }
 }
 
 impl BtfSettings {
+    /// The compositor's knobs.
+    pub fn compositor_knobs(&self) -> crate::render::compositor::CompositorKnobs {
+        crate::render::compositor::CompositorKnobs {
+            stop_below: self.stop_below,
+            full_above: self.full_above,
+        }
+    }
+
     /// The knobs a scene starts from: its `[render]` table over the defaults.
     pub fn from_scene(scene: &Scene) -> Self {
         let mut s = Self::default();

@@ -106,8 +106,8 @@ pub struct BtfFrame {
     /// (0: back to front over the frame, in the main pass).
     pub layer_batches: u32,
     /// The billboards, front to back, go through the tile compositor instead of batches,
-    /// a pixel stopping below this transmittance (`BtfSettings::stop_below`).
-    pub compositor: Option<f32>,
+    /// with these knobs.
+    pub compositor: Option<crate::render::compositor::CompositorKnobs>,
     pub stats: BtfStats,
 }
 
