@@ -175,18 +175,6 @@ fn ray_through(px: vec2<f32>) -> vec3<f32> {
     return far.xyz / far.w - frame.camera_pos;
 }
 
-// Where the ray `d` from the eye meets the quad's plane, in the quad's units (x, y: -1..1
-// on it; z: the distance along `d`, 0 where it misses the plane in front of the eye).
-fn on_quad(b: Billboard, half: f32, n: vec3<f32>, d: vec3<f32>) -> vec3<f32> {
-    let denom = dot(d, n);
-    if abs(denom) < 1e-12 {
-        return vec3<f32>(2.0, 2.0, 0.0);
-    }
-    let t = dot(b.center - frame.camera_pos, n) / denom;
-    let h = frame.camera_pos + t * d - b.center;
-    return vec3<f32>(dot(h, b.plane_right) / half, dot(h, b.plane_up) / half, max(t, 0.0));
-}
-
 // Where a pixel's rays meet a billboard's quad: `q` the centre ray's point (x, y on the
 // quad, -1..1; z the distance along the ray), `qx`, `qy` the next pixels' (for the image
 // gradients); `hit` where the centre ray meets the quad in front of what the frame holds.

@@ -3,11 +3,11 @@
 //! on the CPU's; the early stop, which changes nothing at 0 and stops opaque pixels; and
 //! every tile composited once.
 
-use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
+use canopy::render::{FrameDesc, GpuContext, Renderer};
 use canopy::scene::Scene;
-use glam::Vec3;
 
 use crate::common::*;
+use crate::front_to_back::frame;
 
 /// Mean FLIP over the trees' pixels between the compositor and the raster path front to
 /// back (the same sum: the raster layer sums in half floats and leaves out what lies behind
@@ -25,17 +25,6 @@ fn setup(ctx: &GpuContext) -> (Scene, Renderer) {
     let scene = load_scene("canopy_stand.toml");
     let (_, renderer) = baked_renderer(ctx, &scene);
     (scene, renderer)
-}
-
-/// The dense stand seen low across it, crown behind crown, the near trees at the finer
-/// levels.
-fn frame(scene: &Scene) -> FrameDesc {
-    let mut f = FrameDesc::from_scene(scene);
-    let target = Vec3::new(0.0, 6.0, 0.0);
-    let dir = Vec3::new(0.2, 0.22, -1.0).normalize_or_zero();
-    f.camera = Camera::look_at(target + dir * 150.0, target, 30.0);
-    f.method = Method::Btf;
-    f
 }
 
 fn render(ctx: &GpuContext, renderer: &mut Renderer, frame: &FrameDesc) -> image::RgbaImage {

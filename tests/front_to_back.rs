@@ -33,8 +33,8 @@ fn setup(ctx: &GpuContext) -> (Scene, World, Renderer) {
 }
 
 /// The dense stand seen low across it, crown behind crown, the near trees at the finer
-/// levels.
-fn frame(scene: &Scene) -> FrameDesc {
+/// levels (the compositor's tests draw it too).
+pub(crate) fn frame(scene: &Scene) -> FrameDesc {
     let mut f = FrameDesc::from_scene(scene);
     let target = Vec3::new(0.0, 6.0, 0.0);
     let dir = Vec3::new(0.2, 0.22, -1.0).normalize_or_zero();

@@ -272,18 +272,6 @@ impl Compositor {
         bits.clone()
     }
 
-    /// GPU bytes of its buffers.
-    pub fn bytes(&self) -> u64 {
-        self.rects.size()
-            + self.params.size()
-            + self.counters.size()
-            + self.cpu_count.size()
-            + self
-                .tile_bits
-                .lock()
-                .map_or(0, |b| b.as_ref().map_or(0, wgpu::Buffer::size))
-    }
-
     /// Composites `input`'s billboards into `layer` against the frame's `depth`, then puts
     /// the layer over the frame's `target` (of `format`); timed as `tiles: setup`,
     /// `tiles: composite` and `billboards` (the layer over the frame).
