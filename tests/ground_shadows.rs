@@ -6,7 +6,9 @@
 use canopy::model::World;
 use canopy::model::forest::Forest;
 use canopy::model::terrain::Terrain;
-use canopy::render::{Camera, FrameDesc, GROUND_MAP_SIZE, GROUND_PREVIEW_SIZE, Method, Renderer};
+use canopy::render::{
+    Camera, FrameDesc, GROUND_MAP_SIZE, Method, Renderer, ground_map_side, ground_preview_side,
+};
 use canopy::scene::Scene;
 
 use glam::Vec3;
@@ -56,7 +58,10 @@ fn the_alpha_shadow_map_darkens_the_ground_under_a_tree_and_nowhere_else() {
         again.shadow_triangles, 0,
         "no depth cascades are drawn per frame: the terrain's depth map follows the sun"
     );
-    assert_eq!(stats.ground_map_size, Some(GROUND_MAP_SIZE));
+    // The maps follow the scene: this 80 m square gets smaller ones than the default scene.
+    let side = ground_map_side(world.terrain.bounds().extent().length(), 16384);
+    assert!(side < GROUND_MAP_SIZE, "{side}");
+    assert_eq!(stats.ground_map_size, Some(side));
 
     // Dragging the sun: the maps follow it at the preview size, and are drawn at full size
     // on the first frame after it is let go.
@@ -65,7 +70,7 @@ fn the_alpha_shadow_map_darkens_the_ground_under_a_tree_and_nowhere_else() {
     dragged.sun_held = true;
     let (held_img, held) = renderer.render_image(&ctx, &dragged, w, h, 1).unwrap();
     assert!(held.sun_update);
-    assert_eq!(held.ground_map_size, Some(GROUND_PREVIEW_SIZE));
+    assert_eq!(held.ground_map_size, Some(ground_preview_side(side)));
     let (_, held_still) = renderer.render_image(&ctx, &dragged, w, h, 1).unwrap();
     assert!(
         !held_still.sun_update,
@@ -77,7 +82,7 @@ fn the_alpha_shadow_map_darkens_the_ground_under_a_tree_and_nowhere_else() {
         let_go.sun_update,
         "letting go of the sun draws the full maps"
     );
-    assert_eq!(let_go.ground_map_size, Some(GROUND_MAP_SIZE));
+    assert_eq!(let_go.ground_map_size, Some(side));
     let preview_error = canopy::metrics::flip(&rgb(&let_go_img), &rgb(&held_img))
         .unwrap()
         .stats

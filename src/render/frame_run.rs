@@ -128,7 +128,7 @@ impl Renderer {
             && frame.sun.elevation_deg > 0.0
             && !studio;
         if ground_on && self.ground.is_none() {
-            self.ground = Some(GroundMaps::new(ctx, &self.layouts)?);
+            self.ground = Some(GroundMaps::new(ctx, &self.layouts, &self.world)?);
         }
         self.ensure_depth(ctx, width, height)?;
         let overdraw_view = frame.overdraw.filter(|_| !studio);

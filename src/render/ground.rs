@@ -22,13 +22,41 @@ pub const GROUND_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
 /// square kilometre's depth from the sun, against a lookup offset of 1.5 texels, about
 /// 0.4 m), half the bytes of the cascades' 32-bit floats: 33.5 MB at 4096².
 pub const GROUND_DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth16Unorm;
-/// Side of the ground shadow maps (alpha and terrain depth), covering the whole scene
-/// (about 0.35 m per texel on the default square kilometre).
+/// Largest side of the ground shadow maps (alpha and terrain depth), which cover the whole
+/// scene: the default square kilometre's (about 0.35 m per texel).
 pub const GROUND_MAP_SIZE: u32 = 4096;
-/// Side of the ground shadow maps while the user holds the sun (`FrameDesc::sun_held`):
-/// a sixteenth of the texels, so that dragging the sun does not stall a software
-/// renderer; the full map follows on the first frame after the sun is let go.
-pub const GROUND_PREVIEW_SIZE: u32 = 1024;
+/// Smallest side of the ground shadow maps (a small scene's).
+pub const GROUND_MIN_SIZE: u32 = 1024;
+/// The texel the ground maps aim for (m): the default square kilometre's at
+/// [`GROUND_MAP_SIZE`]. A smaller scene gets smaller maps of texels at least this fine.
+pub const GROUND_TEXEL_M: f32 = 0.35;
+
+/// Side of the ground shadow maps for a scene whose bounding sphere is `diameter_m` wide
+/// (the maps cover it): the power of two that gives texels of at most [`GROUND_TEXEL_M`],
+/// between [`GROUND_MIN_SIZE`] and [`GROUND_MAP_SIZE`] (and the device's `max_dim`). Their
+/// cost, a pass over every texel with each tree's billboard drawn into them, follows it:
+/// a stand 80 m wide draws a sixteenth of the default scene's texels, and its texels are
+/// still 4x finer.
+pub fn ground_map_side(diameter_m: f32, max_dim: u32) -> u32 {
+    let want = if diameter_m.is_finite() && diameter_m > 0.0 {
+        (diameter_m / GROUND_TEXEL_M)
+            .ceil()
+            .min(GROUND_MAP_SIZE as f32) as u32
+    } else {
+        GROUND_MAP_SIZE
+    };
+    want.next_power_of_two()
+        .clamp(GROUND_MIN_SIZE, GROUND_MAP_SIZE)
+        .min(max_dim)
+}
+
+/// Side of the ground shadow maps while the user holds the sun (`FrameDesc::sun_held`), for
+/// maps of side `full`: a sixteenth of the texels (at least 256 a side), so that dragging
+/// the sun does not stall a software renderer; the full maps follow on the first frame after
+/// the sun is let go.
+pub fn ground_preview_side(full: u32) -> u32 {
+    (full / 4).max(256).min(full)
+}
 
 /// What a ground map was built for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -124,8 +152,12 @@ pub struct GroundMaps {
 }
 
 impl GroundMaps {
-    pub fn new(ctx: &GpuContext, layouts: &Layouts) -> Result<Self> {
-        let size = GROUND_MAP_SIZE.min(ctx.device.limits().max_texture_dimension_2d);
+    /// Maps sized for `world`'s scene ([`ground_map_side`]).
+    pub fn new(ctx: &GpuContext, layouts: &Layouts, world: &WorldGpu) -> Result<Self> {
+        let size = ground_map_side(
+            world.scene_bounds.extent().length(),
+            ctx.device.limits().max_texture_dimension_2d,
+        );
         let textures = GroundTextures::new(ctx, size)?;
         let uniforms = ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("ground shadow uniforms"),
@@ -180,7 +212,7 @@ impl GroundMaps {
     ) -> (GroundKey, bool) {
         let capacity = self.textures.capacity;
         let size = if held {
-            GROUND_PREVIEW_SIZE.min(capacity)
+            ground_preview_side(capacity)
         } else {
             capacity
         };
@@ -309,4 +341,25 @@ pub fn ground_sampler(ctx: &GpuContext) -> wgpu::Sampler {
         min_filter: wgpu::FilterMode::Linear,
         ..Default::default()
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_maps_follow_the_scene_between_their_bounds() {
+        // The default square kilometre (its bounding sphere about 1.42 km across) keeps the
+        // largest maps; an 80 m stand gets the smallest, with finer texels.
+        assert_eq!(ground_map_side(1420.0, 16384), GROUND_MAP_SIZE);
+        assert_eq!(ground_map_side(5000.0, 16384), GROUND_MAP_SIZE);
+        assert_eq!(ground_map_side(115.0, 16384), GROUND_MIN_SIZE);
+        assert_eq!(ground_map_side(500.0, 16384), 2048);
+        assert!(500.0 / 2048.0 <= GROUND_TEXEL_M);
+        assert_eq!(ground_map_side(1420.0, 2048), 2048, "the device's limit");
+        assert_eq!(ground_map_side(f32::NAN, 16384), GROUND_MAP_SIZE);
+        assert_eq!(ground_preview_side(4096), 1024);
+        assert_eq!(ground_preview_side(1024), 256);
+        assert_eq!(ground_preview_side(128), 128);
+    }
 }

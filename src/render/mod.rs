@@ -50,7 +50,9 @@ pub use context::{AdapterPreference, GpuContext};
 pub use frame::{
     FrameDesc, FrameStats, Method, Reference, ShadowSettings, Sky, Stage, StudioOutput, Sun,
 };
-pub use ground::{GROUND_DEPTH_FORMAT, GROUND_FORMAT, GROUND_MAP_SIZE, GROUND_PREVIEW_SIZE};
+pub use ground::{
+    GROUND_DEPTH_FORMAT, GROUND_FORMAT, GROUND_MAP_SIZE, ground_map_side, ground_preview_side,
+};
 pub use method::btf;
 pub use target::{OFFSCREEN_FORMAT, OffscreenTarget};
 
