@@ -62,7 +62,7 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
         frame: FrameDesc::from_scene(&scene),
         actions: PanelActions::default(),
     };
-    let stats = PanelStats {
+    let frame_stats = canopy::render::FrameStats {
         btf: Some(canopy::render::btf::BtfStats {
             billboards: PerLevel {
                 twig: 10,
@@ -86,6 +86,10 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
             vcm: true,
             impostors: 0,
         }),
+        ..Default::default()
+    };
+    let stats = PanelStats {
+        frame: frame_stats,
         btf_bytes: 16_500_000,
         vcm_bytes: 53_182_464,
         vcm_resolution: Some(32),

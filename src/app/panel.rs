@@ -3,6 +3,7 @@
 //! headless with egui_kittest.
 
 use crate::render::knob::{KnobKind, KnobValue};
+use crate::render::method::info::format_count;
 use crate::render::{FrameDesc, Method};
 
 /// What the panel shows that the app measured.
@@ -19,12 +20,8 @@ pub struct PanelStats {
     pub draw_calls: u32,
     pub adapter: String,
     pub camera_speed: f32,
-    /// What the btf method did last frame.
-    pub btf: Option<crate::render::btf::BtfStats>,
-    /// What the `texel` method drew in the last frame.
-    pub texel: Option<crate::render::method::texel::TexelStats>,
-    /// What the `impostor` method drew in the last frame.
-    pub impostor: Option<crate::render::method::impostor::ImpostorStats>,
+    /// The last frame's statistics, as its method reports them.
+    pub frame: crate::render::FrameStats,
     /// Bytes of BTF images on the GPU.
     pub btf_bytes: u64,
     /// Bytes of visibility cube maps in main memory.
@@ -82,24 +79,15 @@ pub fn controls(
     ui.label("Method");
     ui.horizontal(|ui| {
         for m in Method::ALL {
-            ui.selectable_value(&mut frame.method, *m, m.name());
+            ui.selectable_value(&mut frame.method, *m, m.name())
+                .on_hover_text(crate::render::method::info(*m).summary);
         }
     });
     if let Some(progress) = &stats.bake_progress {
         bake_progress(ui, stats, progress);
     }
     knob_controls(ui, frame);
-    if frame.method.is_btf()
-        && let Some(s) = &stats.btf
-    {
-        btf_stats(ui, frame, stats, s);
-    }
-    if frame.method == Method::Texel {
-        texel_stats(ui, stats);
-    }
-    if let (Method::Impostor | Method::Hybrid, Some(s)) = (frame.method, &stats.impostor) {
-        impostor_stats(ui, s);
-    }
+    method_stats(ui, frame, stats);
     ui.separator();
 
     actions.sun_held = sun_controls(ui, frame);
@@ -195,96 +183,43 @@ fn bake_progress(
     }
 }
 
-/// What the btf method did last frame, and what its bake holds.
-fn btf_stats(
-    ui: &mut egui::Ui,
-    frame: &FrameDesc,
-    stats: &PanelStats,
-    s: &crate::render::btf::BtfStats,
-) {
-    egui::Grid::new("btf stats").num_columns(2).show(ui, |ui| {
-        ui.label("billboards twig/branch/tree");
-        ui.label(format!(
-            "{} / {} / {}",
-            s.billboards.twig, s.billboards.branch, s.billboards.tree
-        ));
-        ui.end_row();
-        ui.label("trees twig/branch/tree");
-        ui.label(format!(
-            "{} / {} / {}",
-            s.trees_per_level.twig, s.trees_per_level.branch, s.trees_per_level.tree
-        ));
-        ui.end_row();
-        ui.label("trees cross-fading");
-        ui.label(s.faded_trees.to_string());
-        ui.end_row();
-        if frame.method == Method::Hybrid {
-            ui.label("trees as geometry");
-            ui.label(s.geometry_trees.to_string());
-            ui.end_row();
-            ui.label("tree level as impostors");
-            ui.label(match (frame.btf.impostor_px > 0.0, &stats.impostor) {
-                (false, _) => "off".to_string(),
-                (true, Some(_)) => format_count(u64::from(s.impostors)),
-                (true, None) => "none baked ([bake] impostor_frames)".to_string(),
-            });
-            ui.end_row();
-        }
-        if s.gpu_billboards > 0 {
-            ui.label("built on the GPU");
-            ui.label(format_count(u64::from(s.gpu_billboards)));
-            ui.end_row();
-        }
-        if s.canopy_tiles > 0 {
-            ui.label("far canopy: tiles, trees");
-            ui.label(format!(
-                "{}, {}",
-                s.canopy_tiles,
-                format_count(u64::from(s.canopy_trees))
-            ));
-            ui.end_row();
-        }
-        ui.label("images per billboard");
-        ui.label(format!("{:.2}", s.images_per_billboard()));
-        ui.end_row();
-        ui.label("fetches saved");
-        ui.label(format_count(s.fetches_saved));
-        ui.end_row();
-        ui.label("BTF memory");
-        ui.label(format!("{:.1} MB", stats.btf_bytes as f64 / 1e6));
-        ui.end_row();
-        ui.label("VCM");
-        ui.label(match stats.vcm_resolution {
-            Some(r) => format!(
-                "{r}² x 6 faces x 8 corners, {:.1} MB",
-                stats.vcm_bytes as f64 / 1e6
-            ),
-            None => "not baked".to_string(),
-        });
-        ui.end_row();
-        ui.label("sun update");
-        ui.label(match (stats.sun_update_ms, stats.sun_update_gpu_ms) {
-            (Some(cpu), Some(gpu)) => format!("{cpu:.1} ms CPU + {gpu:.1} ms GPU"),
-            (Some(cpu), None) => format!("{cpu:.1} ms CPU"),
-            (None, _) => "n/a".to_string(),
-        });
-        ui.end_row();
-    });
-}
-
-/// What the impostor method drew in the last frame.
-fn impostor_stats(ui: &mut egui::Ui, s: &crate::render::method::impostor::ImpostorStats) {
-    egui::Grid::new("impostor stats")
+/// What the frame's method did last frame (its rows, [`crate::render::method::info`]), and
+/// what its bake holds.
+fn method_stats(ui: &mut egui::Ui, frame: &FrameDesc, stats: &PanelStats) {
+    let info = crate::render::method::info(frame.method);
+    let rows = (info.stat_rows)(&stats.frame, frame);
+    if rows.is_empty() && !info.follows_sun {
+        return;
+    }
+    egui::Grid::new("method stats")
         .num_columns(2)
         .show(ui, |ui| {
-            ui.label("impostors drawn");
-            ui.label(format_count(u64::from(s.impostors)));
+            for row in &rows {
+                ui.label(row.label);
+                ui.label(&row.value);
+                ui.end_row();
+            }
+            if !info.follows_sun {
+                return;
+            }
+            ui.label("BTF memory");
+            ui.label(format!("{:.1} MB", stats.btf_bytes as f64 / 1e6));
             ui.end_row();
-            ui.label("frames (px a frame)");
-            ui.label(format!("{0} x {0} ({1} px)", s.frames, s.frame_px));
+            ui.label("VCM");
+            ui.label(match stats.vcm_resolution {
+                Some(r) => format!(
+                    "{r}² x 6 faces x 8 corners, {:.1} MB",
+                    stats.vcm_bytes as f64 / 1e6
+                ),
+                None => "not baked".to_string(),
+            });
             ui.end_row();
-            ui.label("impostor atlases");
-            ui.label(format!("{:.1} MB", s.atlas_bytes as f64 / 1e6));
+            ui.label("sun update");
+            ui.label(match (stats.sun_update_ms, stats.sun_update_gpu_ms) {
+                (Some(cpu), Some(gpu)) => format!("{cpu:.1} ms CPU + {gpu:.1} ms GPU"),
+                (Some(cpu), None) => format!("{cpu:.1} ms CPU"),
+                (None, _) => "n/a".to_string(),
+            });
             ui.end_row();
         });
 }
@@ -414,14 +349,6 @@ pub fn sun_at_hour(hour: f32) -> (f32, f32) {
     (az, el.max(0.5))
 }
 
-fn format_count(n: u64) -> String {
-    match n {
-        0..1_000 => n.to_string(),
-        1_000..1_000_000 => format!("{:.1} k", n as f64 / 1e3),
-        _ => format!("{:.2} M", n as f64 / 1e6),
-    }
-}
-
 /// A control for each knob of the frame's method ([`crate::render::method::knobs_of`]):
 /// a slider for a number, a checkbox for on/off, buttons for a choice.
 fn knob_controls(ui: &mut egui::Ui, frame: &mut FrameDesc) {
@@ -466,28 +393,6 @@ fn knob_controls(ui: &mut egui::Ui, frame: &mut FrameDesc) {
         if next != value {
             k.set(frame, next);
         }
-    }
-}
-
-/// What the `texel` method drew.
-fn texel_stats(ui: &mut egui::Ui, stats: &PanelStats) {
-    if let Some(s) = &stats.texel {
-        egui::Grid::new("texel stats")
-            .num_columns(2)
-            .show(ui, |ui| {
-                ui.label("texels drawn");
-                ui.label(s.texels.to_string());
-                ui.end_row();
-                ui.label("tiles drawn (trees)");
-                ui.label(format!("{} ({})", s.tiles, s.tiled_trees));
-                ui.end_row();
-                ui.label("slices mean / max");
-                ui.label(format!("{:.1} / {}", s.slices_mean, s.slices_max));
-                ui.end_row();
-                ui.label("texel memory");
-                ui.label(format!("{:.1} MB", s.texel_bytes as f64 / 1e6));
-                ui.end_row();
-            });
     }
 }
 

@@ -104,9 +104,7 @@ impl App {
                 self.stats.triangles = s.triangles;
                 self.stats.shadow_triangles = s.shadow_triangles;
                 self.stats.draw_calls = s.draw_calls;
-                self.stats.btf = s.btf;
-                self.stats.texel = s.texel;
-                self.stats.impostor = s.impostor;
+                self.stats.frame = s;
                 if s.sun_update_ms.is_some() {
                     self.stats.sun_update_ms = s.sun_update_ms;
                 }

@@ -321,10 +321,13 @@ fn check_tune(req: &TuneRequest) -> Result<()> {
             "--write needs a scene file: the embedded default forest cannot be changed; save it to a file first".into(),
         ));
     }
-    if !super::tune::TUNED_METHODS.contains(&req.method) {
+    let tuned = super::tune::tuned_methods();
+    if !tuned.contains(&req.method) {
+        let names: Vec<&str> = tuned.iter().map(|m| m.name()).collect();
         return Err(Error::BadInput(format!(
-            "--method {}: tune searches the knobs of btf or impostor",
-            req.method.name()
+            "--method {}: tune searches the knobs of {}",
+            req.method.name(),
+            names.join(" or ")
         )));
     }
     if req.method != Method::Btf && (req.write || req.bake) {

@@ -4,8 +4,8 @@
 //! measured once: a looser target can only pick a configuration as cheap or cheaper.
 
 use super::run::{Config, ConfigSummary};
-use crate::render::btf::knobs::{KNOBS, tuned_label};
 use crate::render::btf::{BtfSettings, PlaneMode};
+use crate::render::method::knobs_of;
 use crate::render::{FrameDesc, Method};
 use crate::{Error, Result};
 
@@ -69,7 +69,11 @@ pub fn bake_knob_candidates(base: &FrameDesc) -> Vec<Config> {
                 planes: PlaneMode::Single,
                 ..base.btf
             };
-            out.push(Config::from_frame(tuned_label(&d), Method::Btf, &d));
+            out.push(Config::from_frame(
+                tune_label(Method::Btf, &d),
+                Method::Btf,
+                &d,
+            ));
         }
     }
     out
@@ -153,8 +157,25 @@ impl TuneTarget {
     }
 }
 
-/// The methods `tune` searches: their own knobs offer it values.
-pub const TUNED_METHODS: [Method; 2] = [Method::Btf, Method::Impostor];
+/// The methods `tune` searches: those whose knobs offer it values
+/// ([`crate::render::knob::Knob::tune`]).
+pub fn tuned_methods() -> Vec<Method> {
+    Method::ALL
+        .iter()
+        .copied()
+        .filter(|m| knobs_of(*m).iter().any(|k| !k.tune.is_empty()))
+        .collect()
+}
+
+/// `tune`'s name of a configuration of `method`: the method and each knob it searches, as
+/// `frame` has them.
+pub fn tune_label(method: Method, frame: &FrameDesc) -> String {
+    let mut s = String::from(method.name());
+    for k in knobs_of(method).iter().filter(|k| !k.tune.is_empty()) {
+        s.push_str(&format!(" {}={}", k.name, k.text(frame)));
+    }
+    s
+}
 
 /// Every configuration of `btf`'s grid ([`candidates_for`]).
 pub fn candidates(base: &FrameDesc) -> Vec<Config> {
@@ -165,18 +186,10 @@ pub fn candidates(base: &FrameDesc) -> Vec<Config> {
 /// `tune` ([`crate::render::knob::Knob::tune`]; the first knob varies fastest), the other
 /// knobs as `base` has them. Empty for a method `tune` does not search.
 pub fn candidates_for(method: Method, base: &FrameDesc) -> Vec<Config> {
-    let knobs: &[crate::render::knob::Knob] = match method {
-        Method::Btf => KNOBS,
-        Method::Impostor => crate::render::method::impostor::knobs::KNOBS,
-        _ => return Vec::new(),
-    };
-    let label = |d: &FrameDesc| {
-        let mut s = String::from(method.name());
-        for k in knobs.iter().filter(|k| !k.tune.is_empty()) {
-            s.push_str(&format!(" {}={}", k.name, k.text(d)));
-        }
-        s
-    };
+    let knobs = knobs_of(method);
+    if knobs.iter().all(|k| k.tune.is_empty()) {
+        return Vec::new();
+    }
     let mut frames = vec![*base];
     for k in knobs.iter().rev().filter(|k| !k.tune.is_empty()) {
         frames = frames
@@ -193,14 +206,7 @@ pub fn candidates_for(method: Method, base: &FrameDesc) -> Vec<Config> {
     }
     frames
         .iter()
-        .map(|d| {
-            let name = if method == Method::Btf {
-                tuned_label(d)
-            } else {
-                label(d)
-            };
-            Config::from_frame(name, method, d)
-        })
+        .map(|d| Config::from_frame(tune_label(method, d), method, d))
         .collect()
 }
 

@@ -18,7 +18,10 @@ impl ValueEnum for Method {
     }
 
     fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
-        Some(clap::builder::PossibleValue::new(self.name()))
+        Some(
+            clap::builder::PossibleValue::new(self.name())
+                .help(crate::render::method::info(*self).summary),
+        )
     }
 }
 

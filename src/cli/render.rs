@@ -228,8 +228,14 @@ fn named_bake(
         return Ok(None);
     };
     if !args.method.needs_bake() {
+        let baked: Vec<&str> = Method::ALL
+            .iter()
+            .filter(|m| m.needs_bake())
+            .map(|m| m.name())
+            .collect();
         return Err(crate::Error::BadInput(format!(
-            "--baked is for the methods that draw baked images (btf, billboard, texel, hybrid, impostor), not {}",
+            "--baked is for the methods that draw baked images ({}), not {}",
+            baked.join(", "),
             args.method.name()
         ))
         .into());

@@ -144,9 +144,8 @@ pub fn measure_frame_with(
         stats = s;
         on_frame();
     }
-    // The methods with sun-dependent state: the btf methods and the impostors (VCM reads,
-    // light blends, ground maps).
-    let sun_update = if frame.method.is_btf() || frame.method == super::Method::Impostor {
+    // The methods with state that follows the sun (VCM reads, light blends, ground maps).
+    let sun_update = if frame.method.follows_sun() {
         Some(measure_sun_update(renderer, ctx, frame, width, height, ss)?)
     } else {
         None

@@ -11,6 +11,7 @@ use glam::{Mat4, Vec3};
 use super::btf::{
     BillboardGpu, BillboardMode, BtfAssets, BtfFrame, BtfScene, BtfStats, PrepareView,
 };
+use super::info::{MethodInfo, no_rows};
 use super::interface::{Bake, DrawCx, Plan, PrepareCx, RenderMethod, SunWork};
 use super::kind::Method;
 use crate::Result;
@@ -318,3 +319,12 @@ mod tests {
         assert_eq!(capped.records[0].center[2], 0.0, "the nearest tree stays");
     }
 }
+
+/// What the rest of the program asks of `billboard`.
+pub const INFO: MethodInfo = MethodInfo {
+    name: "billboard",
+    summary: "one camera-facing image per tree from a single baked view and light: the floor (needs a bake)",
+    needs_bake: true,
+    follows_sun: false,
+    stat_rows: no_rows,
+};

@@ -2,6 +2,7 @@
 //! through cascaded shadow maps that follow the camera and are drawn every frame, and by the
 //! hemispherical sky. The ground truth every other method is measured against.
 
+use super::info::{MethodInfo, no_rows};
 use super::interface::{Bake, DrawCx, Plan, PrepareCx, RenderMethod, SunWork};
 use super::kind::Method;
 use crate::Result;
@@ -124,3 +125,12 @@ impl RenderMethod for Geometry {
         MeshPasses::draw_main(pass, cx.world, runs, cx.pipes, stats);
     }
 }
+
+/// What the rest of the program asks of `geometry`.
+pub const INFO: MethodInfo = MethodInfo {
+    name: "geometry",
+    summary: "every leaf, needle and branch as triangles: the ground truth (--reference: its reference mode)",
+    needs_bake: false,
+    follows_sun: false,
+    stat_rows: no_rows,
+};

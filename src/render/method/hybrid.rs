@@ -14,6 +14,7 @@ use std::sync::LazyLock;
 use super::btf::method::{BtfMethod, billboard_casters};
 use super::btf::settings::LOD_COLORS;
 use super::impostor::{ImpostorAssets, ImpostorSettings, ImpostorStats};
+use super::info::{MethodInfo, StatRow, format_count};
 use super::interface::{AfterCx, Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod};
 use super::kind::Method;
 use crate::Result;
@@ -210,4 +211,35 @@ impl RenderMethod for HybridMethod {
     fn finish(&self, bake: &Bake, ctx: &GpuContext, wait: bool, stats: &mut FrameStats) {
         self.btf.finish(bake, ctx, wait, stats);
     }
+}
+
+/// What the rest of the program asks of `hybrid`.
+pub const INFO: MethodInfo = MethodInfo {
+    name: "hybrid",
+    summary: "btf, with a tree drawn as geometry wherever even its twig level's texels project above the LOD bound (cross-faded)",
+    needs_bake: true,
+    follows_sun: true,
+    stat_rows,
+};
+
+/// `hybrid`'s statistics of a frame: `btf`'s, its trees drawn as geometry, and its tree
+/// level's impostors.
+fn stat_rows(stats: &FrameStats, frame: &FrameDesc) -> Vec<StatRow> {
+    let mut rows = super::btf::method::stat_rows(stats, frame);
+    if let Some(s) = &stats.btf {
+        rows.push(StatRow::new(
+            "trees as geometry",
+            s.geometry_trees.to_string(),
+        ));
+        rows.push(StatRow::new(
+            "tree level as impostors",
+            match (frame.btf.impostor_px > 0.0, &stats.impostor) {
+                (false, _) => "off".to_string(),
+                (true, Some(_)) => format_count(u64::from(s.impostors)),
+                (true, None) => "none baked ([bake] impostor_frames)".to_string(),
+            },
+        ));
+    }
+    rows.extend(super::impostor::method::stat_rows(stats, frame));
+    rows
 }

@@ -1,26 +1,24 @@
 //! The list of methods: what callers name in a frame, on the command line and in the
-//! viewer. A leaf module, so that the frame's description can name a method without
-//! importing any.
+//! viewer. What each one is (its name, whether it needs a bake...) its module declares
+//! ([`super::info`]).
 
-/// How the forest is drawn. Each method can draw the whole scene alone.
+/// How the forest is drawn. Each method can draw the whole scene alone; its module says how
+/// (and [`super::info`] what it is).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
-    /// Every leaf, needle and branch as triangles: the ground truth.
+    /// [`super::geometry`], the ground truth.
     #[default]
     Geometry,
-    /// BTF billboards of the twig / main branch / tree hierarchy (needs a bake).
+    /// [`super::btf`].
     Btf,
-    /// One camera-facing image per tree from a single baked view and light: the floor.
+    /// [`super::billboard`].
     Billboard,
-    /// Each tree as a volumetric texel: its baked volumes sliced parallel to the screen
-    /// (needs a bake with texel volumes).
+    /// [`super::texel`].
     Texel,
-    /// `btf`, with a tree drawn as geometry wherever even its twig level's texels project
-    /// above the LOD bound (cross-faded): no more detail than the view needs, and no less.
+    /// [`super::hybrid`].
     Hybrid,
-    /// One quad per tree showing its species' octahedral impostor: 3 baked frames blended
-    /// with depth parallax, lit per pixel (needs a bake with impostors).
+    /// [`super::impostor`].
     Impostor,
 }
 
@@ -35,27 +33,17 @@ impl Method {
     ];
 
     pub fn name(self) -> &'static str {
-        match self {
-            Method::Geometry => "geometry",
-            Method::Btf => "btf",
-            Method::Billboard => "billboard",
-            Method::Texel => "texel",
-            Method::Hybrid => "hybrid",
-            Method::Impostor => "impostor",
-        }
+        super::info(self).name
     }
 
     /// The method draws baked images (and needs a bake).
     pub fn needs_bake(self) -> bool {
-        matches!(
-            self,
-            Method::Btf | Method::Billboard | Method::Texel | Method::Hybrid | Method::Impostor
-        )
+        super::info(self).needs_bake
     }
 
-    /// The method draws the BTF hierarchy and takes the `btf` knobs.
-    pub fn is_btf(self) -> bool {
-        matches!(self, Method::Btf | Method::Hybrid)
+    /// The method keeps state that follows the sun, rebuilt when it moves.
+    pub fn follows_sun(self) -> bool {
+        super::info(self).follows_sun
     }
 
     pub fn parse(s: &str) -> Option<Method> {

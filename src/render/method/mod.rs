@@ -6,23 +6,27 @@
 //! maps) stays in the core (`render/mod.rs`); constants more than one method reads are in
 //! `render/consts.rs`.
 //!
-//! Adding a method: its module here (its settings, stats and knobs in its own folder), its
-//! arm in [`Method`] (`kind.rs`), its entry in [`registry`], its settings' field in
-//! [`crate::render::FrameDesc`] and, when it draws from the bake, its slot in [`Bake`]. The
-//! command line (`--method` and a flag per knob), the viewer's method buttons and knob
-//! controls, the bench's chart and sweeps and `tune`'s grid follow [`Method::ALL`] and
-//! [`RenderMethod::knobs`].
+//! Adding a method: its module here, holding its [`RenderMethod`], its [`MethodInfo`]
+//! (name, help, whether it needs a bake and follows the sun, its statistics as rows), its
+//! settings, stats and knobs; its arm in [`Method`] (`kind.rs`); its lines in [`info`] and
+//! [`registry`]; its settings' field in [`crate::render::FrameDesc`] and, when it draws
+//! from the bake, its slot in [`Bake`]. The command line (`--method`, its help and a flag
+//! per knob), the viewer's method buttons, knob controls and statistics grid, the bench's
+//! chart and sweeps, `tune`'s grid (the knobs that offer it values) and the sun moves
+//! `render --json` times follow [`Method::ALL`], [`info`] and [`RenderMethod::knobs`].
 
 pub mod billboard;
 pub mod btf;
 pub mod geometry;
 pub mod hybrid;
 pub mod impostor;
+pub mod info;
 pub mod interface;
 pub mod kind;
 pub mod texel;
 pub mod view;
 
+pub use info::{MethodInfo, StatRow};
 pub use interface::{AfterCx, Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork};
 pub use kind::Method;
 pub use view::PrepareView;
@@ -81,6 +85,18 @@ pub fn knobs_named(name: &str) -> Vec<&'static Knob> {
     out
 }
 
+/// What the rest of the program asks of `method` ([`MethodInfo`], declared in its module).
+pub fn info(method: Method) -> &'static MethodInfo {
+    match method {
+        Method::Geometry => &geometry::INFO,
+        Method::Btf => &btf::method::INFO,
+        Method::Billboard => &billboard::INFO,
+        Method::Texel => &texel::method::INFO,
+        Method::Hybrid => &hybrid::INFO,
+        Method::Impostor => &impostor::method::INFO,
+    }
+}
+
 /// One of each method, as the renderer holds them.
 pub fn registry() -> Vec<Box<dyn RenderMethod>> {
     vec![
@@ -110,6 +126,10 @@ mod tests {
             );
         }
         assert_eq!(methods.len(), Method::ALL.len());
+        for m in Method::ALL {
+            assert_eq!(Method::parse(m.name()), Some(*m));
+            assert!(!info(*m).summary.is_empty(), "{}", m.name());
+        }
     }
 
     #[test]

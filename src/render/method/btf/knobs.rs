@@ -2,7 +2,6 @@
 //! bench's sweeps and `tune` see them.
 
 use super::settings::PlaneMode;
-use crate::render::frame::FrameDesc;
 use crate::render::knob::Knob;
 
 pub static KNOBS: &[Knob] = &[
@@ -158,12 +157,3 @@ pub static KNOBS: &[Knob] = &[
     .slider(1.0, 16.0, true)
     .when(|d| d.btf.gpu_far && d.btf.far_canopy),
 ];
-
-/// `frame`'s `btf` knobs as a label, `btf lod_scale=2 ...`, those `tune` varies.
-pub fn tuned_label(frame: &FrameDesc) -> String {
-    let mut s = String::from("btf");
-    for k in KNOBS.iter().filter(|k| !k.tune.is_empty()) {
-        s.push_str(&format!(" {}={}", k.name, k.text(frame)));
-    }
-    s
-}

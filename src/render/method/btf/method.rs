@@ -10,6 +10,7 @@ use crate::Result;
 use crate::model::mesh::Aabb;
 use crate::render::GpuContext;
 use crate::render::frame::{FrameDesc, FrameStats};
+use crate::render::method::info::{MethodInfo, StatRow, format_count};
 use crate::render::method::interface::{
     AfterCx, Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork,
 };
@@ -400,4 +401,59 @@ impl RenderMethod for BtfMethod {
             b.add_far_stats(ctx, wait, stats);
         }
     }
+}
+
+/// What the rest of the program asks of `btf`.
+pub const INFO: MethodInfo = MethodInfo {
+    name: "btf",
+    summary: "BTF billboards of the twig / main branch / tree hierarchy, shaded by visibility cube maps (needs a bake)",
+    needs_bake: true,
+    follows_sun: true,
+    stat_rows,
+};
+
+/// `btf`'s statistics of a frame: its billboards and trees per level and what they read.
+pub fn stat_rows(stats: &FrameStats, _frame: &FrameDesc) -> Vec<StatRow> {
+    let Some(s) = &stats.btf else {
+        return Vec::new();
+    };
+    let mut rows = vec![
+        StatRow::new(
+            "billboards twig/branch/tree",
+            format!(
+                "{} / {} / {}",
+                s.billboards.twig, s.billboards.branch, s.billboards.tree
+            ),
+        ),
+        StatRow::new(
+            "trees twig/branch/tree",
+            format!(
+                "{} / {} / {}",
+                s.trees_per_level.twig, s.trees_per_level.branch, s.trees_per_level.tree
+            ),
+        ),
+        StatRow::new("trees cross-fading", s.faded_trees.to_string()),
+    ];
+    if s.gpu_billboards > 0 {
+        rows.push(StatRow::new(
+            "built on the GPU",
+            format_count(u64::from(s.gpu_billboards)),
+        ));
+    }
+    if s.canopy_tiles > 0 {
+        rows.push(StatRow::new(
+            "far canopy: tiles, trees",
+            format!(
+                "{}, {}",
+                s.canopy_tiles,
+                format_count(u64::from(s.canopy_trees))
+            ),
+        ));
+    }
+    rows.push(StatRow::new(
+        "images per billboard",
+        format!("{:.2}", s.images_per_billboard()),
+    ));
+    rows.push(StatRow::new("fetches saved", format_count(s.fetches_saved)));
+    rows
 }

@@ -7,7 +7,8 @@ use super::prepare::prepare;
 use super::settings::ImpostorStats;
 use crate::Result;
 use crate::render::GpuContext;
-use crate::render::frame::FrameStats;
+use crate::render::frame::{FrameDesc, FrameStats};
+use crate::render::method::info::{MethodInfo, StatRow, format_count, format_mb};
 use crate::render::method::interface::{
     Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork,
 };
@@ -166,4 +167,28 @@ impl RenderMethod for ImpostorMethod {
         stats.trees_drawn = self.count + self.whole;
         stats.impostor = Some(self.stats);
     }
+}
+
+/// What the rest of the program asks of `impostor`.
+pub const INFO: MethodInfo = MethodInfo {
+    name: "impostor",
+    summary: "one quad per tree showing its species' octahedral impostor: 3 baked frames blended with depth parallax, lit per pixel (needs a bake with impostors)",
+    needs_bake: true,
+    follows_sun: true,
+    stat_rows,
+};
+
+/// The impostors of a frame (`impostor`'s, or `hybrid`'s tree level).
+pub fn stat_rows(stats: &FrameStats, _frame: &FrameDesc) -> Vec<StatRow> {
+    let Some(s) = &stats.impostor else {
+        return Vec::new();
+    };
+    vec![
+        StatRow::new("impostors drawn", format_count(u64::from(s.impostors))),
+        StatRow::new(
+            "frames (px a frame)",
+            format!("{0} x {0} ({1} px)", s.frames, s.frame_px),
+        ),
+        StatRow::new("impostor atlases", format_mb(s.atlas_bytes)),
+    ]
 }

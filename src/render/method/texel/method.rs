@@ -6,7 +6,8 @@ use std::time::Instant;
 
 use super::{TexelFrame, TexelPipelines};
 use crate::render::GpuContext;
-use crate::render::frame::FrameStats;
+use crate::render::frame::{FrameDesc, FrameStats};
+use crate::render::method::info::{MethodInfo, StatRow, format_mb};
 use crate::render::method::interface::{
     Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork,
 };
@@ -127,4 +128,32 @@ impl RenderMethod for TexelMethod {
         }
         stats.texel = Some(tf.stats);
     }
+}
+
+/// What the rest of the program asks of `texel`.
+pub const INFO: MethodInfo = MethodInfo {
+    name: "texel",
+    summary: "each tree as a volumetric texel: its baked volumes sliced parallel to the screen (needs a bake with texel volumes)",
+    needs_bake: true,
+    follows_sun: false,
+    stat_rows,
+};
+
+/// What `texel` drew in a frame.
+fn stat_rows(stats: &FrameStats, _frame: &FrameDesc) -> Vec<StatRow> {
+    let Some(s) = &stats.texel else {
+        return Vec::new();
+    };
+    vec![
+        StatRow::new("texels drawn", s.texels.to_string()),
+        StatRow::new(
+            "tiles drawn (trees)",
+            format!("{} ({})", s.tiles, s.tiled_trees),
+        ),
+        StatRow::new(
+            "slices mean / max",
+            format!("{:.1} / {}", s.slices_mean, s.slices_max),
+        ),
+        StatRow::new("texel memory", format_mb(s.texel_bytes)),
+    ]
 }
