@@ -4,7 +4,7 @@
 //! between the 8 corners of a box, and a small software renderer that draws textured quads
 //! (billboards) and a terrain horizon onto a cube, compositing their opacities. The bake
 //! (`bake::vcm`) decides which objects are drawn into which cube; the renderer
-//! (`render::method::btf::shading`) reads the cubes in the sun's direction.
+//! (`render::vcm_shading`) reads the cubes in the sun's direction.
 //!
 //! The thesis drew the scene onto the faces with its billboard renderer and read alpha back
 //! in software. Here the billboards are drawn in software directly: 32² texels per face are

@@ -28,3 +28,7 @@ pub const SKY_DIRECTIONS: u32 = 64;
 /// Default side of a tree's own sun map in the reference, in texels: about 1 cm for a 20 m
 /// fir (docs/results/geometry.md has the sizes measured against it).
 pub const SELF_MAP_SIZE: u32 = 2048;
+
+/// The show-level overlay's colour of the trees a method draws as geometry in place of its stand-ins (their foliage
+/// tint; white on the leaves' own colour reads as pale, so a strong magenta).
+pub const GEOMETRY_COLOR: [f32; 3] = [1.6, 0.3, 1.8];

@@ -18,6 +18,7 @@ pub mod context;
 pub mod frame;
 mod frame_bindings;
 mod frame_run;
+pub mod geometry_trees;
 pub mod ground;
 pub mod knob;
 pub mod layer;
@@ -38,6 +39,7 @@ pub mod target;
 pub mod terrain_maps;
 pub mod timing;
 pub mod uniforms;
+pub mod vcm_shading;
 pub mod voxelize;
 pub mod world_gpu;
 

@@ -2,8 +2,8 @@
 
 use glam::Vec3;
 
-use super::shading::Shade;
 use crate::model::mesh::Aabb;
+use crate::render::vcm_shading::Shade;
 
 /// What a billboard's fragments show (`Billboard::mode` in `billboard.wgsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -17,7 +17,6 @@ pub mod method;
 mod pipelines_btf;
 pub mod prepare;
 pub mod settings;
-pub mod shading;
 
 use std::collections::HashMap;
 

@@ -257,9 +257,7 @@ pub const LOD_COLORS: PerLevel<[f32; 3]> = PerLevel {
     tree: [0.2, 0.45, 0.95],
 };
 
-/// The show-level overlay's colour of `hybrid`'s trees drawn as geometry (their foliage
-/// tint; white on the leaves' own colour reads as pale, so a strong magenta).
-pub const GEOMETRY_COLOR: [f32; 3] = [1.6, 0.3, 1.8];
+pub use crate::render::consts::GEOMETRY_COLOR;
 
 /// The far canopy's colour in the LOD view.
 pub const CANOPY_COLOR: [f32; 3] = [0.1, 0.8, 0.75];

@@ -15,7 +15,7 @@ use crate::render::method::interface::{
 use crate::render::method::kind::Method;
 use crate::render::pipelines::Layouts;
 
-use crate::render::method::btf::method::geometry_tree_plan;
+use crate::render::geometry_trees::geometry_tree_plan;
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
 
 /// `impostor`: the frame's record count, the trees drawn as geometry and their runs, what
@@ -98,7 +98,7 @@ impl RenderMethod for ImpostorMethod {
         // impostor drawn in the pixels they leave.
         let tint = settings
             .show_lod
-            .then_some(crate::render::method::btf::settings::GEOMETRY_COLOR);
+            .then_some(crate::render::consts::GEOMETRY_COLOR);
         let runs = cx
             .world
             .upload_lists_faded(cx.ctx, &[], &[&f.geometry, &f.geometry], tint);

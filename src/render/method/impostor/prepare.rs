@@ -6,8 +6,8 @@ use glam::{Mat3, Mat4, Vec3};
 
 use super::settings::{GEOMETRY_FADE, IMPOSTOR_COLOR, ImpostorSettings, ImpostorStats};
 use crate::model::mesh::Aabb;
-use crate::render::method::btf::shading::Shade;
 use crate::render::method::view::PrepareView;
+use crate::render::vcm_shading::Shade;
 use crate::render::world_gpu::TreeGpu;
 
 /// One tree's record, as `shaders/impostor.wgsl` reads it (`struct Impostor`).

@@ -4,7 +4,6 @@
 use super::super::billboard::{BillboardGpu, BillboardMode};
 use super::super::prepare::{BtfScene, NearDrawGpu, PrepareView, SortedBillboards};
 use super::super::settings::{BtfSettings, PlaneMode};
-use super::super::shading::VcmShading;
 use super::readback::read_buffer;
 use super::{
     CANOPY_BAND, CanopyFrame, DRAW_WORDS, FarGpu, FarParamsGpu, FarShadeGpu, SORT_ARGS_AT,
@@ -15,6 +14,7 @@ use crate::model::Level;
 use crate::model::mesh::Aabb;
 use crate::render::GpuContext;
 use crate::render::timing::PassSpans;
+use crate::render::vcm_shading::VcmShading;
 use crate::render::world_gpu::TreeGpu;
 
 impl FarGpu {

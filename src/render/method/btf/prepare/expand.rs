@@ -129,7 +129,7 @@ pub(super) fn expand(
     parts: &SpeciesParts,
     level: Level,
     m: Mat4,
-    shading: Option<&super::super::shading::TreeShading>,
+    shading: Option<&crate::render::vcm_shading::TreeShading>,
 ) {
     let trunk_twigs = |p: &mut Pusher| {
         for (k, tw) in parts.trunk_twigs.iter().enumerate() {

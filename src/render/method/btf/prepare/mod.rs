@@ -13,11 +13,11 @@ use glam::{Mat3, Mat4, Vec3};
 
 use super::billboard::{BillboardGpu, BillboardMode, SetInfo};
 use super::settings::{BtfSettings, BtfStats, FETCHES_AT_MOST, PlaneMode};
-use super::shading::{ObjectFrame, ObjectMaps, Shade, VcmShading};
 use crate::format::{Baked, BtfImageSet};
 use crate::lod::{self, LevelTexels};
 use crate::model::mesh::Aabb;
 use crate::model::{Level, PerLevel, World};
+use crate::render::vcm_shading::{ObjectFrame, ObjectMaps, Shade, VcmShading};
 use crate::render::world_gpu::TreeGpu;
 use crate::sphere::{DirectionSet, billboard_axes};
 use crate::vcm::CORNERS;

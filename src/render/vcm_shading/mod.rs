@@ -36,7 +36,7 @@ use cells::CellShading;
 use maps::ObjectVcm;
 
 /// One object's 8 cube maps' bytes (a byte a texel) and its sky visibility at its corners.
-pub(super) type ObjectMaps<'a> = (std::borrow::Cow<'a, [u8]>, [f32; CORNERS]);
+pub(crate) type ObjectMaps<'a> = (std::borrow::Cow<'a, [u8]>, [f32; CORNERS]);
 
 /// The factors one billboard is shaded with.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -110,7 +110,7 @@ impl VcmShading {
     /// Species `sp`'s cube maps for the GPU: per main branch, then per twig (the reference
     /// branch's, then the trunk's), its 8 maps' bytes (`8 × 6 × res²`, corner by corner)
     /// and its sky visibility at the corners.
-    pub(super) fn species_maps(&self, sp: usize) -> [Vec<ObjectMaps<'_>>; 2] {
+    pub(crate) fn species_maps(&self, sp: usize) -> [Vec<ObjectMaps<'_>>; 2] {
         fn objects(v: Option<&Vec<ObjectVcm>>, res: u32) -> Vec<ObjectMaps<'_>> {
             v.map_or(Vec::new(), |v| {
                 v.iter().map(|o| (o.r8(res), o.sky)).collect()
