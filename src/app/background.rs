@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use super::{App, reload};
 use crate::model::World;
-use crate::render::sky_visibility::{SKY_DIRECTIONS, SkyVolume};
+use crate::render::sky_visibility::SKY_DIRECTIONS;
 use crate::render::{AdapterPreference, GpuContext, Method, Renderer};
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -313,9 +313,9 @@ impl App {
             // None yet, or one for a renderer no longer on show (left to finish unseen).
             _ => {
                 let world = self.world.clone();
+                let scene = self.scene.clone();
                 let job = std::thread::spawn(move || {
-                    let bounds = crate::render::sky_visibility::bounds_of(&world, true);
-                    SkyVolume::compute(&world, &bounds, true, SKY_DIRECTIONS)
+                    crate::bake::sky_cache::sky_volume(&scene, &world, SKY_DIRECTIONS, true)
                 });
                 self.sky_job = Some((r.renderer.id(), job));
             }

@@ -14,6 +14,7 @@ pub mod compress;
 pub mod estimate;
 pub mod impostor;
 pub mod report;
+pub mod sky_cache;
 pub mod stages;
 pub mod texel;
 pub mod vcm;

@@ -89,12 +89,10 @@ fn renderer(
 ) -> Result<(GpuContext, Renderer)> {
     let ctx = GpuContext::headless(adapter)?;
     let mut renderer = Renderer::new(&ctx, world)?;
-    renderer.prepare_reference(
-        &ctx,
-        world,
-        crate::render::Reference::default().sky_directions,
-        true,
-    )?;
+    let directions = crate::render::Reference::default().sky_directions;
+    renderer.prepare_reference_with(&ctx, world, directions, true, |_| {
+        crate::bake::sky_cache::sky_volume(scene, world, directions, true)
+    })?;
     if let Some(cache_dir) = bake {
         attach_bake(
             &ctx,

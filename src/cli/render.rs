@@ -88,6 +88,7 @@ pub struct RenderArgs {
 }
 
 pub fn render(args: RenderArgs) -> anyhow::Result<()> {
+    use crate::render::sky_visibility::SKY_DIRECTIONS;
     let method = args.method;
     args.bc7.apply();
     let scene = load_scene(args.scene.as_deref())?;
@@ -106,7 +107,9 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     log_memory(&ctx, "the renderer is made");
     if frame.ground_sky && canopy_shades_ground(method) {
         let t0 = Instant::now();
-        renderer.prepare_sky(&ctx, &world)?;
+        renderer.prepare_sky_with(&ctx, &world, |_| {
+            crate::bake::sky_cache::sky_volume(&scene, &world, SKY_DIRECTIONS, true)
+        })?;
         log::info!(
             "the ground's sky visibility in {:.1} s",
             t0.elapsed().as_secs_f64()
@@ -114,7 +117,9 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     }
     if let Some(r) = frame.reference {
         let t0 = Instant::now();
-        renderer.prepare_reference(&ctx, &world, r.sky_directions, true)?;
+        renderer.prepare_reference_with(&ctx, &world, r.sky_directions, true, |_| {
+            crate::bake::sky_cache::sky_volume(&scene, &world, r.sky_directions, true)
+        })?;
         log::info!(
             "sky visibility from {} directions in {:.1} s",
             r.sky_directions,

@@ -42,6 +42,21 @@ impl Renderer {
         directions: u32,
         terrain: bool,
     ) -> Result<()> {
+        self.prepare_reference_with(ctx, world, directions, terrain, |bounds| {
+            SkyVolume::compute(world, bounds, terrain, directions.max(1))
+        })
+    }
+
+    /// [`Self::prepare_reference`] with the volume from `volume`, given the bounds it covers
+    /// ([`sky_visibility::bounds_of`]): a cache's, or computed.
+    pub fn prepare_reference_with(
+        &mut self,
+        ctx: &GpuContext,
+        world: &World,
+        directions: u32,
+        terrain: bool,
+        volume: impl FnOnce(&crate::model::mesh::Aabb) -> SkyVolume,
+    ) -> Result<()> {
         if world.forest.instances.len() != self.world.tree_bounds.len()
             || world.species.len() != self.world.species.len()
         {
@@ -59,7 +74,7 @@ impl Renderer {
                 "the reference needs something to draw: the world is empty".into(),
             ));
         }
-        let volume = SkyVolume::compute(world, &bounds, terrain, directions.max(1));
+        let volume = volume(&bounds);
         self.attach_sky(ctx, &volume, directions)
     }
 
@@ -67,10 +82,23 @@ impl Renderer {
     /// directions) once, for the image-based methods' ground (`FrameDesc::ground_sky`); a
     /// no-op when the reference's is there already.
     pub fn prepare_sky(&mut self, ctx: &GpuContext, world: &World) -> Result<()> {
+        self.prepare_sky_with(ctx, world, |bounds| {
+            SkyVolume::compute(world, bounds, true, sky_visibility::SKY_DIRECTIONS)
+        })
+    }
+
+    /// [`Self::prepare_sky`] with the volume from `volume` (see
+    /// [`Self::prepare_reference_with`]).
+    pub fn prepare_sky_with(
+        &mut self,
+        ctx: &GpuContext,
+        world: &World,
+        volume: impl FnOnce(&crate::model::mesh::Aabb) -> SkyVolume,
+    ) -> Result<()> {
         if self.sky_vis.is_some() {
             return Ok(());
         }
-        self.prepare_reference(ctx, world, sky_visibility::SKY_DIRECTIONS, true)
+        self.prepare_reference_with(ctx, world, sky_visibility::SKY_DIRECTIONS, true, volume)
     }
 
     /// `frame` as the core draws it: a reference frame (the `geometry` method with

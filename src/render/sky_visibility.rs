@@ -130,7 +130,9 @@ impl SkyVolume {
     /// Sky visibility of `world` over `bounds` (its trees, and its terrain when `terrain`;
     /// without terrain it is one object in the studio, on a finer grid), from `count`
     /// directions.
-    pub fn compute(world: &World, bounds: &Aabb, terrain: bool, count: u32) -> Self {
+    /// The grid [`Self::compute`] uses over `bounds`: its origin, cell side and cells along
+    /// x, y, z.
+    pub fn grid(bounds: &Aabb, terrain: bool) -> (Vec3, f32, [usize; 3]) {
         let ext = bounds.extent().max(Vec3::splat(1e-3));
         let volume = ext.x * ext.y * ext.z;
         let (max_cells, min_cell) = if terrain {
@@ -142,7 +144,11 @@ impl SkyVolume {
         // One cell of margin on every side, and the grid's top above everything.
         let origin = bounds.min - Vec3::splat(cell);
         let n = |e: f32| ((e / cell).ceil() as usize + 2).max(2);
-        let dims = [n(ext.x), n(ext.y), n(ext.z)];
+        (origin, cell, [n(ext.x), n(ext.y), n(ext.z)])
+    }
+
+    pub fn compute(world: &World, bounds: &Aabb, terrain: bool, count: u32) -> Self {
+        let (origin, cell, dims) = Self::grid(bounds, terrain);
         let [nx, ny, nz] = dims;
         let cells = nx * ny * nz;
         let cell_volume = cell * cell * cell;
