@@ -1,6 +1,7 @@
 //! Memory a frame leaves behind: `btf` drawn frame after frame, its far trees built on the
-//! GPU, keeps the C heap flat. Its own test binary, so that no other test allocates beside
-//! it while the heap is measured.
+//! GPU, keeps the C heap flat. The heap is the process's, so the test runs itself again in
+//! a process of its own (the suite's executable, this test alone), where no other test
+//! allocates beside it while the heap is measured.
 //!
 //! Lavapipe (Mesa 22) compiles a shader again, with the values inlined, each time a
 //! pipeline whose branches and loop bounds read a uniform buffer is bound, and keeps every
@@ -27,8 +28,34 @@ const FRAMES: usize = 40;
 /// every frame compiles the build pass again.
 const MAX_BYTES_PER_FRAME: f64 = 64.0 * 1024.0;
 
+/// Set in the process the test starts for itself.
+const ALONE: &str = "CANOPY_HEAP_TEST_ALONE";
+
 #[test]
 fn btf_frames_with_far_trees_on_the_gpu_leave_the_heap_flat() {
+    if std::env::var_os(ALONE).is_none() {
+        let exe = std::env::current_exe().expect("the test executable");
+        let out = std::process::Command::new(exe)
+            .args([
+                "frame_memory::btf_frames_with_far_trees_on_the_gpu_leave_the_heap_flat",
+                "--exact",
+                "--test-threads",
+                "1",
+                "--nocapture",
+            ])
+            .env(ALONE, "1")
+            .output()
+            .expect("running the test in a process of its own");
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        eprintln!("{text}");
+        assert!(out.status.success(), "the test alone failed");
+        assert!(text.contains("1 passed"), "the test alone did not run");
+        return;
+    }
     let ctx = common::gpu();
     // 144 firs on a 12 x 12 grid, 9 m apart, seen from 150-160 m: all at the tree level,
     // every one built by the GPU's far pass.
