@@ -222,7 +222,8 @@ pub struct Sample {
     /// lavapipe's freed or taken, a heap trim landing in the lightest or the heaviest
     /// moment of the action cycle); a leak lifts the whole band.
     pub resident_peak_bytes: u64,
-    /// The scene data the renderer holds on the GPU (BTF images, texels, meshes).
+    /// The scene data the renderer holds on the GPU (the bake's images, volumes and atlases,
+    /// the meshes).
     pub gpu_bytes: u64,
     /// The peak over the interval of every buffer and texture wgpu has allocated on the
     /// device (its allocator's report; 0 where the backend keeps none): targets, maps and

@@ -48,7 +48,7 @@ impl App {
         let (Some(run), Some(r)) = (self.soak.as_mut(), self.running.as_ref()) else {
             return;
         };
-        let gpu_bytes = r.renderer.btf_bytes() + r.renderer.texel_bytes() + r.renderer.mesh_bytes();
+        let gpu_bytes = r.renderer.scene_bytes();
         run.resident.add(soak::resident_bytes());
         if let Some(b) = r.ctx.device_allocated_bytes() {
             run.device.add(b);

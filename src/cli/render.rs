@@ -107,8 +107,8 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     log_memory(&ctx, "the renderer is made");
     if frame.ground_sky && canopy_shades_ground(method) {
         let t0 = Instant::now();
-        renderer.prepare_sky_with(&ctx, &world, |_| {
-            crate::bake::sky_cache::sky_volume(&scene, &world, SKY_DIRECTIONS, true)
+        renderer.prepare_sky_with(&ctx, &world, |bounds| {
+            sky_volume(named.is_some(), &scene, &world, bounds, SKY_DIRECTIONS)
         })?;
         log::info!(
             "the ground's sky visibility in {:.1} s",
@@ -117,8 +117,8 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     }
     if let Some(r) = frame.reference {
         let t0 = Instant::now();
-        renderer.prepare_reference_with(&ctx, &world, r.sky_directions, true, |_| {
-            crate::bake::sky_cache::sky_volume(&scene, &world, r.sky_directions, true)
+        renderer.prepare_reference_with(&ctx, &world, r.sky_directions, true, |bounds| {
+            sky_volume(named.is_some(), &scene, &world, bounds, r.sky_directions)
         })?;
         log::info!(
             "sky visibility from {} directions in {:.1} s",
@@ -221,6 +221,23 @@ fn frame_of(
         frame.sun.elevation_deg = el;
     }
     Ok(frame)
+}
+
+/// The sky visibility of `world` over `bounds` from `directions` directions: from the
+/// cache (kept there when computed), unless the frame draws a named `--baked` file, whose
+/// render writes nothing into the cache.
+fn sky_volume(
+    named: bool,
+    scene: &crate::scene::Scene,
+    world: &crate::model::World,
+    bounds: &crate::model::mesh::Aabb,
+    directions: u32,
+) -> crate::render::sky_visibility::SkyVolume {
+    if named {
+        crate::render::sky_visibility::SkyVolume::compute(world, bounds, true, directions)
+    } else {
+        crate::bake::sky_cache::sky_volume(scene, world, directions, true)
+    }
 }
 
 /// The `--baked` file, read and checked before any work (a file that cannot be used is

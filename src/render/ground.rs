@@ -354,8 +354,9 @@ mod tests {
         assert_eq!(ground_map_side(1420.0, 16384), GROUND_MAP_SIZE);
         assert_eq!(ground_map_side(5000.0, 16384), GROUND_MAP_SIZE);
         assert_eq!(ground_map_side(115.0, 16384), GROUND_MIN_SIZE);
-        assert_eq!(ground_map_side(500.0, 16384), 2048);
-        assert!(500.0 / 2048.0 <= GROUND_TEXEL_M);
+        let side = ground_map_side(500.0, 16384);
+        assert_eq!(side, 2048);
+        assert!(500.0 / side as f32 <= GROUND_TEXEL_M);
         assert_eq!(ground_map_side(1420.0, 2048), 2048, "the device's limit");
         assert_eq!(ground_map_side(f32::NAN, 16384), GROUND_MAP_SIZE);
         assert_eq!(ground_preview_side(4096), 1024);

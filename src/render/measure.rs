@@ -234,6 +234,11 @@ pub struct FrameReport {
     /// `texel_bytes`, `texel_mode` (absent for other methods).
     #[serde(flatten)]
     pub texel: Option<crate::render::method::texel::TexelStats>,
+    /// What the impostors did (`impostor`, or `hybrid`'s tree level), as an object:
+    /// `impostors`, `geometry_trees`, `frames`, `frame_px`, `atlas_bytes` (absent where
+    /// none were drawn).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub impostor: Option<crate::render::method::impostor::ImpostorStats>,
     /// Every knob of the method, by name ([`crate::render::method::knobs_of`]).
     pub knobs: std::collections::BTreeMap<&'static str, KnobValue>,
     /// With the overdraw view on: `fragments_per_pixel` and `reads_per_pixel`.
@@ -356,6 +361,7 @@ impl FrameReport {
             memory: None,
             btf,
             texel: m.stats.texel,
+            impostor: m.stats.impostor,
             knobs: KnobValues::read(knobs_of(frame.method), frame).to_map(),
             overdraw: m.stats.overdraw,
             reference: reference.is_some(),

@@ -237,6 +237,12 @@ impl Renderer {
         memory::MemoryReport::new(&ctx.device, cpu)
     }
 
+    /// Bytes of the scene's data on the GPU: the bake's images, volumes and atlases (every
+    /// method's) and the trees' and terrain's meshes.
+    pub fn scene_bytes(&self) -> u64 {
+        self.bake.gpu_bytes() + self.world.mesh_bytes
+    }
+
     /// Bytes of BTF images on the GPU (0 without a bake).
     pub fn btf_bytes(&self) -> u64 {
         self.bake.btf.as_ref().map_or(0, |b| b.bytes)

@@ -219,6 +219,15 @@ impl RenderMethod for Billboard {
     }
 }
 
+/// What the rest of the program asks of `billboard`.
+pub const INFO: MethodInfo = MethodInfo {
+    name: "billboard",
+    summary: "one camera-facing image per tree from a single baked view and light: the floor (needs a bake)",
+    needs_bake: true,
+    follows_sun: false,
+    stat_rows: no_rows,
+};
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -319,12 +328,3 @@ mod tests {
         assert_eq!(capped.records[0].center[2], 0.0, "the nearest tree stays");
     }
 }
-
-/// What the rest of the program asks of `billboard`.
-pub const INFO: MethodInfo = MethodInfo {
-    name: "billboard",
-    summary: "one camera-facing image per tree from a single baked view and light: the floor (needs a bake)",
-    needs_bake: true,
-    follows_sun: false,
-    stat_rows: no_rows,
-};

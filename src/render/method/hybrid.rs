@@ -216,7 +216,7 @@ impl RenderMethod for HybridMethod {
 /// What the rest of the program asks of `hybrid`.
 pub const INFO: MethodInfo = MethodInfo {
     name: "hybrid",
-    summary: "btf, with a tree drawn as geometry wherever even its twig level's texels project above the LOD bound (cross-faded)",
+    summary: "btf, with a tree drawn as geometry wherever even its twig level's texels project above the LOD bound, cross-faded (needs a bake)",
     needs_bake: true,
     follows_sun: true,
     stat_rows,

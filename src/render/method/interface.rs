@@ -97,6 +97,13 @@ impl Bake {
         Ok(bake)
     }
 
+    /// Bytes of the bake's images, volumes and atlases on the GPU, every method's.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.btf.as_ref().map_or(0, |b| b.bytes)
+            + self.texel.as_ref().map_or(0, TexelAssets::total_bytes)
+            + self.impostor.as_ref().map_or(0, |i| i.bytes)
+    }
+
     /// The bake has texel volumes that can be drawn (on the GPU or still waiting to be).
     pub fn has_texels(&self) -> bool {
         self.texel.is_some() || self.texel_pending.is_some()
