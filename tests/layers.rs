@@ -348,3 +348,147 @@ fn the_checker_catches_what_it_should() {
     assert_eq!(depth("src/vcm/mod.rs"), 1);
     assert_eq!(depth("src/render/method/btf/far.rs"), 4);
 }
+
+/// The methods' modules under `src/render/method/`, each a file `NAME.rs` or a folder.
+const METHODS: &[&str] = &[
+    "geometry",
+    "btf",
+    "billboard",
+    "texel",
+    "hybrid",
+    "impostor",
+];
+
+/// The imports of one method by another that are allowed, with why: `hybrid` composes
+/// `btf` and `impostor` through their public face; `billboard` is drawn through `btf`'s
+/// images and pipeline (a debt: ARCHITECTURE.md, "Known debts").
+const METHOD_IMPORTS: &[(&str, &str)] = &[
+    ("hybrid", "btf"),
+    ("hybrid", "impostor"),
+    ("billboard", "btf"),
+];
+
+/// The methods a method's file names, by any of the paths that reach another method's
+/// module: `method::x`, `render::x` (the core's re-export), or the `super::` chain that
+/// climbs from the file's module to `method` (`super::x` from `method/billboard.rs`,
+/// `super::super::super::x` from `method/btf/far/new.rs`). Comment lines are skipped.
+fn methods_named(rel: &str, text: &str, own: &str) -> Vec<(String, usize)> {
+    let below: Vec<&str> = rel
+        .trim_start_matches("src/render/method/")
+        .trim_end_matches(".rs")
+        .split('/')
+        .filter(|s| *s != "mod")
+        .collect();
+    let climb = "super::".repeat(below.len());
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let code = line.trim_start();
+        if code.starts_with("//") {
+            continue;
+        }
+        for other in METHODS.iter().filter(|m| **m != own) {
+            // (path, whether a `::` may come before it: not for the `super::` chain, where
+            // that would be a longer chain, reaching elsewhere)
+            let prefixes = [
+                (format!("method::{other}"), true),
+                (format!("render::{other}"), true),
+                (format!("{climb}{other}"), false),
+            ];
+            let named = prefixes.iter().any(|(p, after_colons)| {
+                code.match_indices(p.as_str()).any(|(i, _)| {
+                    let before = code[..i].chars().next_back();
+                    let after = code[i + p.len()..].chars().next();
+                    !before.is_some_and(|c| is_ident(c) || (c == ':' && !after_colons))
+                        && !after.is_some_and(is_ident)
+                })
+            });
+            if named {
+                out.push((other.to_string(), n + 1));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn no_method_imports_another_but_those_allowed() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    rust_files(root, &root.join("src/render/method"), &mut files);
+    let mut bad = Vec::new();
+    let mut used: Vec<(&str, String)> = Vec::new();
+    for (rel, path) in &files {
+        let Some(own) = METHODS.iter().copied().find(|m| {
+            rel == &format!("src/render/method/{m}.rs")
+                || rel.starts_with(&format!("src/render/method/{m}/"))
+        }) else {
+            continue;
+        };
+        let text = fs::read_to_string(path).expect("a source file");
+        for (other, line) in methods_named(rel, &text, own) {
+            if METHOD_IMPORTS.contains(&(own, other.as_str())) {
+                used.push((own, other));
+            } else {
+                bad.push(format!("{rel}:{line}: {own} names the {other} method"));
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "a method reaches into another (share it through the render core instead):\n{}",
+        bad.join("\n")
+    );
+    for (own, other) in METHOD_IMPORTS {
+        assert!(
+            used.iter().any(|(o, t)| o == own && t == other),
+            "{own} no longer names {other}: take the pair out of METHOD_IMPORTS"
+        );
+    }
+}
+
+#[test]
+fn the_method_import_check_catches_each_path() {
+    let hits = |rel: &str, text: &str, own: &str| -> Vec<String> {
+        methods_named(rel, text, own)
+            .into_iter()
+            .map(|(m, _)| m)
+            .collect()
+    };
+    let nested = "src/render/method/btf/far/new.rs";
+    assert!(hits(nested, "use super::super::billboard::BillboardGpu;", "btf").is_empty());
+    assert_eq!(
+        hits(nested, "use super::super::super::texel::X;", "btf"),
+        ["texel"]
+    );
+    let shallow = "src/render/method/btf/method.rs";
+    assert!(hits(shallow, "use super::super::super::texel::X;", "btf").is_empty());
+    let folder = "src/render/method/texel/prepare.rs";
+    assert_eq!(
+        hits(folder, "use crate::render::method::btf::BtfScene;", "texel"),
+        ["btf"]
+    );
+    assert_eq!(
+        hits(folder, "use crate::render::btf::BtfStats;", "texel"),
+        ["btf"]
+    );
+    assert_eq!(
+        hits(folder, "use super::super::impostor::X;", "texel"),
+        ["impostor"]
+    );
+    assert!(
+        hits(
+            folder,
+            "// crate::render::method::btf::X in a comment",
+            "texel"
+        )
+        .is_empty()
+    );
+    assert!(hits(folder, "use super::scene::TexelScene;", "texel").is_empty());
+    assert!(hits(folder, "use crate::render::btf_like::X;", "texel").is_empty());
+    let file = "src/render/method/billboard.rs";
+    assert_eq!(
+        hits(file, "use super::btf::{BtfAssets};", "billboard"),
+        ["btf"]
+    );
+    assert!(hits(file, "use super::interface::Bake;", "billboard").is_empty());
+}

@@ -322,10 +322,13 @@ fn check_tune(req: &TuneRequest) -> Result<()> {
     let tuned = super::tune::tuned_methods();
     if !tuned.contains(&req.method) {
         let names: Vec<&str> = tuned.iter().map(|m| m.name()).collect();
+        let list = match names.split_last() {
+            Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+            _ => names.join(""),
+        };
         return Err(Error::BadInput(format!(
-            "--method {}: tune searches the knobs of {}",
-            req.method.name(),
-            names.join(" or ")
+            "--method {}: tune searches the knobs of {list}",
+            req.method.name()
         )));
     }
     if req.method != Method::Btf && (req.write || req.bake) {

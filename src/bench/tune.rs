@@ -352,6 +352,8 @@ mod tests {
             (64.0, 4.0)
         );
         assert!(candidates_for(Method::Texel, &base).is_empty());
+        assert!(candidates_for(Method::Hybrid, &base).is_empty());
+        assert_eq!(tuned_methods(), [Method::Btf, Method::Impostor]);
     }
 
     #[test]

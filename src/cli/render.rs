@@ -105,10 +105,14 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     log_memory(&ctx, "the GPU context is made");
     let mut renderer = Renderer::new(&ctx, &world)?;
     log_memory(&ctx, "the renderer is made");
+    // The bake first: a bake that is refused (too large, not enough memory) is refused
+    // before the sky visibility's seconds are spent.
+    let named_file = named.is_some();
+    attach_bake(&args, named, &ctx, &scene, &world, &mut renderer)?;
     if frame.ground_sky && canopy_shades_ground(method) {
         let t0 = Instant::now();
         renderer.prepare_sky_with(&ctx, &world, |bounds| {
-            sky_volume(named.is_some(), &scene, &world, bounds, SKY_DIRECTIONS)
+            sky_volume(named_file, &scene, &world, bounds, SKY_DIRECTIONS)
         })?;
         log::info!(
             "the ground's sky visibility in {:.1} s",
@@ -118,7 +122,7 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
     if let Some(r) = frame.reference {
         let t0 = Instant::now();
         renderer.prepare_reference_with(&ctx, &world, r.sky_directions, true, |bounds| {
-            sky_volume(named.is_some(), &scene, &world, bounds, r.sky_directions)
+            sky_volume(named_file, &scene, &world, bounds, r.sky_directions)
         })?;
         log::info!(
             "sky visibility from {} directions in {:.1} s",
@@ -126,7 +130,6 @@ pub fn render(args: RenderArgs) -> anyhow::Result<()> {
             t0.elapsed().as_secs_f64()
         );
     }
-    attach_bake(&args, named, &ctx, &scene, &world, &mut renderer)?;
 
     let opts = MeasureOptions {
         frames: args.frames,

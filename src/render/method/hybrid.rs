@@ -11,7 +11,7 @@
 
 use std::sync::LazyLock;
 
-use super::btf::method::{BtfMethod, billboard_casters};
+use super::btf::method::BtfMethod;
 use super::btf::settings::LOD_COLORS;
 use super::impostor::{ImpostorAssets, ImpostorSettings, ImpostorStats};
 use super::info::{MethodInfo, StatRow, format_count};
@@ -24,6 +24,7 @@ use crate::render::frame::{FrameDesc, FrameStats};
 use crate::render::knob::Knob;
 use crate::render::pipelines::Layouts;
 use crate::render::timing::PassSpans;
+use crate::render::vcm_shading::TreeShades;
 use crate::render::world_gpu::WorldGpu;
 
 /// `hybrid`'s own knob: where its tree level is drawn as impostors.
@@ -37,11 +38,14 @@ static IMPOSTOR_PX: Knob = Knob::number(
 )
 .slider(0.0, 4.0, false);
 
-/// `btf`'s knobs, `impostor_px`, and the impostor's knobs its impostors read (out of
-/// `tune`'s grid, which stays `btf`'s for `hybrid`; offered in the panel while
-/// `impostor_px` is on).
+/// `btf`'s knobs, `impostor_px`, and the impostor's knobs its impostors read (offered in
+/// the panel while `impostor_px` is on). None offers `tune` values: `tune` searches `btf`
+/// and `impostor`, not `hybrid`.
 static KNOBS: LazyLock<Vec<Knob>> = LazyLock::new(|| {
-    let mut knobs: Vec<Knob> = super::btf::knobs::KNOBS.to_vec();
+    let mut knobs: Vec<Knob> = super::btf::knobs::KNOBS
+        .iter()
+        .map(|k| Knob { tune: &[], ..*k })
+        .collect();
     knobs.push(IMPOSTOR_PX);
     let shared = ["alpha_cutoff", "parallax", "parallax_depth", "self_shadow"];
     for k in super::impostor::knobs::KNOBS {
@@ -153,7 +157,7 @@ impl RenderMethod for HybridMethod {
         to_sun: glam::Vec3,
         excluded: &[u32],
     ) -> Option<GroundCasters> {
-        billboard_casters(bake, ctx, layouts, world, to_sun, excluded)
+        bake.billboard_casters(ctx, layouts, world, to_sun, excluded)
     }
 
     fn ensure_pipelines(

@@ -97,6 +97,29 @@ impl Bake {
         Ok(bake)
     }
 
+    /// The bake's tree-level billboards as the sun sees them, for the ground alpha shadow
+    /// map (the casters of `btf`, `hybrid`, `billboard` and `impostor` alike), leaving out
+    /// `excluded` trees; None without BTF images.
+    pub fn billboard_casters(
+        &mut self,
+        ctx: &GpuContext,
+        layouts: &Layouts,
+        world: &WorldGpu,
+        to_sun: glam::Vec3,
+        excluded: &[u32],
+    ) -> Option<GroundCasters> {
+        let b = self.btf.as_mut()?;
+        let count = b.prepare_sun(ctx, world, to_sun, excluded);
+        Some(GroundCasters {
+            pipeline: b
+                .opacity_pipeline(&ctx.device, &layouts.shadow_frame)
+                .clone(),
+            bind_group: b.sun_bind_group().clone(),
+            count,
+            vertices: 6,
+        })
+    }
+
     /// Bytes of the bake's images, volumes and atlases on the GPU, every method's.
     pub fn gpu_bytes(&self) -> u64 {
         self.btf.as_ref().map_or(0, |b| b.bytes)

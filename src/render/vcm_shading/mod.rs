@@ -83,6 +83,15 @@ fn at(f: &Factors, bounds: &Aabb, p: Vec3) -> (f32, f32) {
     (vcm::trilinear(&f.0, u), vcm::trilinear(&f.1, u))
 }
 
+/// Where a method finds a tree's visibility cube map factors for the current sun without
+/// knowing who holds them (the bake's BTF scene does).
+pub trait TreeShades {
+    /// Tree instance `t` (of `species`, placed by `model`): its tree-level factors at the 8
+    /// corners of its species' tree box, and that box in the object frame; None without
+    /// visibility cube maps.
+    fn tree_shade(&self, t: usize, species: usize, model: &Mat4) -> Option<(Shade, Aabb)>;
+}
+
 /// Every VCM of a scene, ready to be read in the sun's direction.
 pub struct VcmShading {
     res: u32,

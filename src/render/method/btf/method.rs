@@ -173,28 +173,6 @@ pub(crate) fn plan_geometry(
     (runs, plan)
 }
 
-/// The BTF billboards as the sun sees them, for the ground alpha shadow map (`btf`,
-/// `hybrid` and `billboard` alike).
-pub(crate) fn billboard_casters(
-    bake: &mut Bake,
-    ctx: &GpuContext,
-    layouts: &Layouts,
-    world: &WorldGpu,
-    to_sun: glam::Vec3,
-    excluded: &[u32],
-) -> Option<GroundCasters> {
-    let b = bake.btf.as_mut()?;
-    let count = b.prepare_sun(ctx, world, to_sun, excluded);
-    Some(GroundCasters {
-        pipeline: b
-            .opacity_pipeline(&ctx.device, &layouts.shadow_frame)
-            .clone(),
-        bind_group: b.sun_bind_group().clone(),
-        count,
-        vertices: 6,
-    })
-}
-
 /// The billboards' pipeline for `format` (the `btf` method's, which `billboard` draws with
 /// too); None without BTF images.
 pub(crate) fn billboard_pipeline(
@@ -272,7 +250,7 @@ impl RenderMethod for BtfMethod {
         to_sun: glam::Vec3,
         excluded: &[u32],
     ) -> Option<GroundCasters> {
-        billboard_casters(bake, ctx, layouts, world, to_sun, excluded)
+        bake.billboard_casters(ctx, layouts, world, to_sun, excluded)
     }
 
     fn ensure_pipelines(

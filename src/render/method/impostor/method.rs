@@ -14,6 +14,7 @@ use crate::render::method::interface::{
 };
 use crate::render::method::kind::Method;
 use crate::render::pipelines::Layouts;
+use crate::render::vcm_shading::TreeShades;
 
 use crate::render::geometry_trees::geometry_tree_plan;
 use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
@@ -117,9 +118,7 @@ impl RenderMethod for ImpostorMethod {
         excluded: &[u32],
     ) -> Option<GroundCasters> {
         // The same ground shadows as `btf`: the trees' tree-level images seen from the sun.
-        crate::render::method::btf::method::billboard_casters(
-            bake, ctx, layouts, world, to_sun, excluded,
-        )
+        bake.billboard_casters(ctx, layouts, world, to_sun, excluded)
     }
 
     fn ensure_pipelines(

@@ -11,12 +11,12 @@ use crate::format::{Baked, PackedBytes, TexelVolume};
 use crate::model::World;
 use crate::render::GpuContext;
 use crate::render::frame::FrameStats;
-use crate::render::method::btf::BtfScene;
 use crate::render::method::view::PrepareView;
 use crate::render::pipelines::{
     Blended, blended_pipeline, sampled_rgba8_texture, storage_buffer_of, write_rgba8,
 };
 use crate::render::timing::PassSpans;
+use crate::render::vcm_shading::TreeShades;
 use crate::render::world_gpu::WorldGpu;
 use crate::slices::{self};
 use crate::{Error, Result};
@@ -384,7 +384,7 @@ impl TexelAssets {
         visible: &[Vec<u32>],
         view: &PrepareView,
         settings: &TexelSettings,
-        vcm: Option<&BtfScene>,
+        vcm: Option<&dyn TreeShades>,
     ) -> Result<TexelFrame> {
         if settings.mode == TexelMode::Stacks {
             self.ensure_stacks(ctx)?;

@@ -63,7 +63,7 @@ impl RenderMethod for TexelMethod {
                     sun.moved = true;
                     sun.ms += t0.elapsed().as_secs_f64() * 1e3;
                 }
-                Some(b.scene())
+                Some(b.scene() as &dyn crate::render::vcm_shading::TreeShades)
             }
             _ => None,
         };

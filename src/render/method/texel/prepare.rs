@@ -5,8 +5,8 @@ use glam::{Mat3, Mat4, Vec3};
 use super::scene::TexelScene;
 use super::{TexelGpu, TexelSettings, TexelStats, polygons, stacks, tiles};
 use crate::model::mesh::Aabb;
-use crate::render::method::btf::BtfScene;
 use crate::render::method::view::PrepareView;
+use crate::render::vcm_shading::TreeShades;
 use crate::render::world_gpu::TreeGpu;
 use crate::slices::{self};
 
@@ -26,7 +26,7 @@ pub struct TexelFrame {
 }
 
 /// The texels of the trees in `visible` (per species, indices into `trees`): slice counts,
-/// lights, VCM factors (from `vcm`, the `btf` method's scene, when given), back to front,
+/// lights, VCM factors (from `vcm`, the bake's BTF scene, when given), back to front,
 /// at most `max` of them (the nearest kept). With `stack_atlas` (the stacks mode), each
 /// texel's stack and level too.
 #[allow(clippy::too_many_arguments)]
@@ -36,7 +36,7 @@ pub fn prepare(
     visible: &[Vec<u32>],
     view: &PrepareView,
     settings: &TexelSettings,
-    vcm: Option<&BtfScene>,
+    vcm: Option<&dyn TreeShades>,
     stack_atlas: Option<&stacks::StackAtlas>,
     max: usize,
 ) -> TexelFrame {

@@ -71,6 +71,15 @@ pub struct BtfScene {
     light_blend_first: u32,
 }
 
+impl crate::render::vcm_shading::TreeShades for BtfScene {
+    fn tree_shade(&self, t: usize, species: usize, model: &Mat4) -> Option<(Shade, Aabb)> {
+        let parts = self.species.get(species)?;
+        let vcm = self.vcm.as_ref()?;
+        let shade = vcm.for_tree(t, species, model, &parts.frames).tree();
+        Some((shade, parts.frames.tree.bounds))
+    }
+}
+
 pub use crate::render::method::view::PrepareView;
 use expand::{GPU_SPECIES_ROWS, PREPARE_CHUNK, Prepared, Pusher, expand};
 pub use expand::{NearDrawGpu, SortedBillboards};
@@ -298,16 +307,6 @@ impl BtfScene {
     pub fn tree_set(&self, species: usize) -> Option<(u32, Vec3, f32)> {
         let s = &self.species.get(species)?.sets.tree;
         Some((s.layer_base, s.center, s.radius))
-    }
-
-    /// Tree instance `t`'s tree-level VCM shading for the current sun (its sun and sky
-    /// factors at the 8 corners of its species' tree box) and that box in the object frame;
-    /// None without visibility cube maps.
-    pub fn tree_shade(&self, t: usize, species: usize, model: &Mat4) -> Option<(Shade, Aabb)> {
-        let parts = self.species.get(species)?;
-        let vcm = self.vcm.as_ref()?;
-        let shade = vcm.for_tree(t, species, model, &parts.frames).tree();
-        Some((shade, parts.frames.tree.bounds))
     }
 
     /// The bound below which a tree's tree-level texels must project for the tree to be
