@@ -3,7 +3,7 @@
 //! headless with egui_kittest.
 
 use crate::render::knob::{KnobKind, KnobValue};
-use crate::render::method::info::format_count;
+use crate::render::method::info::{format_count, format_mb};
 use crate::render::{FrameDesc, Method};
 
 /// What the panel shows that the app measured.
@@ -203,14 +203,11 @@ fn method_stats(ui: &mut egui::Ui, frame: &FrameDesc, stats: &PanelStats) {
                 return;
             }
             ui.label("BTF memory");
-            ui.label(format!("{:.1} MB", stats.btf_bytes as f64 / 1e6));
+            ui.label(format_mb(stats.btf_bytes));
             ui.end_row();
             ui.label("VCM");
             ui.label(match stats.vcm_resolution {
-                Some(r) => format!(
-                    "{r}² x 6 faces x 8 corners, {:.1} MB",
-                    stats.vcm_bytes as f64 / 1e6
-                ),
+                Some(r) => format!("{r}² x 6 faces x 8 corners, {}", format_mb(stats.vcm_bytes)),
                 None => "not baked".to_string(),
             });
             ui.end_row();

@@ -26,7 +26,11 @@ const HEADER: usize = 8 + 4 + 4 + 4 + 8 + 12 + 4 + 12;
 /// Where the sky visibility of `scene` from `directions` directions (with its terrain, or
 /// over the trees alone) is kept in the cache folder `dir`.
 pub fn sky_path_in(dir: &Path, scene: &Scene, directions: u32, terrain: bool) -> PathBuf {
-    let key = super::cache::scene_hash(scene);
+    path_for(dir, super::cache::scene_hash(scene), directions, terrain)
+}
+
+/// [`sky_path_in`] for the scene whose key is `key`.
+fn path_for(dir: &Path, key: u64, directions: u32, terrain: bool) -> PathBuf {
     let kind = if terrain { "sky" } else { "trees-sky" };
     dir.join(format!("{key:016x}.{kind}{directions}"))
 }
@@ -42,8 +46,9 @@ pub fn sky_volume_in(
     terrain: bool,
 ) -> SkyVolume {
     let directions = directions.max(1);
-    let path = sky_path_in(dir, scene, directions, terrain);
+    // The key once: it reads an imported tree's files.
     let key = super::cache::scene_hash(scene);
+    let path = path_for(dir, key, directions, terrain);
     let bounds = sky_visibility::bounds_of(world, terrain);
     let grid = SkyVolume::grid(&bounds, terrain);
     if path.exists() {
