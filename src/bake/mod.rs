@@ -419,6 +419,7 @@ fn studio_frame(camera: Camera, sun: Sun, sky: f32, shadow_map: u32) -> FrameDes
         btf: Default::default(),
         texel: Default::default(),
         impostor: Default::default(),
+        surfel: Default::default(),
         trees: true,
         ground_shadows: false,
         ground_sky: false,

@@ -147,6 +147,8 @@ pub struct FrameDesc {
     pub texel: TexelSettings,
     /// The `impostor` method's knobs.
     pub impostor: super::method::impostor::ImpostorSettings,
+    /// The `surfel` method's knobs.
+    pub surfel: super::method::surfel::SurfelSettings,
     /// Draw the trees (off: terrain and sky only, e.g. while a bake is running).
     pub trees: bool,
     /// Image-based methods: soft tree shadows on the ground from an alpha shadow map, and
@@ -216,6 +218,7 @@ impl FrameDesc {
             btf: BtfSettings::from_scene(scene),
             texel: Default::default(),
             impostor: Default::default(),
+            surfel: Default::default(),
             trees: true,
             ground_shadows: true,
             ground_sky: true,
@@ -262,6 +265,8 @@ pub struct FrameStats {
     pub texel: Option<TexelStats>,
     /// What the `impostor` method did (absent for other methods).
     pub impostor: Option<super::method::impostor::ImpostorStats>,
+    /// What the `surfel` method did (absent for other methods).
+    pub surfel: Option<super::method::surfel::SurfelStats>,
     /// Sun-dependent state was rebuilt this frame (the sun moved): the trees' VCM reads
     /// and the ground alpha shadow map.
     pub sun_update: bool,

@@ -45,6 +45,7 @@ const IMPOSTOR: &str = include_str!("../../shaders/impostor.wgsl");
 const OVERDRAW: &str = include_str!("../../shaders/overdraw.wgsl");
 const LAYER: &str = include_str!("../../shaders/layer.wgsl");
 const COMPOSITOR: &str = include_str!("../../shaders/compositor.wgsl");
+const SURFEL: &str = include_str!("../../shaders/surfel.wgsl");
 
 /// A mesh pass's module: frame uniforms, instancing, then the pass's own file.
 fn with_instancing(pass: &str) -> String {
@@ -93,6 +94,7 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("overdraw", overdraw()),
         ("layer", layer()),
         ("compositor", compositor()),
+        ("surfel", surfel()),
     ]
 }
 
@@ -119,6 +121,11 @@ pub fn btf() -> String {
 
 /// The tile compositor (src/render/compositor.rs): the btf pass's billboards and their
 /// shading, then its file.
+/// The `surfel` method's splatting and pull-push passes: frame uniforms, then its file.
+pub fn surfel() -> String {
+    with_frame(SURFEL)
+}
+
 pub fn compositor() -> String {
     with_billboards(&format!("{BTF}\n{COMPOSITOR}"))
 }

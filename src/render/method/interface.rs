@@ -12,6 +12,7 @@
 use super::btf::BtfAssets;
 use super::impostor::ImpostorAssets;
 use super::kind::Method;
+use super::surfel::method::SurfelSource;
 use super::texel::{PendingTexel, TexelAssets};
 use super::view::PrepareView;
 use crate::format::Baked;
@@ -43,6 +44,8 @@ pub struct Bake {
     pub impostor: Option<ImpostorAssets>,
     /// Why they could not be loaded (the other methods still draw).
     pub impostor_problem: Option<String>,
+    /// The species the `surfel` method samples its LDC trees from.
+    pub surfels: SurfelSource,
 }
 
 impl Bake {
@@ -64,6 +67,7 @@ impl Bake {
     pub fn load(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
         let mut bake = Self {
             btf: Some(BtfAssets::new(ctx, baked, world)?),
+            surfels: SurfelSource::new(world),
             ..Default::default()
         };
         // A bake handed over before it is done (its tree levels) lacks what its settings ask

@@ -20,6 +20,8 @@ pub enum Method {
     Hybrid,
     /// [`super::impostor`].
     Impostor,
+    /// [`super::surfel`].
+    Surfel,
 }
 
 impl Method {
@@ -30,6 +32,7 @@ impl Method {
         Method::Texel,
         Method::Hybrid,
         Method::Impostor,
+        Method::Surfel,
     ];
 
     pub fn name(self) -> &'static str {

@@ -23,6 +23,7 @@ pub mod impostor;
 pub mod info;
 pub mod interface;
 pub mod kind;
+pub mod surfel;
 pub mod texel;
 pub mod view;
 
@@ -94,6 +95,7 @@ pub fn info(method: Method) -> &'static MethodInfo {
         Method::Texel => &texel::method::INFO,
         Method::Hybrid => &hybrid::INFO,
         Method::Impostor => &impostor::method::INFO,
+        Method::Surfel => &surfel::method::INFO,
     }
 }
 
@@ -106,6 +108,7 @@ pub fn registry() -> Vec<Box<dyn RenderMethod>> {
         Box::new(texel::method::TexelMethod::default()),
         Box::new(hybrid::HybridMethod::default()),
         Box::new(impostor::method::ImpostorMethod::default()),
+        Box::new(surfel::method::SurfelMethod::default()),
     ]
 }
 
@@ -155,8 +158,8 @@ mod tests {
         }
         assert_eq!(
             knobs_named("vcm").len(),
-            4,
-            "btf's, hybrid's copy of it, texel's and impostor's"
+            5,
+            "btf's, hybrid's copy of it, texel's, impostor's and surfel's"
         );
         assert!(
             knobs_of(Method::Hybrid)

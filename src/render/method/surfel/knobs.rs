@@ -1,0 +1,48 @@
+//! The `surfel` method's knobs, as the command line, the panel, the bench's sweeps and
+//! `tune` see them.
+
+use crate::render::knob::Knob;
+
+pub static KNOBS: &[Knob] = &[
+    Knob::number(
+        "surfel_px",
+        "surfel spacing (px)",
+        "each block of a tree is drawn at the coarsest level whose surfel spacing projects to at most this many pixels (below 1 more surfels than pixels; above 1 pull-push fills the holes)",
+        (0.25, 8.0),
+        |d| d.surfel.surfel_px,
+        |d, v| d.surfel.surfel_px = v,
+    )
+    .slider(0.25, 4.0, false)
+    .tuned(&["0.7", "1", "1.4", "2"]),
+    Knob::number(
+        "surfel_tolerance",
+        "depth tolerance (spacings)",
+        "surfels up to this many of their level's spacings behind their pixel's nearest one are averaged into the pixel",
+        (0.0, 16.0),
+        |d| d.surfel.tolerance,
+        |d, v| d.surfel.tolerance = v,
+    )
+    .slider(0.0, 8.0, false)
+    .tuned(&["1", "2", "4"]),
+    Knob::toggle(
+        "surfel_fill",
+        "fill holes (pull-push)",
+        "fill an empty pixel from the half- or quarter-resolution level where that level is covered at least half and in front of the frame",
+        |d| d.surfel.fill,
+        |d, v| d.surfel.fill = v,
+    ),
+    Knob::toggle(
+        "vcm",
+        "VCM shading (trees shade each other)",
+        "shade the trees by the visibility cube maps (when the bake has them)",
+        |d| d.surfel.vcm,
+        |d, v| d.surfel.vcm = v,
+    ),
+    Knob::toggle(
+        "show_lod",
+        "show LOD level",
+        "colour each surfel by its level of the LDC tree (red the finest, then orange, yellow, green, blue, violet)",
+        |d| d.surfel.show_lod,
+        |d, v| d.surfel.show_lod = v,
+    ),
+];

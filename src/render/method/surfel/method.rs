@@ -1,0 +1,257 @@
+//! The `surfel` method through the renderer's one interface.
+
+use std::time::Instant;
+
+use super::gpu::{SplatInput, Splatter, SurfelAssets};
+use super::prepare::{SurfelFrame, prepare};
+use super::sample::{SurfelTree, sample_tree};
+use super::settings::SurfelStats;
+use crate::model::TreeModel;
+use crate::render::GpuContext;
+use crate::render::frame::{FrameDesc, FrameStats};
+use crate::render::method::info::{MethodInfo, StatRow, format_count, format_mb};
+use crate::render::method::interface::{
+    AfterCx, Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork,
+};
+use crate::render::method::kind::Method;
+use crate::render::pipelines::Layouts;
+use crate::render::vcm_shading::TreeShades;
+use crate::render::world_gpu::WorldGpu;
+use crate::{Error, Result};
+
+/// Level-0 surfels a species is sampled with (about; its levels add a third).
+pub const SURFEL_BUDGET: u32 = 250_000;
+/// The finest spacing a species is sampled at (m).
+pub const MIN_SPACING: f32 = 0.004;
+
+/// The species a bake's surfels are sampled from, until a frame of `surfel` asks for them.
+#[derive(Default)]
+pub struct SurfelSource {
+    prototypes: Vec<TreeModel>,
+}
+
+impl SurfelSource {
+    pub fn new(world: &crate::model::World) -> Self {
+        Self {
+            prototypes: world.species.clone(),
+        }
+    }
+
+    /// Every species sampled into its LDC tree, in parallel.
+    pub fn sample(&self) -> Vec<SurfelTree> {
+        use rayon::prelude::*;
+        self.prototypes
+            .par_iter()
+            .map(|t| sample_tree(t, SURFEL_BUDGET, MIN_SPACING))
+            .collect()
+    }
+}
+
+/// `surfel`: the species' surfels on the GPU, the splatting passes, the frame.
+#[derive(Default)]
+pub struct SurfelMethod {
+    assets: Option<SurfelAssets>,
+    splatter: Option<Splatter>,
+    frame: SurfelFrame,
+    fill: bool,
+    mode: u32,
+    /// The frame's pixels per metre at a metre (0: orthographic).
+    focal_px: f32,
+    /// How long sampling the species took (ms), once done.
+    sample_ms: f64,
+}
+
+impl SurfelMethod {
+    /// The species' surfels, sampled and uploaded on first use.
+    fn assets(&mut self, bake: &Bake, ctx: &GpuContext) -> Result<&SurfelAssets> {
+        if self.assets.is_none() {
+            let t0 = Instant::now();
+            let trees = bake.surfels.sample();
+            self.sample_ms = t0.elapsed().as_secs_f64() * 1e3;
+            log::info!(
+                "surfels: {} species sampled in {:.0} ms",
+                trees.len(),
+                self.sample_ms
+            );
+            self.assets = Some(SurfelAssets::new(ctx, trees)?);
+        }
+        self.assets
+            .as_ref()
+            .ok_or_else(|| Error::Gpu("the surfels are not loaded".into()))
+    }
+}
+
+impl RenderMethod for SurfelMethod {
+    fn method(&self) -> Method {
+        Method::Surfel
+    }
+
+    fn check(&self, bake: &Bake) -> Result<()> {
+        bake.need_btf(Method::Surfel).map(|_| ())
+    }
+
+    fn shades_ground(&self) -> bool {
+        true
+    }
+
+    fn knobs(&self) -> &'static [crate::render::knob::Knob] {
+        super::knobs::KNOBS
+    }
+
+    fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
+        bake.need_btf(Method::Surfel)?;
+        let settings = cx.frame.surfel;
+        self.fill = settings.fill;
+        self.mode = u32::from(settings.show_lod);
+        self.focal_px = if cx.view.camera.ortho.is_none() {
+            cx.view.focal_px
+        } else {
+            0.0
+        };
+        let mut sun = SunWork::default();
+        if cx.frame.trees {
+            self.assets(bake, cx.ctx)?;
+        }
+        let Some(btf) = bake.btf.as_mut() else {
+            return Err(Error::Gpu("the BTF assets are not loaded".into()));
+        };
+        if settings.vcm && cx.frame.trees {
+            let t0 = Instant::now();
+            if btf.update_sun(cx.view.to_sun) {
+                sun.moved = true;
+                sun.ms += t0.elapsed().as_secs_f64() * 1e3;
+            }
+        }
+        let scene = btf.scene();
+        self.frame = match &self.assets {
+            Some(a) if cx.frame.trees => prepare(
+                &a.species,
+                &cx.world.tree_data,
+                &cx.visible,
+                &cx.view,
+                &settings,
+                &mut |t, sp, m| {
+                    if settings.vcm {
+                        scene.tree_shade(t, sp, m)
+                    } else {
+                        None
+                    }
+                },
+            ),
+            _ => SurfelFrame::default(),
+        };
+        // Instance 0 is the terrain's: the list holds no tree.
+        cx.world
+            .upload_lists(cx.ctx, &[vec![Vec::new(); cx.world.species.len()]]);
+        let mut plan = Plan::without_cascades(sun);
+        plan.layer = true;
+        Ok(plan)
+    }
+
+    fn ground_casters(
+        &mut self,
+        bake: &mut Bake,
+        ctx: &GpuContext,
+        layouts: &Layouts,
+        world: &WorldGpu,
+        to_sun: glam::Vec3,
+        excluded: &[u32],
+    ) -> Option<GroundCasters> {
+        // The same ground shadows as `btf`: the trees' tree-level images seen from the sun.
+        bake.billboard_casters(ctx, layouts, world, to_sun, excluded)
+    }
+
+    fn ensure_pipelines(
+        &mut self,
+        _bake: &mut Bake,
+        ctx: &GpuContext,
+        layouts: &Layouts,
+        _format: wgpu::TextureFormat,
+    ) -> Result<()> {
+        if self.splatter.is_none() {
+            self.splatter = Some(ctx.checked("building the surfel passes", || {
+                Splatter::new(&ctx.device, layouts)
+            })?);
+        }
+        Ok(())
+    }
+
+    fn draw(
+        &self,
+        _bake: &Bake,
+        _pass: &mut wgpu::RenderPass<'_>,
+        _cx: &DrawCx<'_>,
+        stats: &mut FrameStats,
+    ) {
+        stats.trees_drawn = self.frame.stats.trees;
+    }
+
+    fn draw_after(
+        &self,
+        _bake: &Bake,
+        encoder: &mut wgpu::CommandEncoder,
+        cx: &AfterCx<'_>,
+        stats: &mut FrameStats,
+    ) {
+        let (Some(assets), Some(splatter)) = (&self.assets, &self.splatter) else {
+            return;
+        };
+        let input = SplatInput {
+            surfels: &assets.surfels,
+            items: &self.frame.items,
+            trees: &self.frame.trees,
+            fill: self.fill,
+            mode: self.mode,
+            focal_px: self.focal_px,
+        };
+        if let Err(e) = splatter.splat(
+            cx.ctx,
+            encoder,
+            cx.frame_group,
+            &input,
+            (cx.depth, cx.layer),
+            (cx.target, cx.format),
+            cx.spans,
+        ) {
+            log::warn!("surfels not drawn: {e}");
+            return;
+        }
+        stats.surfel = Some(SurfelStats {
+            surfel_bytes: assets.bytes,
+            surfels_held: assets.count,
+            ..self.frame.stats
+        });
+    }
+}
+
+/// What the rest of the program asks of `surfel`.
+pub const INFO: MethodInfo = MethodInfo {
+    name: "surfel",
+    summary: "Guennebaud and Paulin's LDC trees of surfels, each block at the level whose spacing is about a pixel, splatted in compute and hole-filled by pull-push (needs a bake, for the VCMs)",
+    needs_bake: true,
+    follows_sun: true,
+    stat_rows,
+};
+
+/// The surfels of a frame.
+pub fn stat_rows(stats: &FrameStats, _frame: &FrameDesc) -> Vec<StatRow> {
+    let Some(s) = &stats.surfel else {
+        return Vec::new();
+    };
+    vec![
+        StatRow::new("surfels splatted", format_count(s.surfels)),
+        StatRow::new(
+            "blocks (trees)",
+            format!("{} ({})", format_count(u64::from(s.blocks)), s.trees),
+        ),
+        StatRow::new("levels drawn", format!("{} to {}", s.finest, s.coarsest)),
+        StatRow::new(
+            "surfels held",
+            format!(
+                "{} ({})",
+                format_count(s.surfels_held),
+                format_mb(s.surfel_bytes)
+            ),
+        ),
+    ]
+}

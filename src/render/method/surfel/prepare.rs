@@ -1,0 +1,138 @@
+//! The `surfel` method's CPU work: per tree in view, its LDC tree walked from the root,
+//! each block culled against the frustum and drawn at the coarsest level whose spacing
+//! projects to at most `surfel_px` pixels (the paper's traversal), and the tree's record
+//! (placement, tint, VCM factors).
+
+use glam::{Mat4, Vec3};
+
+use super::gpu::{SurfelItem, SurfelTreeGpu};
+use super::sample::SurfelTree;
+use super::settings::{SurfelSettings, SurfelStats};
+use crate::model::mesh::Aabb;
+use crate::render::method::view::PrepareView;
+use crate::render::vcm_shading::Shade;
+use crate::render::world_gpu::TreeGpu;
+
+/// The frame's blocks and trees.
+#[derive(Default)]
+pub struct SurfelFrame {
+    pub items: Vec<SurfelItem>,
+    pub trees: Vec<SurfelTreeGpu>,
+    pub stats: SurfelStats,
+}
+
+/// Distance from `p` to the box `b` (0 inside).
+fn distance_to(b: &Aabb, p: Vec3) -> f32 {
+    (b.min - p).max(p - b.max).max(Vec3::ZERO).length()
+}
+
+/// The blocks of `tree` (placed by `model`, of uniform scale `scale`) that `view` draws:
+/// from the roots down, each in the frustum, at the coarsest level whose world spacing is
+/// at most `surfel_px` pixels at the block's nearest point; `emit(node)` for each.
+pub fn walk(
+    tree: &SurfelTree,
+    model: &Mat4,
+    scale: f32,
+    view: &PrepareView<'_>,
+    surfel_px: f32,
+    emit: &mut dyn FnMut(usize),
+) {
+    let eye = view.camera.position;
+    let perspective = view.camera.ortho.is_none() && view.focal_px > 0.0;
+    let mut stack: Vec<u32> = tree.roots.clone();
+    while let Some(n) = stack.pop() {
+        let Some(node) = tree.nodes.get(n as usize) else {
+            continue;
+        };
+        let world = node.bounds.transformed(*model);
+        if !view.frustum.intersects(&world) {
+            continue;
+        }
+        let spacing = tree.spacing(node.level) * scale;
+        let fine_enough =
+            perspective && spacing <= surfel_px * distance_to(&world, eye) / view.focal_px;
+        if node.level == 0 || node.children.is_empty() || fine_enough {
+            emit(n as usize);
+        } else {
+            stack.extend_from_slice(&node.children);
+        }
+    }
+}
+
+/// The frame of `visible` trees (per species, indices into `trees`): per species its LDC
+/// tree and where its surfels start (`species`), and `shade(t, species, model)` the tree's
+/// VCM factors and box (None: unshaded).
+pub fn prepare(
+    species: &[(SurfelTree, u32)],
+    trees: &[TreeGpu],
+    visible: &[Vec<u32>],
+    view: &PrepareView<'_>,
+    settings: &SurfelSettings,
+    shade: &mut dyn FnMut(usize, usize, &Mat4) -> Option<(Shade, Aabb)>,
+) -> SurfelFrame {
+    let mut f = SurfelFrame::default();
+    f.stats.finest = u32::MAX;
+    for (sp, list) in visible.iter().enumerate() {
+        let Some((tree, base)) = species.get(sp) else {
+            continue;
+        };
+        for &t in list {
+            let Some(data) = trees.get(t as usize) else {
+                continue;
+            };
+            let model = Mat4::from_cols_array_2d(&data.model);
+            let scale = model.x_axis.truncate().length();
+            let record = f.trees.len() as u32;
+            let before = f.items.len();
+            let tolerance = settings.tolerance;
+            walk(tree, &model, scale, view, settings.surfel_px, &mut |n| {
+                let node = &tree.nodes[n];
+                f.items.push(SurfelItem {
+                    tree: record,
+                    first: base + node.first,
+                    count: node.count,
+                    tolerance: tolerance * tree.spacing(node.level) * scale,
+                    level: node.level,
+                    spacing: tree.spacing(node.level) * scale,
+                    _pad: [0; 2],
+                });
+                f.stats.surfels += u64::from(node.count);
+                f.stats.finest = f.stats.finest.min(node.level);
+                f.stats.coarsest = f.stats.coarsest.max(node.level);
+            });
+            if f.items.len() == before {
+                continue;
+            }
+            let (s, vbox) = shade(t as usize, sp, &model).unwrap_or((Shade::NONE, tree.bounds));
+            let vsize = vbox.extent().max(Vec3::splat(1e-6));
+            let corners = |c: &[f32; 8]| [[c[0], c[1], c[2], c[3]], [c[4], c[5], c[6], c[7]]];
+            let mut direct = s.direct;
+            let mut sky = s.sky;
+            for k in 0..8 {
+                direct[k] *= s.parent_direct;
+                sky[k] *= s.parent_sky;
+            }
+            f.trees.push(SurfelTreeGpu {
+                model: data.model,
+                qmin: tree.bounds.min.to_array(),
+                instance: t,
+                qsize: tree.bounds.extent().to_array(),
+                scale,
+                tint: [data.tint[0], data.tint[1], data.tint[2]],
+                _pad0: 0.0,
+                vcm_min: vbox.min.to_array(),
+                _pad1: 0.0,
+                vcm_inv_size: vsize.recip().to_array(),
+                _pad2: 0.0,
+                vcm_direct: corners(&direct),
+                vcm_sky: corners(&sky),
+            });
+        }
+    }
+    f.stats.trees = f.trees.len() as u32;
+    f.stats.blocks = f.items.len() as u32;
+    if f.items.is_empty() {
+        f.stats.finest = 0;
+    }
+    f
+}

@@ -1,0 +1,582 @@
+//! A tree sampled into Guennebaud and Paulin's LDC tree (2002): three orthogonal layered
+//! depth images (LDIs) at the finest spacing, each pixel a list of surfels where the
+//! pixel's ray meets the tree's triangles; each coarser level made from the one below at
+//! twice the spacing, a 2x2 group of pixels becoming one whose surfels are the children's
+//! matched by depth and averaged (position, normal, colour); every level cut into blocks of
+//! `BLOCK`³ cells, the octree's nodes, down to one block for the whole tree.
+//!
+//! Each triangle is sampled in the LDI whose axis it faces most (the paper's LDIs each hold
+//! every surface; drawn with partial coverage, a surface held three times would cover its
+//! pixels up to three times). A triangle narrower than the spacing may fall between the
+//! pixels' rays; it then gets one surfel at its centroid, weighted by the share of the
+//! pixel it covers, so that needles and small leaves keep their share of the crown.
+
+use std::collections::HashMap;
+
+use glam::{Mat3, Mat4, Vec2, Vec3};
+
+use crate::model::TreeModel;
+use crate::model::gltf::Material;
+use crate::model::mesh::{Aabb, Mesh};
+
+/// Cells on a block's side at every level (the paper's b).
+pub const BLOCK: u32 = 8;
+/// Most levels of a tree (the finest spacing's side then spans at most BLOCK · 2^(MAX-1)).
+pub const MAX_LEVELS: usize = 16;
+
+/// One sample of a tree's surface, in the tree frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Surfel {
+    pub position: Vec3,
+    /// Unit normal (a leaf's, which is two-sided, turned upwards).
+    pub normal: Vec3,
+    /// Linear albedo.
+    pub albedo: Vec3,
+    /// Lit as foliage (two-sided, the tree's tint); bark otherwise.
+    pub foliage: bool,
+    /// The share of its cell (its level's spacing squared, across its LDI's axis) the
+    /// surfaces it stands for cover: a surfel is drawn with this probability, so that a
+    /// sparse crown seen from afar lets as much through as its triangles do.
+    pub coverage: f32,
+}
+
+/// A block of one level: its surfels (a range of the tree's), its bounds in the tree frame
+/// and its children one level finer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Node {
+    pub level: u32,
+    pub bounds: Aabb,
+    pub first: u32,
+    pub count: u32,
+    /// Indices of the child nodes (none at level 0).
+    pub children: Vec<u32>,
+}
+
+/// A tree's LDC tree.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfelTree {
+    /// The box the surfels' positions are quantised in (the tree's bounds).
+    pub bounds: Aabb,
+    /// Spacing of level 0 (m); level l has `spacing0 · 2^l`.
+    pub spacing0: f32,
+    /// Every surfel, grouped by node.
+    pub surfels: Vec<Surfel>,
+    /// Every node; the coarsest level's are the roots.
+    pub nodes: Vec<Node>,
+    pub roots: Vec<u32>,
+    /// Surfels per level, finest first.
+    pub per_level: Vec<u32>,
+}
+
+impl SurfelTree {
+    pub fn levels(&self) -> usize {
+        self.per_level.len()
+    }
+
+    /// Spacing of level `l` (m, tree frame).
+    pub fn spacing(&self, level: u32) -> f32 {
+        self.spacing0 * (1u32 << level.min(31)) as f32
+    }
+}
+
+/// A triangle to sample, in the tree frame.
+struct Tri {
+    p: [Vec3; 3],
+    n: [Vec3; 3],
+    c: [Vec3; 3],
+    uv: [Vec2; 3],
+    foliage: bool,
+    material: Option<u32>,
+}
+
+/// Every triangle of `tree` in the tree frame, with its material where the tree has them.
+fn triangles(tree: &TreeModel) -> Vec<Tri> {
+    let surfaces = tree.surfaces.as_deref();
+    let mut out = Vec::new();
+    let mut part =
+        |mesh: &Mesh, ranges: Option<&[crate::model::tree::SurfaceRange]>, at: &[Mat4]| {
+            let tris = mesh.indices.len() / 3;
+            let mut material: Vec<Option<u32>> = vec![None; tris];
+            for r in ranges.unwrap_or(&[]) {
+                let first = (r.first / 3) as usize;
+                let last = (first + (r.count / 3) as usize).min(tris);
+                for m in material.iter_mut().take(last).skip(first) {
+                    *m = Some(r.material);
+                }
+            }
+            for m in at {
+                let linear = Mat3::from_mat4(*m);
+                let nm = if linear.determinant().abs() > 1e-30 {
+                    linear.inverse().transpose()
+                } else {
+                    linear
+                };
+                for (t, idx) in mesh.indices.chunks_exact(3).enumerate() {
+                    let Some(v) = idx
+                        .iter()
+                        .map(|&i| mesh.vertices.get(i as usize))
+                        .collect::<Option<Vec<_>>>()
+                    else {
+                        continue;
+                    };
+                    out.push(Tri {
+                        p: [0, 1, 2].map(|k| m.transform_point3(Vec3::from(v[k].position))),
+                        n: [0, 1, 2].map(|k| (nm * Vec3::from(v[k].normal)).normalize_or_zero()),
+                        c: [0, 1, 2].map(|k| Vec3::from(v[k].color)),
+                        uv: [0, 1, 2].map(|k| Vec2::from(v[k].uv)),
+                        foliage: v[0].foliage > 0.5,
+                        material: material[t],
+                    });
+                }
+            }
+        };
+    part(
+        &tree.trunk,
+        surfaces.map(|s| s.trunk.as_slice()),
+        &[Mat4::IDENTITY],
+    );
+    part(
+        &tree.branch_limb,
+        surfaces.map(|s| s.limb.as_slice()),
+        &tree.tree_branches,
+    );
+    part(
+        &tree.twig,
+        surfaces.map(|s| s.twig.as_slice()),
+        &tree.twigs_in_tree_frame(),
+    );
+    out
+}
+
+/// The colour and alpha of `material`'s texture at `uv` (nearest texel, repeated), linear.
+fn texel(material: &Material, uv: Vec2) -> Option<(Vec3, f32)> {
+    let t = material.texture.as_ref()?;
+    if t.width == 0 || t.height == 0 {
+        return None;
+    }
+    let x = (uv.x.rem_euclid(1.0) * t.width as f32) as u32 % t.width;
+    let y = (uv.y.rem_euclid(1.0) * t.height as f32) as u32 % t.height;
+    let at = ((y * t.width + x) * 4) as usize;
+    let px = t.pixels.get(at..at + 4)?;
+    let c = Vec3::new(
+        crate::color::srgb_to_linear(px[0]),
+        crate::color::srgb_to_linear(px[1]),
+        crate::color::srgb_to_linear(px[2]),
+    );
+    Some((c, f32::from(px[3]) / 255.0))
+}
+
+/// One surfel of an LDI: its pixel, its depth along the axis, its weight (level-0 pixels
+/// it stands for) and what it holds.
+#[derive(Clone, Copy)]
+struct Entry {
+    pixel: u32,
+    depth: f32,
+    weight: f32,
+    s: Surfel,
+}
+
+/// One of the three LDIs of a level.
+struct Ldi {
+    axis: usize,
+    dims: [u32; 2],
+    entries: Vec<Entry>,
+}
+
+/// The axes across an LDI along `axis`.
+fn across(axis: usize) -> (usize, usize) {
+    ((axis + 1) % 3, (axis + 2) % 3)
+}
+
+/// The surfel of `tri` at barycentric `b`, or None where its material's alpha test drops it.
+fn surfel_at(tri: &Tri, b: Vec3, materials: &[Material]) -> Option<Surfel> {
+    let position = tri.p[0] * b.x + tri.p[1] * b.y + tri.p[2] * b.z;
+    let mut normal = (tri.n[0] * b.x + tri.n[1] * b.y + tri.n[2] * b.z).normalize_or_zero();
+    if normal == Vec3::ZERO {
+        normal = (tri.p[1] - tri.p[0])
+            .cross(tri.p[2] - tri.p[0])
+            .normalize_or(Vec3::Y);
+    }
+    if tri.foliage && normal.y < 0.0 {
+        normal = -normal;
+    }
+    let mut albedo = tri.c[0] * b.x + tri.c[1] * b.y + tri.c[2] * b.z;
+    if let Some(m) = tri.material.and_then(|m| materials.get(m as usize)) {
+        let uv = tri.uv[0] * b.x + tri.uv[1] * b.y + tri.uv[2] * b.z;
+        if let Some((c, a)) = texel(m, uv) {
+            if a * m.base_color[3] < m.alpha_cutoff {
+                return None;
+            }
+            albedo *= c;
+        }
+    }
+    Some(Surfel {
+        position,
+        normal,
+        albedo,
+        foliage: tri.foliage,
+        coverage: 1.0,
+    })
+}
+
+/// Level 0: the three LDIs of `tris` over `bounds` at `spacing`.
+fn sample_level0(tris: &[Tri], bounds: &Aabb, spacing: f32, materials: &[Material]) -> [Ldi; 3] {
+    let ext = bounds.extent();
+    [0, 1, 2].map(|axis| {
+        let (a, b) = across(axis);
+        let dims = [
+            ((ext[a] / spacing).ceil() as u32).max(1),
+            ((ext[b] / spacing).ceil() as u32).max(1),
+        ];
+        let mut entries = Vec::new();
+        for tri in tris {
+            let q = tri.p.map(|p| {
+                Vec2::new(
+                    (p[a] - bounds.min[a]) / spacing,
+                    (p[b] - bounds.min[b]) / spacing,
+                )
+            });
+            let area = (q[1] - q[0]).perp_dot(q[2] - q[0]);
+            let face = (tri.p[1] - tri.p[0]).cross(tri.p[2] - tri.p[0]);
+            let facing = face.abs();
+            let dominant = facing[axis] >= facing[a] && facing[axis] >= facing[b];
+            // Each triangle in the LDI it faces most: the three LDIs hold each surface once.
+            if !dominant {
+                continue;
+            }
+            let mut hits = 0usize;
+            if area.abs() > 1e-12 {
+                let lo = q[0].min(q[1]).min(q[2]);
+                let hi = q[0].max(q[1]).max(q[2]);
+                let i0 = (lo.x - 0.5).ceil().max(0.0) as u32;
+                let j0 = (lo.y - 0.5).ceil().max(0.0) as u32;
+                let i1 = ((hi.x - 0.5).floor() as i64).min(i64::from(dims[0]) - 1);
+                let j1 = ((hi.y - 0.5).floor() as i64).min(i64::from(dims[1]) - 1);
+                for j in i64::from(j0)..=j1 {
+                    for i in i64::from(i0)..=i1 {
+                        let c = Vec2::new(i as f32 + 0.5, j as f32 + 0.5);
+                        let w0 = (q[2] - q[1]).perp_dot(c - q[1]) / area;
+                        let w1 = (q[0] - q[2]).perp_dot(c - q[2]) / area;
+                        let w2 = 1.0 - w0 - w1;
+                        if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
+                            continue;
+                        }
+                        let bary = Vec3::new(w0, w1, w2);
+                        if let Some(s) = surfel_at(tri, bary, materials) {
+                            hits += 1;
+                            entries.push(Entry {
+                                pixel: j as u32 * dims[0] + i as u32,
+                                depth: s.position[axis],
+                                weight: 1.0,
+                                s,
+                            });
+                        }
+                    }
+                }
+            }
+            if hits == 0 && facing[axis] > 0.0 {
+                let bary = Vec3::splat(1.0 / 3.0);
+                if let Some(s) = surfel_at(tri, bary, materials) {
+                    let c = (q[0] + q[1] + q[2]) / 3.0;
+                    let i = (c.x.max(0.0) as u32).min(dims[0] - 1);
+                    let j = (c.y.max(0.0) as u32).min(dims[1] - 1);
+                    entries.push(Entry {
+                        pixel: j * dims[0] + i,
+                        depth: s.position[axis],
+                        weight: (area.abs() * 0.5).min(1.0),
+                        s,
+                    });
+                }
+            }
+        }
+        entries.sort_by(|x, y| x.pixel.cmp(&y.pixel).then(x.depth.total_cmp(&y.depth)));
+        Ldi {
+            axis,
+            dims,
+            entries,
+        }
+    })
+}
+
+/// The level above `ldi` (spacing `spacing`, twice its own): each 2x2 group of pixels one
+/// pixel, whose surfels are the children's matched by depth (a cluster spans less than
+/// `spacing` along the axis) and averaged by weight.
+fn parent(ldi: &Ldi, spacing: f32) -> Ldi {
+    let dims = [ldi.dims[0].div_ceil(2), ldi.dims[1].div_ceil(2)];
+    let mut moved: Vec<Entry> = ldi
+        .entries
+        .iter()
+        .map(|e| {
+            let (i, j) = (e.pixel % ldi.dims[0], e.pixel / ldi.dims[0]);
+            Entry {
+                pixel: (j / 2) * dims[0] + i / 2,
+                ..*e
+            }
+        })
+        .collect();
+    moved.sort_by(|x, y| x.pixel.cmp(&y.pixel).then(x.depth.total_cmp(&y.depth)));
+    let mut entries = Vec::new();
+    let mut k = 0;
+    while k < moved.len() {
+        let start = moved[k];
+        let mut end = k + 1;
+        while end < moved.len()
+            && moved[end].pixel == start.pixel
+            && moved[end].depth - start.depth < spacing
+        {
+            end += 1;
+        }
+        entries.push(merge(&moved[k..end]));
+        k = end;
+    }
+    Ldi {
+        axis: ldi.axis,
+        dims,
+        entries,
+    }
+}
+
+/// The weighted mean of `group` (one pixel's surfels matched by depth).
+fn merge(group: &[Entry]) -> Entry {
+    if let [one] = group {
+        return *one;
+    }
+    let total: f32 = group.iter().map(|e| e.weight).sum::<f32>().max(1e-12);
+    let mut position = Vec3::ZERO;
+    let mut normal = Vec3::ZERO;
+    let mut albedo = Vec3::ZERO;
+    let mut foliage = 0.0;
+    let mut depth = 0.0;
+    for e in group {
+        let w = e.weight / total;
+        position += e.s.position * w;
+        normal += e.s.normal * e.weight;
+        albedo += e.s.albedo * w;
+        foliage += if e.s.foliage { w } else { 0.0 };
+        depth += e.depth * w;
+    }
+    Entry {
+        pixel: group[0].pixel,
+        depth,
+        weight: total,
+        s: Surfel {
+            position,
+            normal: normal.normalize_or(group[0].s.normal),
+            albedo,
+            foliage: foliage >= 0.5,
+            coverage: 1.0,
+        },
+    }
+}
+
+/// How many level-0 surfels `tris` would give at `spacing` (their projected areas over
+/// the three axes, in pixels).
+fn expected_count(tris: &[Tri], spacing: f32) -> f64 {
+    tris.iter()
+        .map(|t| {
+            let face = (t.p[1] - t.p[0]).cross(t.p[2] - t.p[0]) * 0.5;
+            let px = f64::from(face.abs().element_sum()) / f64::from(spacing * spacing);
+            px.max(1.0)
+        })
+        .sum()
+}
+
+/// The finest spacing that gives about `budget` level-0 surfels (never below `min`).
+fn spacing_for(tris: &[Tri], budget: u32, min: f32, bounds: &Aabb) -> f32 {
+    let ext = bounds.extent().max_element().max(1e-3);
+    let (mut lo, mut hi) = (min.max(ext / 65_535.0), ext);
+    if expected_count(tris, lo) <= f64::from(budget) {
+        return lo;
+    }
+    for _ in 0..30 {
+        let mid = (lo * hi).sqrt();
+        if expected_count(tris, mid) > f64::from(budget) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
+}
+
+/// `tree` sampled into an LDC tree of about `budget` surfels at its finest level, no finer
+/// than `min_spacing` (m).
+pub fn sample_tree(tree: &TreeModel, budget: u32, min_spacing: f32) -> SurfelTree {
+    let tris = triangles(tree);
+    let materials: &[Material] = tree
+        .surfaces
+        .as_deref()
+        .map_or(&[], |s| s.materials.as_slice());
+    let bounds = tree.tree_bounds;
+    let spacing0 = spacing_for(&tris, budget.max(1), min_spacing, &bounds);
+    sample_triangles(&tris, materials, bounds, spacing0)
+}
+
+/// The LDC tree of `tris` over `bounds` with level-0 spacing `spacing0`.
+fn sample_triangles(
+    tris: &[Tri],
+    materials: &[Material],
+    bounds: Aabb,
+    spacing0: f32,
+) -> SurfelTree {
+    let mut levels: Vec<[Ldi; 3]> = vec![sample_level0(tris, &bounds, spacing0, materials)];
+    let cells = |spacing: f32| (bounds.extent().max_element() / spacing).ceil() as u32;
+    while levels.len() < MAX_LEVELS && cells(spacing0 * (1 << (levels.len() - 1)) as f32) > BLOCK {
+        let spacing = spacing0 * (1 << levels.len()) as f32;
+        let below = levels.last().expect("level 0");
+        levels.push([0, 1, 2].map(|a| parent(&below[a], spacing)));
+    }
+    let mut tree = SurfelTree {
+        bounds,
+        spacing0,
+        surfels: Vec::new(),
+        nodes: Vec::new(),
+        roots: Vec::new(),
+        per_level: Vec::new(),
+    };
+    // Nodes level by level, finest first, so that a node's children are known when it is
+    // made; each level's blocks are cells of BLOCK · spacing from the bounds' corner.
+    let mut below: HashMap<[u32; 3], u32> = HashMap::new();
+    for (l, ldis) in levels.iter().enumerate() {
+        let side = BLOCK as f32 * spacing0 * (1u32 << l) as f32;
+        let key = |p: Vec3| {
+            let c = ((p - bounds.min) / side).max(Vec3::ZERO);
+            [c.x as u32, c.y as u32, c.z as u32]
+        };
+        // A surfel's weight counts level-0 cells; a cell of level l holds 4^l of them.
+        let cells = (1u64 << (2 * l)) as f32;
+        let mut all: Vec<(Surfel, [u32; 3])> = ldis
+            .iter()
+            .flat_map(|ldi| {
+                ldi.entries.iter().map(|e| {
+                    let s = Surfel {
+                        coverage: (e.weight / cells).min(1.0),
+                        ..e.s
+                    };
+                    (s, key(e.s.position))
+                })
+            })
+            .collect();
+        all.sort_by_key(|(_, k)| (k[2], k[1], k[0]));
+        tree.per_level.push(all.len() as u32);
+        let mut here: HashMap<[u32; 3], u32> = HashMap::new();
+        let mut k = 0;
+        while k < all.len() {
+            let block = all[k].1;
+            let mut end = k;
+            let first = tree.surfels.len() as u32;
+            let mut b = Aabb::EMPTY;
+            while end < all.len() && all[end].1 == block {
+                tree.surfels.push(all[end].0);
+                b = b.including(all[end].0.position);
+                end += 1;
+            }
+            let pad = Vec3::splat(0.5 * spacing0 * (1u32 << l) as f32);
+            let children = if l == 0 {
+                Vec::new()
+            } else {
+                let mut c = Vec::new();
+                for d in 0..8u32 {
+                    let child = [
+                        2 * block[0] + (d & 1),
+                        2 * block[1] + ((d >> 1) & 1),
+                        2 * block[2] + ((d >> 2) & 1),
+                    ];
+                    if let Some(&n) = below.get(&child) {
+                        c.push(n);
+                    }
+                }
+                c
+            };
+            here.insert(block, tree.nodes.len() as u32);
+            tree.nodes.push(Node {
+                level: l as u32,
+                bounds: Aabb::new(b.min - pad, b.max + pad),
+                first,
+                count: (end - k) as u32,
+                children,
+            });
+            k = end;
+        }
+        below = here;
+    }
+    tree.roots = below.values().copied().collect();
+    tree.roots.sort_unstable();
+    tree
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::model::Vertex;
+
+    /// A flat square of side `side` (m) in the plane z = 0, facing +z, of `color`.
+    pub(crate) fn quad(side: f32, color: Vec3) -> TreeModel {
+        let mut mesh = Mesh::default();
+        let n = Vec3::Z;
+        let h = side / 2.0;
+        for p in [
+            Vec3::new(-h, 0.0, 0.0),
+            Vec3::new(h, 0.0, 0.0),
+            Vec3::new(h, side, 0.0),
+            Vec3::new(-h, side, 0.0),
+        ] {
+            mesh.vertices.push(Vertex::new(p, n, color, 0.0));
+        }
+        mesh.indices = vec![0, 1, 2, 0, 2, 3];
+        let bounds = Aabb::new(Vec3::new(-h, 0.0, -0.01), Vec3::new(h, side, 0.01));
+        TreeModel {
+            name: "quad".into(),
+            foliage: crate::model::FoliageKind::Leaves,
+            foliage_per_twig: 0,
+            twig: Mesh::default(),
+            branch_limb: Mesh::default(),
+            branch_twigs: Vec::new(),
+            trunk: mesh,
+            tree_branches: Vec::new(),
+            tree_twigs: Vec::new(),
+            twig_bounds: Aabb::EMPTY,
+            branch_bounds: Aabb::EMPTY,
+            tree_bounds: bounds,
+            surfaces: None,
+            levels_note: None,
+            variant: 0,
+        }
+    }
+
+    #[test]
+    fn a_quad_is_covered_at_every_level_with_its_colour() {
+        let color = Vec3::new(0.2, 0.5, 0.1);
+        let tree = quad(4.0, color);
+        let s = sample_tree(&tree, 10_000, 0.0);
+        // About 10,000 surfels at level 0 (all in the LDI along z).
+        let l0 = s.per_level[0];
+        assert!((8_000..=12_000).contains(&l0), "{l0}");
+        assert!(s.levels() >= 3, "{}", s.levels());
+        assert_eq!(s.roots.len(), 1);
+        for node in &s.nodes {
+            for x in &s.surfels[node.first as usize..(node.first + node.count) as usize] {
+                assert!((x.albedo - color).abs().max_element() < 1e-5);
+                assert!(x.position.z.abs() < 1e-5);
+                assert!(x.normal.abs_diff_eq(Vec3::Z, 1e-5));
+                assert!(node.bounds.contains(x.position));
+            }
+        }
+        // Each level covers the quad: every cell of its spacing holds a surfel.
+        for l in 0..s.levels() as u32 {
+            let r = s.spacing(l);
+            let n = (4.0 / r).floor() as i32;
+            let mut covered = std::collections::HashSet::new();
+            for node in s.nodes.iter().filter(|n| n.level == l) {
+                for x in &s.surfels[node.first as usize..(node.first + node.count) as usize] {
+                    covered.insert((((x.position.x + 2.0) / r) as i32, (x.position.y / r) as i32));
+                }
+            }
+            for i in 0..n {
+                for j in 0..n {
+                    assert!(covered.contains(&(i, j)), "level {l}: cell {i},{j} empty");
+                }
+            }
+        }
+    }
+}
