@@ -12,8 +12,10 @@
 //   sums in fixed point.
 // - `pull1`, `pull2`: the sums at half and quarter resolution, with the share of covered
 //   pixels and the nearest distance of each.
-// - `push`, a thread per pixel: a covered pixel its mean; an empty one the mean of the
-//   finer of the two coarser levels that is covered at least half and nearer than the
+// - `push`, a thread per pixel: a covered pixel its mean; an empty one with at least 6 of
+//   its 8 neighbours covered their mean; where the surfels are spaced wider than a pixel
+//   (`surfel_px` above 1.5 or 3), an empty one inside a covered region of the half- or
+//   quarter-resolution level that level's colour; in each case only in front of the
 //   frame's depth there (else it stays empty). Written into the trees' layer, which is then
 //   put over the frame.
 //
@@ -28,13 +30,15 @@ struct SurfelParams {
     items: u32,
     // Workgroups of a dispatch's row (items are numbered x + y * this).
     row: u32,
-    // 1: holes are filled.
+    // Levels holes are filled from: 0 none; 1 a pixel's neighbours; 2 and 3 the half- and
+    // quarter-resolution levels too (where the surfels are spaced wider than a pixel).
     fill: u32,
     // 1: each surfel takes its level's colour (the LOD overlay); 2: its sun factor.
     mode: u32,
     // Pixels per metre at one metre from the camera (0: orthographic, every surfel drawn).
     focal_px: f32,
-    _pad: u32,
+    // Multiplies the trees' own extinction (0: no self-shadowing).
+    self_shadow: f32,
 }
 
 struct SurfelTreeGpu {
@@ -55,6 +59,12 @@ struct SurfelTreeGpu {
     _pad2: f32,
     vcm_direct: array<vec4<f32>, 2>,
     vcm_sky: array<vec4<f32>, 2>,
+    // The species' density volume: its corner (tree frame), voxel side, size in voxels and
+    // where it starts in `volumes`.
+    vol_origin: vec3<f32>,
+    vol_voxel: f32,
+    vol_dims: vec3<u32>,
+    vol_offset: u32,
 }
 
 struct SurfelItem {
@@ -79,6 +89,7 @@ struct SurfelItem {
 @group(1) @binding(6) var<storage, read_write> levels: array<vec4<f32>>;
 @group(1) @binding(7) var scene_depth: texture_depth_2d;
 @group(1) @binding(8) var layer_out: texture_storage_2d<rgba16float, write>;
+@group(1) @binding(9) var<storage, read> volumes: array<f32>;
 
 // Fixed-point units of a colour sum (1.0 = this many).
 const SUM_SCALE: f32 = 256.0;
@@ -124,6 +135,8 @@ struct Placed {
     foliage: bool,
     // Box coordinates in the VCM box.
     u: vec3<f32>,
+    // Where it is in the tree frame.
+    local: vec3<f32>,
 }
 
 fn octa_decode(e: vec2<f32>) -> vec3<f32> {
@@ -159,6 +172,7 @@ fn place(t: SurfelTreeGpu, i: u32, spacing: f32) -> Placed {
     out.foliage = ((w2 >> 24u) & 1u) != 0u;
     let coverage = f32(w2 >> 25u) / 127.0;
     out.u = (p - t.vcm_min) * t.vcm_inv_size;
+    out.local = p;
     let clip = frame.view_proj * vec4<f32>(out.world, 1.0);
     if clip.w <= 1e-4 {
         return out;
@@ -220,6 +234,23 @@ fn level_color(l: u32) -> vec3<f32> {
     return c[l % 6u];
 }
 
+// The tree's own optical depth from `p` (tree frame) along the unit `dir`, a voxel a step
+// through its density volume, from half a voxel out.
+fn optical_depth(t: SurfelTreeGpu, p: vec3<f32>, dir: vec3<f32>) -> f32 {
+    let dims = vec3<f32>(t.vol_dims);
+    var x = (p - t.vol_origin) / t.vol_voxel + 0.5 * dir;
+    var tau = 0.0;
+    for (var k = 0u; k < 64u; k++) {
+        if any(x < vec3<f32>(0.0)) || any(x >= dims) {
+            break;
+        }
+        let v = vec3<u32>(x);
+        tau += volumes[t.vol_offset + (v.z * t.vol_dims.y + v.y) * t.vol_dims.x + v.x];
+        x += dir;
+    }
+    return tau * t.vol_voxel;
+}
+
 // A surfel lit as the geometry lights its surface (geometry.wgsl's `lit_by`), with the
 // tree-level VCM factors for the sun and the sky (as `impostor` and `btf`'s tree level).
 fn lit(t: SurfelTreeGpu, s: Placed, level: u32) -> vec3<f32> {
@@ -228,8 +259,17 @@ fn lit(t: SurfelTreeGpu, s: Placed, level: u32) -> vec3<f32> {
     if s.foliage && dot(n, to_eye) < 0.0 {
         n = -n;
     }
-    let sun_f = trilinear(t.vcm_direct[0], t.vcm_direct[1], s.u);
-    let sky_f = trilinear(t.vcm_sky[0], t.vcm_sky[1], s.u);
+    var sun_f = trilinear(t.vcm_direct[0], t.vcm_direct[1], s.u);
+    var sky_f = trilinear(t.vcm_sky[0], t.vcm_sky[1], s.u);
+    // The tree's own shadow: its extinction towards the sun and straight up, in the tree
+    // frame (the model's rotation and uniform scale undone).
+    for (var k = 0u; k < select(0u, 1u, sp.self_shadow > 0.0); k++) {
+        let m = mat3x3<f32>(t.model[0].xyz, t.model[1].xyz, t.model[2].xyz);
+        let to_sun = normalize(transpose(m) * frame.sun_dir);
+        let up = normalize(transpose(m) * vec3<f32>(0.0, 1.0, 0.0));
+        sun_f *= exp(-sp.self_shadow * optical_depth(t, s.local, to_sun));
+        sky_f *= exp(-sp.self_shadow * optical_depth(t, s.local, up));
+    }
     let ndl = dot(n, frame.sun_dir);
     var direct = max(ndl, 0.0);
     if s.foliage {
@@ -414,10 +454,10 @@ fn push(@builtin(global_invocation_id) id: vec3<u32>) {
         let scene = scene_distance(id.xy);
         let p = vec2<i32>(id.xy);
         var fill = hole0(p);
-        if fill[0].a < 1.0 {
+        if fill[0].a < 1.0 && sp.fill >= 2u {
             fill = inside(1u, p / 2);
         }
-        if fill[0].a < 1.0 {
+        if fill[0].a < 1.0 && sp.fill >= 3u {
             fill = inside(2u, p / 4);
         }
         if fill[0].a >= 1.0 && fill[1].x < scene {

@@ -25,7 +25,8 @@ pub struct SurfelParams {
     pub mode: u32,
     /// Pixels per metre at one metre from the camera (0: orthographic, every surfel drawn).
     pub focal_px: f32,
-    pub _pad: u32,
+    /// Multiplies the trees' own extinction (0: no self-shadowing).
+    pub self_shadow: f32,
 }
 
 /// `SurfelTreeGpu` of surfel.wgsl: one drawn tree.
@@ -46,6 +47,12 @@ pub struct SurfelTreeGpu {
     pub _pad2: f32,
     pub vcm_direct: [[f32; 4]; 2],
     pub vcm_sky: [[f32; 4]; 2],
+    /// The species' density volume: its corner (tree frame), voxel side, size in voxels
+    /// and where it starts in the volumes' buffer.
+    pub vol_origin: [f32; 3],
+    pub vol_voxel: f32,
+    pub vol_dims: [u32; 3],
+    pub vol_offset: u32,
 }
 
 /// `SurfelItem` of surfel.wgsl: one block of one tree.
@@ -129,7 +136,10 @@ pub struct SurfelAssets {
     /// Per species: its LDC tree (surfels dropped once uploaded) and where its surfels
     /// start in the buffer.
     pub species: Vec<(SurfelTree, u32)>,
+    /// Where each species' density volume starts in `volumes`.
+    pub volume_offsets: Vec<u32>,
     pub surfels: wgpu::Buffer,
+    pub volumes: wgpu::Buffer,
     pub bytes: u64,
     pub count: u64,
 }
@@ -146,7 +156,12 @@ impl SurfelAssets {
         }
         let mut words: Vec<u32> = Vec::with_capacity((count as usize) * SURFEL_WORDS);
         let mut species = Vec::with_capacity(trees.len());
+        let mut sigma: Vec<f32> = Vec::new();
+        let mut volume_offsets = Vec::with_capacity(trees.len());
         for mut t in trees {
+            volume_offsets.push(sigma.len() as u32);
+            sigma.extend_from_slice(&t.density.sigma);
+            t.density.sigma = Vec::new();
             let base = (words.len() / SURFEL_WORDS) as u32;
             let (qmin, qsize) = (t.bounds.min, t.bounds.extent());
             for s in &t.surfels {
@@ -158,6 +173,9 @@ impl SurfelAssets {
         if words.is_empty() {
             words.extend_from_slice(&[0; SURFEL_WORDS]);
         }
+        if sigma.is_empty() {
+            sigma.push(0.0);
+        }
         let surfels = ctx.checked("uploading the surfels", || {
             use wgpu::util::DeviceExt;
             ctx.device
@@ -167,9 +185,21 @@ impl SurfelAssets {
                     usage: wgpu::BufferUsages::STORAGE,
                 })
         })?;
+        let volumes = ctx.checked("uploading the surfel density volumes", || {
+            use wgpu::util::DeviceExt;
+            ctx.device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("surfel density volumes"),
+                    contents: bytemuck::cast_slice(&sigma),
+                    usage: wgpu::BufferUsages::STORAGE,
+                })
+        })?;
+        let bytes = bytes + sigma.len() as u64 * 4;
         Ok(Self {
             species,
+            volume_offsets,
             surfels,
+            volumes,
             bytes,
             count,
         })
@@ -267,11 +297,13 @@ impl PixelBuffers {
 /// What one frame splats.
 pub struct SplatInput<'a> {
     pub surfels: &'a wgpu::Buffer,
+    pub volumes: &'a wgpu::Buffer,
     pub items: &'a [SurfelItem],
     pub trees: &'a [SurfelTreeGpu],
-    pub fill: bool,
+    pub fill: u32,
     pub mode: u32,
     pub focal_px: f32,
+    pub self_shadow: f32,
 }
 
 impl Splatter {
@@ -299,6 +331,7 @@ impl Splatter {
                     },
                     count: None,
                 },
+                buffer_entry(9, compute, read),
                 wgpu::BindGroupLayoutEntry {
                     binding: 8,
                     visibility: compute,
@@ -403,10 +436,10 @@ impl Splatter {
             quarter_size: quarter(size),
             items,
             row,
-            fill: u32::from(input.fill),
+            fill: input.fill,
             mode: input.mode,
             focal_px: input.focal_px,
-            _pad: 0,
+            self_shadow: input.self_shadow,
         };
         ctx.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
@@ -445,6 +478,7 @@ impl Splatter {
                     binding: 8,
                     resource: wgpu::BindingResource::TextureView(layer_view),
                 },
+                entry(9, input.volumes),
             ],
         });
         let (w, h) = px.size;

@@ -31,6 +31,16 @@ pub static KNOBS: &[Knob] = &[
         |d| d.surfel.fill,
         |d, v| d.surfel.fill = v,
     ),
+    Knob::number(
+        "surfel_shadow",
+        "self-shadowing",
+        "multiplies each tree's own extinction (its surfels' area as a volume) between a surfel and the sun, and the sky straight above it; 0: none",
+        (0.0, 8.0),
+        |d| d.surfel.self_shadow,
+        |d, v| d.surfel.self_shadow = v,
+    )
+    .slider(0.0, 4.0, false)
+    .tuned(&["0", "0.5", "1", "2"]),
     Knob::toggle(
         "vcm",
         "VCM shading (trees shade each other)",

@@ -53,10 +53,13 @@ pub struct SurfelMethod {
     assets: Option<SurfelAssets>,
     splatter: Option<Splatter>,
     frame: SurfelFrame,
-    fill: bool,
+    /// Levels holes are filled from (surfel.wgsl's `fill`).
+    fill: u32,
     mode: u32,
     /// The frame's pixels per metre at a metre (0: orthographic).
     focal_px: f32,
+    /// The frame's `surfel_shadow` knob.
+    self_shadow: f32,
     /// How long sampling the species took (ms), once done.
     sample_ms: f64,
 }
@@ -101,8 +104,15 @@ impl RenderMethod for SurfelMethod {
     fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
         bake.need_btf(Method::Surfel)?;
         let settings = cx.frame.surfel;
-        self.fill = settings.fill;
+        // Holes are filled from a pixel's neighbours, and from the coarser levels where the
+        // surfels are spaced wider than a pixel.
+        self.fill = if settings.fill {
+            1 + u32::from(settings.surfel_px > 1.5) + u32::from(settings.surfel_px > 3.0)
+        } else {
+            0
+        };
         self.mode = u32::from(settings.show_lod);
+        self.self_shadow = settings.self_shadow;
         self.focal_px = if cx.view.camera.ortho.is_none() {
             cx.view.focal_px
         } else {
@@ -126,6 +136,7 @@ impl RenderMethod for SurfelMethod {
         self.frame = match &self.assets {
             Some(a) if cx.frame.trees => prepare(
                 &a.species,
+                &a.volume_offsets,
                 &cx.world.tree_data,
                 &cx.visible,
                 &cx.view,
@@ -198,11 +209,13 @@ impl RenderMethod for SurfelMethod {
         };
         let input = SplatInput {
             surfels: &assets.surfels,
+            volumes: &assets.volumes,
             items: &self.frame.items,
             trees: &self.frame.trees,
             fill: self.fill,
             mode: self.mode,
             focal_px: self.focal_px,
+            self_shadow: self.self_shadow,
         };
         if let Err(e) = splatter.splat(
             cx.ctx,

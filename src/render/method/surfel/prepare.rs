@@ -64,6 +64,7 @@ pub fn walk(
 /// VCM factors and box (None: unshaded).
 pub fn prepare(
     species: &[(SurfelTree, u32)],
+    volume_offsets: &[u32],
     trees: &[TreeGpu],
     visible: &[Vec<u32>],
     view: &PrepareView<'_>,
@@ -126,6 +127,10 @@ pub fn prepare(
                 _pad2: 0.0,
                 vcm_direct: corners(&direct),
                 vcm_sky: corners(&sky),
+                vol_origin: tree.density.origin.to_array(),
+                vol_voxel: tree.density.voxel,
+                vol_dims: tree.density.dims,
+                vol_offset: volume_offsets.get(sp).copied().unwrap_or(0),
             });
         }
     }

@@ -66,6 +66,43 @@ pub struct SurfelTree {
     pub roots: Vec<u32>,
     /// Surfels per level, finest first.
     pub per_level: Vec<u32>,
+    /// The tree's own foliage and bark as an extinction volume, for its self-shadowing.
+    pub density: Density,
+}
+
+/// Voxels on the longest side of a tree's [`Density`].
+pub const DENSITY_SIDE: u32 = 32;
+
+/// A tree's surfaces as a volume of extinction coefficients (1/m) over its bounds: each
+/// voxel's surface area (from the level-0 surfels) times a half (the mean share of a
+/// randomly turned leaf's area a ray sees) over the voxel's volume.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Density {
+    pub origin: Vec3,
+    pub voxel: f32,
+    pub dims: [u32; 3],
+    pub sigma: Vec<f32>,
+}
+
+impl Density {
+    fn of(bounds: &Aabb, surfels: &[(Surfel, f32)]) -> Density {
+        let ext = bounds.extent().max(Vec3::splat(1e-3));
+        let voxel = ext.max_element() / DENSITY_SIDE as f32;
+        let dims = (ext / voxel).ceil().as_uvec3().max(glam::UVec3::ONE).to_array();
+        let mut sigma = vec![0.0f32; (dims[0] * dims[1] * dims[2]) as usize];
+        let volume = voxel * voxel * voxel;
+        for (s, area) in surfels {
+            let v = ((s.position - bounds.min) / voxel).max(Vec3::ZERO).as_uvec3();
+            let v = v.min(glam::UVec3::from(dims) - 1);
+            sigma[((v.z * dims[1] + v.y) * dims[0] + v.x) as usize] += 0.5 * area / volume;
+        }
+        Density {
+            origin: bounds.min,
+            voxel,
+            dims,
+            sigma,
+        }
+    }
 }
 
 impl SurfelTree {
@@ -433,7 +470,21 @@ fn sample_triangles(
         nodes: Vec::new(),
         roots: Vec::new(),
         per_level: Vec::new(),
+        density: Density::default(),
     };
+    // The surface each level-0 surfel stands for: its share of a cell, over the cosine
+    // between its normal and its LDI's axis.
+    let cell = spacing0 * spacing0;
+    let areas: Vec<(Surfel, f32)> = levels[0]
+        .iter()
+        .flat_map(|ldi| {
+            ldi.entries.iter().map(move |e| {
+                let cos = e.s.normal[ldi.axis].abs().max(0.3);
+                (e.s, e.weight.min(1.0) * cell / cos)
+            })
+        })
+        .collect();
+    tree.density = Density::of(&bounds, &areas);
     // Nodes level by level, finest first, so that a node's children are known when it is
     // made; each level's blocks are cells of BLOCK · spacing from the bounds' corner.
     let mut below: HashMap<[u32; 3], u32> = HashMap::new();

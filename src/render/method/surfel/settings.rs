@@ -13,6 +13,9 @@ pub struct SurfelSettings {
     pub fill: bool,
     /// Shade with the trees' visibility cube maps.
     pub vcm: bool,
+    /// Multiplies each tree's own extinction between a surfel and the sun (and the sky
+    /// above it); 0: no self-shadowing.
+    pub self_shadow: f32,
     /// Colour each surfel by its level.
     pub show_lod: bool,
 }
@@ -24,6 +27,7 @@ impl Default for SurfelSettings {
             tolerance: 2.0,
             fill: true,
             vcm: true,
+            self_shadow: 1.0,
             show_lod: false,
         }
     }
