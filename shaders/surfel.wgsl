@@ -185,16 +185,18 @@ fn place(t: SurfelTreeGpu, i: u32, spacing: f32) -> Placed {
     if !out.foliage && dot(out.normal, to_eye) < 0.0 {
         return out;
     }
-    // Drawn with the chance of the share of its pixel it covers, by a hash of the surfel
-    // and its tree (the same surfels every frame): its cell's share covered, times the
-    // cell's area over the pixel's, seen at its angle (the cell lies across the axis the
-    // normal leans on most).
-    if sp.focal_px > 0.0 {
+    // Drawn with a chance, by a hash of the surfel and its tree (the same surfels every
+    // frame), such that the k surfels of a surface that fall in one pixel leave it empty
+    // with the chance the surface leaves it open: 1 - (1 - c)^(1/k), c its cell's share
+    // covered, k the pixel's area over the cell's as seen at its angle (the cell lies
+    // across the axis the normal leans on most). A cell wholly covered is always drawn.
+    if sp.focal_px > 0.0 && coverage < 1.0 {
         let pixel = clip.w / sp.focal_px;
         let n = abs(out.normal);
         let slant = abs(dot(out.normal, to_eye)) / (length(to_eye) * max(max(n.x, max(n.y, n.z)), 0.3));
-        let share = coverage * (spacing * spacing) / (pixel * pixel) * slant;
-        if share < hash01(i ^ (t.instance * 0x9e3779b9u)) {
+        let per_pixel = (spacing * spacing) / (pixel * pixel) * slant;
+        let chance = 1.0 - pow(1.0 - coverage, per_pixel);
+        if chance < hash01(i ^ (t.instance * 0x9e3779b9u)) {
             return out;
         }
     }

@@ -31,6 +31,7 @@ mod reference;
 mod shaders;
 mod species;
 mod stability;
+mod surfel;
 mod texel;
 mod tune;
 mod vcm;

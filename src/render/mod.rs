@@ -152,7 +152,7 @@ impl Renderer {
         Ok(Self {
             meshes: MeshPasses::new(ctx, &layouts)?,
             methods: method::registry(),
-            bake: Bake::default(),
+            bake: Bake::unbaked(world),
             ground_placeholder: GroundTextures::placeholder(ctx)?,
             sky_vis: None,
             sky_placeholder: SkyVisibility::placeholder(ctx)?,

@@ -49,6 +49,14 @@ pub struct Bake {
 }
 
 impl Bake {
+    /// No bake yet: what the methods that need none draw from (`surfel`'s species).
+    pub fn unbaked(world: &World) -> Self {
+        Self {
+            surfels: SurfelSource::new(world),
+            ..Default::default()
+        }
+    }
+
     /// Drops every render pipeline the assets built (they are built again on next use).
     pub fn forget_pipelines(&mut self) {
         if let Some(b) = self.btf.as_mut() {

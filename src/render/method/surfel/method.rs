@@ -89,8 +89,10 @@ impl RenderMethod for SurfelMethod {
         Method::Surfel
     }
 
-    fn check(&self, bake: &Bake) -> Result<()> {
-        bake.need_btf(Method::Surfel).map(|_| ())
+    fn check(&self, _bake: &Bake) -> Result<()> {
+        // Without a bake the trees are drawn unshaded by visibility cube maps, with no
+        // ground shadows.
+        Ok(())
     }
 
     fn shades_ground(&self) -> bool {
@@ -102,7 +104,6 @@ impl RenderMethod for SurfelMethod {
     }
 
     fn prepare(&mut self, bake: &mut Bake, cx: PrepareCx<'_>) -> Result<Plan> {
-        bake.need_btf(Method::Surfel)?;
         let settings = cx.frame.surfel;
         // Holes are filled from a pixel's neighbours, and from the coarser levels where the
         // surfels are spaced wider than a pixel.
@@ -122,17 +123,15 @@ impl RenderMethod for SurfelMethod {
         if cx.frame.trees {
             self.assets(bake, cx.ctx)?;
         }
-        let Some(btf) = bake.btf.as_mut() else {
-            return Err(Error::Gpu("the BTF assets are not loaded".into()));
-        };
-        if settings.vcm && cx.frame.trees {
+        let vcm = settings.vcm && cx.frame.trees && bake.btf.is_some();
+        if vcm && let Some(btf) = bake.btf.as_mut() {
             let t0 = Instant::now();
             if btf.update_sun(cx.view.to_sun) {
                 sun.moved = true;
                 sun.ms += t0.elapsed().as_secs_f64() * 1e3;
             }
         }
-        let scene = btf.scene();
+        let scene = bake.btf.as_ref().map(|b| b.scene());
         self.frame = match &self.assets {
             Some(a) if cx.frame.trees => prepare(
                 &a.species,
@@ -141,13 +140,7 @@ impl RenderMethod for SurfelMethod {
                 &cx.visible,
                 &cx.view,
                 &settings,
-                &mut |t, sp, m| {
-                    if settings.vcm {
-                        scene.tree_shade(t, sp, m)
-                    } else {
-                        None
-                    }
-                },
+                &mut |t, sp, m| scene.filter(|_| vcm).and_then(|s| s.tree_shade(t, sp, m)),
             ),
             _ => SurfelFrame::default(),
         };
@@ -240,7 +233,7 @@ impl RenderMethod for SurfelMethod {
 /// What the rest of the program asks of `surfel`.
 pub const INFO: MethodInfo = MethodInfo {
     name: "surfel",
-    summary: "Guennebaud and Paulin's LDC trees of surfels, each block at the level whose spacing is about a pixel, splatted in compute and hole-filled by pull-push (needs a bake, for the VCMs)",
+    summary: "Guennebaud and Paulin's LDC trees of surfels, each block at the level whose spacing is about a pixel, splatted in compute and hole-filled by pull-push (a bake adds the VCM shading and ground shadows)",
     needs_bake: true,
     follows_sun: true,
     stat_rows,

@@ -88,11 +88,17 @@ impl Density {
     fn of(bounds: &Aabb, surfels: &[(Surfel, f32)]) -> Density {
         let ext = bounds.extent().max(Vec3::splat(1e-3));
         let voxel = ext.max_element() / DENSITY_SIDE as f32;
-        let dims = (ext / voxel).ceil().as_uvec3().max(glam::UVec3::ONE).to_array();
+        let dims = (ext / voxel)
+            .ceil()
+            .as_uvec3()
+            .max(glam::UVec3::ONE)
+            .to_array();
         let mut sigma = vec![0.0f32; (dims[0] * dims[1] * dims[2]) as usize];
         let volume = voxel * voxel * voxel;
         for (s, area) in surfels {
-            let v = ((s.position - bounds.min) / voxel).max(Vec3::ZERO).as_uvec3();
+            let v = ((s.position - bounds.min) / voxel)
+                .max(Vec3::ZERO)
+                .as_uvec3();
             let v = v.min(glam::UVec3::from(dims) - 1);
             sigma[((v.z * dims[1] + v.y) * dims[0] + v.x) as usize] += 0.5 * area / volume;
         }
@@ -203,11 +209,13 @@ fn texel(material: &Material, uv: Vec2) -> Option<(Vec3, f32)> {
     Some((c, f32::from(px[3]) / 255.0))
 }
 
-/// One surfel of an LDI: its pixel, its depth along the axis, its weight (level-0 pixels
-/// it stands for) and what it holds.
+/// One surfel of an LDI: its pixel, the pixel of the level below it came from (its own at
+/// level 0), its depth along the axis, its weight (the level-0 cells it covers) and what it
+/// holds.
 #[derive(Clone, Copy)]
 struct Entry {
     pixel: u32,
+    src: u32,
     depth: f32,
     weight: f32,
     s: Surfel,
@@ -303,6 +311,7 @@ fn sample_level0(tris: &[Tri], bounds: &Aabb, spacing: f32, materials: &[Materia
                             hits += 1;
                             entries.push(Entry {
                                 pixel: j as u32 * dims[0] + i as u32,
+                                src: j as u32 * dims[0] + i as u32,
                                 depth: s.position[axis],
                                 weight: 1.0,
                                 s,
@@ -319,6 +328,7 @@ fn sample_level0(tris: &[Tri], bounds: &Aabb, spacing: f32, materials: &[Materia
                     let j = (c.y.max(0.0) as u32).min(dims[1] - 1);
                     entries.push(Entry {
                         pixel: j * dims[0] + i,
+                        src: j * dims[0] + i,
                         depth: s.position[axis],
                         weight: (area.abs() * 0.5).min(1.0),
                         s,
@@ -327,18 +337,58 @@ fn sample_level0(tris: &[Tri], bounds: &Aabb, spacing: f32, materials: &[Materia
             }
         }
         entries.sort_by(|x, y| x.pixel.cmp(&y.pixel).then(x.depth.total_cmp(&y.depth)));
+        // Surfels of one pixel closer in depth than the spacing are one surface (the many
+        // needles of a twig that fall in one pixel).
         Ldi {
             axis,
             dims,
-            entries,
+            entries: cluster(&entries, spacing, 1.0, 1.0),
         }
     })
 }
 
-/// The level above `ldi` (spacing `spacing`, twice its own): each 2x2 group of pixels one
-/// pixel, whose surfels are the children's matched by depth (a cluster spans less than
-/// `spacing` along the axis) and averaged by weight.
-fn parent(ldi: &Ldi, spacing: f32) -> Ldi {
+/// `sorted` (by pixel, then depth) with each pixel's surfels less than `spacing` apart in
+/// depth merged. A merged surfel covers what its parts cover: those from one pixel of the
+/// level below (`below` level-0 cells) overlap as independent layers (the share left open
+/// is the product of theirs), those from different pixels add up, to at most `cells` (the
+/// level-0 cells of its own pixel).
+fn cluster(sorted: &[Entry], spacing: f32, cells: f32, below: f32) -> Vec<Entry> {
+    let mut out = Vec::new();
+    let mut k = 0;
+    while k < sorted.len() {
+        let start = sorted[k];
+        let mut end = k + 1;
+        while end < sorted.len()
+            && sorted[end].pixel == start.pixel
+            && sorted[end].depth - start.depth < spacing
+        {
+            end += 1;
+        }
+        let group = &sorted[k..end];
+        let mut e = merge(group);
+        if group.len() > 1 {
+            let mut open: Vec<(u32, f32)> = Vec::new();
+            for x in group {
+                let share = 1.0 - (x.weight / below).min(1.0);
+                match open.iter_mut().find(|(src, _)| *src == x.src) {
+                    Some(o) => o.1 *= share,
+                    None => open.push((x.src, share)),
+                }
+            }
+            e.weight = open.iter().map(|(_, o)| (1.0 - o) * below).sum();
+        }
+        e.weight = e.weight.min(cells);
+        e.src = e.pixel;
+        out.push(e);
+        k = end;
+    }
+    out
+}
+
+/// The level above `ldi` (spacing `spacing`, twice its own; `cells` level-0 cells a
+/// pixel): each 2x2 group of pixels one pixel, whose surfels are the children's matched by
+/// depth (a cluster spans less than `spacing` along the axis) and averaged by weight.
+fn parent(ldi: &Ldi, spacing: f32, cells: f32) -> Ldi {
     let dims = [ldi.dims[0].div_ceil(2), ldi.dims[1].div_ceil(2)];
     let mut moved: Vec<Entry> = ldi
         .entries
@@ -347,29 +397,16 @@ fn parent(ldi: &Ldi, spacing: f32) -> Ldi {
             let (i, j) = (e.pixel % ldi.dims[0], e.pixel / ldi.dims[0]);
             Entry {
                 pixel: (j / 2) * dims[0] + i / 2,
+                src: e.pixel,
                 ..*e
             }
         })
         .collect();
     moved.sort_by(|x, y| x.pixel.cmp(&y.pixel).then(x.depth.total_cmp(&y.depth)));
-    let mut entries = Vec::new();
-    let mut k = 0;
-    while k < moved.len() {
-        let start = moved[k];
-        let mut end = k + 1;
-        while end < moved.len()
-            && moved[end].pixel == start.pixel
-            && moved[end].depth - start.depth < spacing
-        {
-            end += 1;
-        }
-        entries.push(merge(&moved[k..end]));
-        k = end;
-    }
     Ldi {
         axis: ldi.axis,
         dims,
-        entries,
+        entries: cluster(&moved, spacing, cells, cells / 4.0),
     }
 }
 
@@ -394,6 +431,7 @@ fn merge(group: &[Entry]) -> Entry {
     }
     Entry {
         pixel: group[0].pixel,
+        src: group[0].src,
         depth,
         weight: total,
         s: Surfel {
@@ -406,14 +444,14 @@ fn merge(group: &[Entry]) -> Entry {
     }
 }
 
-/// How many level-0 surfels `tris` would give at `spacing` (their projected areas over
-/// the three axes, in pixels).
+/// About how many level-0 surfels `tris` give at `spacing`: their areas across the axes
+/// they face most, in pixels (triangles smaller than a pixel share their pixels once
+/// merged by depth).
 fn expected_count(tris: &[Tri], spacing: f32) -> f64 {
     tris.iter()
         .map(|t| {
             let face = (t.p[1] - t.p[0]).cross(t.p[2] - t.p[0]) * 0.5;
-            let px = f64::from(face.abs().element_sum()) / f64::from(spacing * spacing);
-            px.max(1.0)
+            f64::from(face.abs().max_element()) / f64::from(spacing * spacing)
         })
         .sum()
 }
@@ -461,7 +499,8 @@ fn sample_triangles(
     while levels.len() < MAX_LEVELS && cells(spacing0 * (1 << (levels.len() - 1)) as f32) > BLOCK {
         let spacing = spacing0 * (1 << levels.len()) as f32;
         let below = levels.last().expect("level 0");
-        levels.push([0, 1, 2].map(|a| parent(&below[a], spacing)));
+        let cells = (1u64 << (2 * levels.len())) as f32;
+        levels.push([0, 1, 2].map(|a| parent(&below[a], spacing, cells)));
     }
     let mut tree = SurfelTree {
         bounds,
@@ -627,6 +666,89 @@ pub(crate) mod tests {
                 for j in 0..n {
                     assert!(covered.contains(&(i, j)), "level {l}: cell {i},{j} empty");
                 }
+            }
+        }
+    }
+
+    /// Per level: how much of the tree's silhouette along each axis its surfels cover, as
+    /// the splatting draws a level whose spacing is a pixel (on a grid of the level's
+    /// spacing, each surfel leaving open 1 - its coverage seen along the axis), summed over
+    /// the three axes in m², and their coverage-weighted mean albedo.
+    fn level_totals(s: &SurfelTree) -> Vec<(f32, Vec3)> {
+        (0..s.levels() as u32)
+            .map(|l| {
+                let r = s.spacing(l);
+                let cell = r;
+                let mut area = 0.0f32;
+                let mut colour = Vec3::ZERO;
+                let mut weight = 0.0f32;
+                for axis in 0..3 {
+                    let (a, b) = across(axis);
+                    let mut open: HashMap<(i32, i32), f32> = HashMap::new();
+                    for node in s.nodes.iter().filter(|n| n.level == l) {
+                        for x in &s.surfels[node.first as usize..(node.first + node.count) as usize]
+                        {
+                            let n = x.normal.abs();
+                            let seen = n[axis] / n.max_element().max(0.3);
+                            let k = (r * r) / (cell * cell) * seen;
+                            let key = (
+                                ((x.position[a] - s.bounds.min[a]) / cell) as i32,
+                                ((x.position[b] - s.bounds.min[b]) / cell) as i32,
+                            );
+                            *open.entry(key).or_insert(1.0) *= (1.0 - x.coverage).powf(k);
+                            colour += x.albedo * x.coverage;
+                            weight += x.coverage;
+                        }
+                    }
+                    area += open.values().map(|o| 1.0 - o).sum::<f32>() * cell * cell;
+                }
+                (area, colour / weight.max(1e-9))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn parent_levels_keep_a_trees_coverage_and_mean_colour() {
+        for name in ["fir", "broadleaf"] {
+            let params = crate::model::preset(name).unwrap();
+            let tree = TreeModel::generate(&params, 7).unwrap();
+            let s = sample_tree(&tree, 60_000, 0.0);
+            let totals = level_totals(&s);
+            let (area0, colour0) = totals[0];
+            // The levels down to one block: the coarsest is a single root.
+            assert!(s.levels() >= 4, "{name}: {} levels", s.levels());
+            assert_eq!(s.roots.len(), 1, "{name}");
+            // Every node's surfels lie in its bounds; children are one level finer.
+            for n in &s.nodes {
+                for x in &s.surfels[n.first as usize..(n.first + n.count) as usize] {
+                    assert!(n.bounds.contains(x.position), "{name}");
+                }
+                for &c in &n.children {
+                    assert_eq!(s.nodes[c as usize].level + 1, n.level, "{name}");
+                }
+            }
+            for (l, (area, colour)) in totals.iter().enumerate() {
+                eprintln!(
+                    "{name} level {l} ({:.3} m): {} surfels, silhouettes {:.2} m² (level 0: {area0:.2}), mean albedo {colour:.3}",
+                    s.spacing(l as u32),
+                    s.per_level[l],
+                    area
+                );
+                // The silhouettes along the three axes as the surfels of each level cover
+                // them. Measured at a 60,000 budget: levels 1, 2, 3 keep 0.98, 0.94, 0.86
+                // of level 0's on the fir (0.96, 0.92, 0.90 on the broadleaf); the coarsest,
+                // one block for the tree, 0.62 (0.78): a merged surfel that stands for
+                // surfaces overlapping across its cell covers their union, and deep crowns
+                // overlap most. The colour stays within 0.001.
+                let (lo, hi) = if l <= 3 { (0.8, 1.05) } else { (0.5, 1.05) };
+                assert!(
+                    *area > lo * area0 && *area < hi * area0,
+                    "{name} level {l}: {area} against {area0}"
+                );
+                assert!(
+                    (*colour - colour0).abs().max_element() < 0.005,
+                    "{name} level {l}: {colour} against {colour0}"
+                );
             }
         }
     }
