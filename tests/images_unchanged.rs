@@ -27,6 +27,12 @@ const MAX_MEAN_FLIP: f32 = 0.005;
 /// first-bake work and after it), where `geometry` and `btf` measure 0.0000.
 const MAX_MEAN_FLIP_TEXEL: f32 = 0.008;
 
+/// The same for `surfel`: each surfel lands in one pixel, so a rounding that moves one
+/// across a pixel's edge changes that pixel whole, and the coverage dither follows which
+/// surfels are drawn. Its references were made on a 2-core Xeon (2026-12-07); the bound is
+/// set well above the rounding and well below what changing a knob moves.
+const MAX_MEAN_FLIP_SURFEL: f32 = 0.02;
+
 const SIZE: (u32, u32) = (320, 180);
 
 /// (name, camera, look-at): near (inside the stand, twig and branch levels), mid (the
@@ -69,10 +75,10 @@ fn every_method_matches_its_references_at_three_distances() {
                     stats.btf.unwrap().trees_per_level
                 );
             }
-            let bound = if method == Method::Texel {
-                MAX_MEAN_FLIP_TEXEL
-            } else {
-                MAX_MEAN_FLIP
+            let bound = match method {
+                Method::Texel => MAX_MEAN_FLIP_TEXEL,
+                Method::Surfel => MAX_MEAN_FLIP_SURFEL,
+                _ => MAX_MEAN_FLIP,
             };
             let mean = check_snapshot(&format!("stand_{name}_{}", method.name()), &img, bound);
             eprintln!(

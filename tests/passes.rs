@@ -102,7 +102,7 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
     let scene = scene();
     let world = scene.build_world().unwrap();
     let mut r = renderer(&ctx, &world);
-    let expected: [(Method, &[&str]); 5] = [
+    let expected: [(Method, &[&str]); 6] = [
         (Method::Geometry, &["cascades", "sky", "terrain", "trees"]),
         (
             Method::Billboard,
@@ -127,6 +127,18 @@ fn every_method_names_its_passes_and_they_add_up_to_the_frame() {
         (
             Method::Impostor,
             &["cascades", "sky", "terrain", "impostors"],
+        ),
+        (
+            Method::Surfel,
+            &[
+                "cascades",
+                "sky",
+                "terrain",
+                "surfel",
+                "surfels: splat",
+                "surfels: fill",
+                "surfels",
+            ],
         ),
     ];
     for (method, want) in expected {
