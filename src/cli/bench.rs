@@ -13,12 +13,12 @@ pub struct BenchArgs {
     /// A built-in flight (overview, walk, approach, sunset, orbit) or a flight file (TOML).
     #[arg(long, default_value = "walk")]
     flight: String,
-    /// Methods to measure, comma-separated.
+    /// Methods to measure, comma-separated (default: every method).
     #[arg(
         long,
         value_enum,
         value_delimiter = ',',
-        default_value = "geometry,btf,billboard,texel,hybrid,impostor"
+        default_values_t = Method::ALL.to_vec()
     )]
     methods: Vec<Method>,
     /// Sweep a knob: KEY=V1,V2,... with KEY any knob of `render --help`'s "Method knobs"

@@ -239,6 +239,11 @@ pub struct FrameReport {
     /// none were drawn).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub impostor: Option<crate::render::method::impostor::ImpostorStats>,
+    /// What `surfel` did, as an object: `trees`, `blocks`, `surfels` (splatted), `finest`
+    /// and `coarsest` (levels drawn), `surfel_bytes`, `surfels_held` (absent for other
+    /// methods).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub surfel: Option<crate::render::method::surfel::SurfelStats>,
     /// Every knob of the method, by name ([`crate::render::method::knobs_of`]).
     pub knobs: std::collections::BTreeMap<&'static str, KnobValue>,
     /// With the overdraw view on: `fragments_per_pixel` and `reads_per_pixel`.
@@ -362,6 +367,7 @@ impl FrameReport {
             btf,
             texel: m.stats.texel,
             impostor: m.stats.impostor,
+            surfel: m.stats.surfel,
             knobs: KnobValues::read(knobs_of(frame.method), frame).to_map(),
             overdraw: m.stats.overdraw,
             reference: reference.is_some(),
