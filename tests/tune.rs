@@ -151,7 +151,17 @@ fn tune_searches_btf_or_impostor_and_writes_btf_only() {
         .err()
         .expect("texel is not tuned")
         .to_string();
-    assert!(e.contains("btf or impostor"), "{e}");
+    let tuned: Vec<&str> = canopy::bench::tune::tuned_methods()
+        .iter()
+        .map(|m| m.name())
+        .collect();
+    assert!(
+        tuned.contains(&"btf") && tuned.contains(&"impostor"),
+        "{tuned:?}"
+    );
+    for name in &tuned {
+        assert!(e.contains(name), "{e} names {name}");
+    }
     let e = run_tune(&req(canopy::render::Method::Impostor, true))
         .err()
         .expect("--write is btf's")

@@ -353,7 +353,10 @@ mod tests {
         );
         assert!(candidates_for(Method::Texel, &base).is_empty());
         assert!(candidates_for(Method::Hybrid, &base).is_empty());
-        assert_eq!(tuned_methods(), [Method::Btf, Method::Impostor]);
+        assert_eq!(
+            tuned_methods(),
+            [Method::Btf, Method::Impostor, Method::Surfel]
+        );
     }
 
     #[test]

@@ -13,7 +13,7 @@ pub static KNOBS: &[Knob] = &[
         |d, v| d.surfel.surfel_px = v,
     )
     .slider(0.25, 4.0, false)
-    .tuned(&["0.7", "1", "1.4", "2"]),
+    .tuned(&["1", "1.5", "2"]),
     Knob::number(
         "surfel_tolerance",
         "depth tolerance (spacings)",
@@ -40,7 +40,7 @@ pub static KNOBS: &[Knob] = &[
         |d, v| d.surfel.self_shadow = v,
     )
     .slider(0.0, 4.0, false)
-    .tuned(&["0", "0.5", "1", "2"]),
+    .tuned(&["0.5", "1", "2"]),
     Knob::toggle(
         "vcm",
         "VCM shading (trees shade each other)",
