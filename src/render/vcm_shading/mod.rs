@@ -92,6 +92,10 @@ pub trait TreeShades {
     fn tree_shade(&self, t: usize, species: usize, model: &Mat4) -> Option<(Shade, Aabb)>;
 }
 
+/// `shade(t, species, model)`: tree `t`'s tree-level VCM factors and the box they are
+/// given over (None: unshaded), as a method's CPU work asks for them.
+pub type TreeShade<'a> = dyn FnMut(usize, usize, &Mat4) -> Option<(Shade, Aabb)> + 'a;
+
 /// Every VCM of a scene, ready to be read in the sun's direction.
 pub struct VcmShading {
     res: u32,

@@ -60,9 +60,7 @@ pub struct SpeciesImpostor {
     pub texel: f32,
 }
 
-/// A tree's tree-level VCM factors and the box they are taken over (object frame), from
-/// its index, species and model matrix; None: unshaded.
-pub type TreeShade<'a> = dyn FnMut(usize, usize, &Mat4) -> Option<(Shade, Aabb)> + 'a;
+pub use crate::render::vcm_shading::TreeShade;
 
 /// What the prepare step chose: the impostors' records and the trees drawn as geometry.
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -10,7 +10,7 @@ use super::sample::SurfelTree;
 use super::settings::{SurfelSettings, SurfelStats};
 use crate::model::mesh::Aabb;
 use crate::render::method::view::PrepareView;
-use crate::render::vcm_shading::Shade;
+use crate::render::vcm_shading::{Shade, TreeShade};
 use crate::render::world_gpu::TreeGpu;
 
 /// The frame's blocks and trees.
@@ -69,7 +69,7 @@ pub fn prepare(
     visible: &[Vec<u32>],
     view: &PrepareView<'_>,
     settings: &SurfelSettings,
-    shade: &mut dyn FnMut(usize, usize, &Mat4) -> Option<(Shade, Aabb)>,
+    shade: &mut TreeShade<'_>,
 ) -> SurfelFrame {
     let mut f = SurfelFrame::default();
     f.stats.finest = u32::MAX;
