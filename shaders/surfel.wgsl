@@ -452,7 +452,9 @@ fn push(@builtin(global_invocation_id) id: vec3<u32>) {
     let own = full_pixel(id.x, id.y);
     if own[0].a > 0.0 {
         out = vec4<f32>(own[0].rgb, 1.0);
-    } else if sp.fill != 0u {
+    } else if sp.fill != 0u && level_at(1u, i32(id.x / 2u), i32(id.y / 2u))[0].a > 0.0 {
+        // (Where the half-resolution pixel over this one is empty, so are 3 of its 8
+        // neighbours and the coarser levels there: nothing to fill.)
         let scene = scene_distance(id.xy);
         let p = vec2<i32>(id.xy);
         var fill = hole0(p);
