@@ -24,6 +24,15 @@ pub static KNOBS: &[Knob] = &[
     )
     .slider(0.0, 8.0, false)
     .tuned(&["1", "2", "4"]),
+    Knob::number(
+        "surfel_geometry_px",
+        "geometry above (px)",
+        "a tree whose finest surfels project above this many pixels at its nearest point is drawn as geometry, faded in over the last fifth before it (0: never)",
+        (0.0, 64.0),
+        |d| d.surfel.geometry_px,
+        |d, v| d.surfel.geometry_px = v,
+    )
+    .slider(0.0, 16.0, false),
     Knob::toggle(
         "surfel_fill",
         "fill holes (pull-push)",

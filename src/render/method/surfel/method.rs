@@ -3,12 +3,13 @@
 use std::time::Instant;
 
 use super::gpu::{SplatInput, Splatter, SurfelAssets};
-use super::prepare::{SurfelFrame, prepare};
+use super::prepare::{SurfelFrame, near_geometry, prepare};
 use super::sample::{SurfelTree, sample_tree};
 use super::settings::SurfelStats;
 use crate::model::TreeModel;
 use crate::render::GpuContext;
 use crate::render::frame::{FrameDesc, FrameStats};
+use crate::render::geometry_trees::geometry_tree_plan;
 use crate::render::method::info::{MethodInfo, StatRow, format_count, format_mb};
 use crate::render::method::interface::{
     AfterCx, Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork,
@@ -16,7 +17,7 @@ use crate::render::method::interface::{
 use crate::render::method::kind::Method;
 use crate::render::pipelines::Layouts;
 use crate::render::vcm_shading::TreeShades;
-use crate::render::world_gpu::WorldGpu;
+use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
 use crate::{Error, Result};
 
 /// Level-0 surfels a species is sampled with (about; its levels add a third).
@@ -62,6 +63,10 @@ pub struct SurfelMethod {
     self_shadow: f32,
     /// How long sampling the species took (ms), once done.
     sample_ms: f64,
+    /// Trees drawn as geometry this frame (whole or fading in), and their runs: trunks and
+    /// limbs, then twigs.
+    geometry_trees: u32,
+    runs: Vec<Vec<TreeRun>>,
 }
 
 impl SurfelMethod {
@@ -132,22 +137,39 @@ impl RenderMethod for SurfelMethod {
             }
         }
         let scene = bake.btf.as_ref().map(|b| b.scene());
+        let (geometry, visible) = match &self.assets {
+            Some(a) if cx.frame.trees => near_geometry(
+                &a.species,
+                &cx.world.tree_data,
+                &cx.world.tree_bounds,
+                &cx.visible,
+                &cx.view,
+                settings.geometry_px,
+            ),
+            _ => (vec![Vec::new(); cx.visible.len()], cx.visible.clone()),
+        };
         self.frame = match &self.assets {
             Some(a) if cx.frame.trees => prepare(
                 &a.species,
                 &a.volume_offsets,
                 &cx.world.tree_data,
-                &cx.visible,
+                &visible,
                 &cx.view,
                 &settings,
                 &mut |t, sp, m| scene.filter(|_| vcm).and_then(|s| s.tree_shade(t, sp, m)),
             ),
             _ => SurfelFrame::default(),
         };
-        // Instance 0 is the terrain's: the list holds no tree.
-        cx.world
-            .upload_lists(cx.ctx, &[vec![Vec::new(); cx.world.species.len()]]);
-        let mut plan = Plan::without_cascades(sun);
+        // The trees drawn as geometry, as `impostor` draws its near ones: in sun cascades of
+        // their own and out of the ground alpha map; faded whole (trunk and limbs too), the
+        // surfels drawn in the pixels they leave (the splatting starts from the frame's
+        // depth). Instance 0 is the terrain's.
+        let runs = cx
+            .world
+            .upload_lists_faded(cx.ctx, &[], &[&geometry, &geometry], None);
+        self.geometry_trees = geometry.iter().map(|l| l.len() as u32).sum();
+        let mut plan = geometry_tree_plan(cx.world, cx.frame, &geometry, &runs[0], sun);
+        self.runs = runs;
         plan.layer = true;
         Ok(plan)
     }
@@ -183,11 +205,23 @@ impl RenderMethod for SurfelMethod {
     fn draw(
         &self,
         _bake: &Bake,
-        _pass: &mut wgpu::RenderPass<'_>,
-        _cx: &DrawCx<'_>,
+        pass: &mut wgpu::RenderPass<'_>,
+        cx: &DrawCx<'_>,
         stats: &mut FrameStats,
     ) {
-        stats.trees_drawn = self.frame.stats.trees;
+        if self.geometry_trees > 0 {
+            cx.spans.rename("near trees");
+            let faded = Some(cx.pipes.faded_meshes());
+            let mut draw = |list: usize, kinds: &[PartKind]| match self.runs.get(list) {
+                Some(r) => cx.world.draw(pass, r, faded, false, kinds),
+                None => (0, 0, 0),
+            };
+            let (ta, _, ca) = draw(0, &[PartKind::Trunk, PartKind::Limbs]);
+            let (tb, _, cb) = draw(1, &[PartKind::Twigs]);
+            stats.triangles += ta + tb;
+            stats.draw_calls += ca + cb;
+        }
+        stats.trees_drawn = self.frame.stats.trees.max(self.geometry_trees);
     }
 
     fn draw_after(
@@ -225,6 +259,7 @@ impl RenderMethod for SurfelMethod {
         stats.surfel = Some(SurfelStats {
             surfel_bytes: assets.bytes,
             surfels_held: assets.count,
+            geometry_trees: self.geometry_trees,
             ..self.frame.stats
         });
     }
@@ -251,6 +286,7 @@ pub fn stat_rows(stats: &FrameStats, _frame: &FrameDesc) -> Vec<StatRow> {
             format!("{} ({})", format_count(u64::from(s.blocks)), s.trees),
         ),
         StatRow::new("levels drawn", format!("{} to {}", s.finest, s.coarsest)),
+        StatRow::new("trees as geometry", s.geometry_trees.to_string()),
         StatRow::new(
             "surfels held",
             format!(

@@ -59,6 +59,59 @@ pub fn walk(
     }
 }
 
+/// Per species, trees with their opacity as geometry (1: whole).
+pub type FadedTrees = Vec<Vec<(u32, f32)>>;
+
+/// The share of the fade over which a tree's geometry comes in, below `geometry_px`.
+const GEOMETRY_FADE: f32 = 0.2;
+
+/// The trees of `visible` (per species) drawn as geometry, per species with their opacity
+/// (1: whole): those whose finest surfels (`species`' level-0 spacing, placed) project above
+/// `geometry_px` pixels at the nearest point of their bounds (`bounds`, per tree), faded in
+/// over the last fifth before it; and the rest of `visible`, the trees drawn as surfels
+/// (those fading in too).
+pub fn near_geometry(
+    species: &[(SurfelTree, u32)],
+    trees: &[TreeGpu],
+    bounds: &[Aabb],
+    visible: &[Vec<u32>],
+    view: &PrepareView<'_>,
+    geometry_px: f32,
+) -> (FadedTrees, Vec<Vec<u32>>) {
+    let mut geometry = vec![Vec::new(); visible.len()];
+    let mut surfels = vec![Vec::new(); visible.len()];
+    let on = geometry_px > 0.0 && view.camera.ortho.is_none() && view.focal_px > 0.0;
+    for (sp, list) in visible.iter().enumerate() {
+        for &t in list {
+            let opacity = match (
+                on,
+                species.get(sp),
+                trees.get(t as usize),
+                bounds.get(t as usize),
+            ) {
+                (true, Some((tree, _)), Some(data), Some(b)) => {
+                    let scale = Mat4::from_cols_array_2d(&data.model)
+                        .x_axis
+                        .truncate()
+                        .length();
+                    let z = distance_to(b, view.camera.position).max(1e-3);
+                    let px = tree.spacing0 * scale * view.focal_px / z;
+                    let start = geometry_px * (1.0 - GEOMETRY_FADE);
+                    ((px - start) / (geometry_px - start)).clamp(0.0, 1.0)
+                }
+                _ => 0.0,
+            };
+            if opacity > 0.0 {
+                geometry[sp].push((t, opacity));
+            }
+            if opacity < 1.0 {
+                surfels[sp].push(t);
+            }
+        }
+    }
+    (geometry, surfels)
+}
+
 /// The frame of `visible` trees (per species, indices into `trees`): per species its LDC
 /// tree and where its surfels start (`species`), and `shade(t, species, model)` the tree's
 /// VCM factors and box (None: unshaded).

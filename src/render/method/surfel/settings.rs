@@ -18,6 +18,9 @@ pub struct SurfelSettings {
     pub self_shadow: f32,
     /// Colour each surfel by its level.
     pub show_lod: bool,
+    /// A tree whose finest surfels project above this many pixels at its nearest point is
+    /// drawn as geometry, faded in over the last fifth before it; 0: never.
+    pub geometry_px: f32,
 }
 
 impl Default for SurfelSettings {
@@ -29,6 +32,7 @@ impl Default for SurfelSettings {
             vcm: true,
             self_shadow: 1.0,
             show_lod: false,
+            geometry_px: 2.0,
         }
     }
 }
@@ -49,4 +53,7 @@ pub struct SurfelStats {
     pub surfel_bytes: u64,
     /// Surfels of every species, every level.
     pub surfels_held: u64,
+    /// Trees drawn as geometry (their finest surfels past `geometry_px`), whole or fading
+    /// in.
+    pub geometry_trees: u32,
 }
