@@ -4,10 +4,31 @@
 //! alpha map (where their own stand-in would shade them).
 
 use crate::model::mesh::Aabb;
-use crate::render::frame::FrameDesc;
-use crate::render::method::interface::{Plan, SunWork};
+use crate::render::frame::{FrameDesc, FrameStats};
+use crate::render::method::interface::{DrawCx, Plan, SunWork};
 use crate::render::shadow::Cascades;
-use crate::render::world_gpu::{TreeRun, WorldGpu};
+use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
+
+/// Draws the trees a method uploaded as geometry, faded (`runs`: trunks and limbs, then
+/// twigs, as [`WorldGpu::upload_lists_faded`] gave them for the same list twice), timed as
+/// `near trees`, and counts them in `stats`.
+pub fn draw_faded_trees(
+    pass: &mut wgpu::RenderPass<'_>,
+    cx: &DrawCx<'_>,
+    runs: &[Vec<TreeRun>],
+    stats: &mut FrameStats,
+) {
+    cx.spans.rename("near trees");
+    let faded = Some(cx.pipes.faded_meshes());
+    let mut draw = |list: usize, kinds: &[PartKind]| match runs.get(list) {
+        Some(r) => cx.world.draw(pass, r, faded, false, kinds),
+        None => (0, 0, 0),
+    };
+    let (ta, _, ca) = draw(0, &[PartKind::Trunk, PartKind::Limbs]);
+    let (tb, _, cb) = draw(1, &[PartKind::Twigs]);
+    stats.triangles += ta + tb;
+    stats.draw_calls += ca + cb;
+}
 
 /// The plan of a frame whose trees drawn as geometry (`trees`, per species, with their
 /// opacities; uploaded as `whole`) shade themselves and the rest through one sun shadow

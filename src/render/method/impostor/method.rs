@@ -16,8 +16,8 @@ use crate::render::method::kind::Method;
 use crate::render::pipelines::Layouts;
 use crate::render::vcm_shading::TreeShades;
 
-use crate::render::geometry_trees::geometry_tree_plan;
-use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
+use crate::render::geometry_trees::{draw_faded_trees, geometry_tree_plan};
+use crate::render::world_gpu::{TreeRun, WorldGpu};
 
 /// `impostor`: the frame's record count, the trees drawn as geometry and their runs, what
 /// it reports.
@@ -146,16 +146,7 @@ impl RenderMethod for ImpostorMethod {
         };
         cx.spans.rename("impostors");
         if self.stats.geometry_trees > 0 {
-            cx.spans.rename("near trees");
-            let faded = Some(cx.pipes.faded_meshes());
-            let mut draw = |list: usize, kinds: &[PartKind]| match self.runs.get(list) {
-                Some(r) => cx.world.draw(pass, r, faded, false, kinds),
-                None => (0, 0, 0),
-            };
-            let (ta, _, ca) = draw(0, &[PartKind::Trunk, PartKind::Limbs]);
-            let (tb, _, cb) = draw(1, &[PartKind::Twigs]);
-            stats.triangles += ta + tb;
-            stats.draw_calls += ca + cb;
+            draw_faded_trees(pass, cx, &self.runs, stats);
             cx.spans.mark(pass, "impostors");
         }
         imp.draw(pass, self.count);

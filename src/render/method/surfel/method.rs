@@ -9,7 +9,7 @@ use super::settings::SurfelStats;
 use crate::model::TreeModel;
 use crate::render::GpuContext;
 use crate::render::frame::{FrameDesc, FrameStats};
-use crate::render::geometry_trees::geometry_tree_plan;
+use crate::render::geometry_trees::{draw_faded_trees, geometry_tree_plan};
 use crate::render::method::info::{MethodInfo, StatRow, format_count, format_mb};
 use crate::render::method::interface::{
     AfterCx, Bake, DrawCx, GroundCasters, Plan, PrepareCx, RenderMethod, SunWork,
@@ -17,7 +17,7 @@ use crate::render::method::interface::{
 use crate::render::method::kind::Method;
 use crate::render::pipelines::Layouts;
 use crate::render::vcm_shading::TreeShades;
-use crate::render::world_gpu::{PartKind, TreeRun, WorldGpu};
+use crate::render::world_gpu::{TreeRun, WorldGpu};
 use crate::{Error, Result};
 
 /// Level-0 surfels a species is sampled with (about; its levels add a third).
@@ -210,16 +210,7 @@ impl RenderMethod for SurfelMethod {
         stats: &mut FrameStats,
     ) {
         if self.geometry_trees > 0 {
-            cx.spans.rename("near trees");
-            let faded = Some(cx.pipes.faded_meshes());
-            let mut draw = |list: usize, kinds: &[PartKind]| match self.runs.get(list) {
-                Some(r) => cx.world.draw(pass, r, faded, false, kinds),
-                None => (0, 0, 0),
-            };
-            let (ta, _, ca) = draw(0, &[PartKind::Trunk, PartKind::Limbs]);
-            let (tb, _, cb) = draw(1, &[PartKind::Twigs]);
-            stats.triangles += ta + tb;
-            stats.draw_calls += ca + cb;
+            draw_faded_trees(pass, cx, &self.runs, stats);
         }
         stats.trees_drawn = self.frame.stats.trees.max(self.geometry_trees);
     }
