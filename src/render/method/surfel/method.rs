@@ -6,6 +6,7 @@ use super::gpu::{SplatInput, Splatter, SurfelAssets};
 use super::prepare::{SurfelFrame, near_geometry, prepare};
 use super::sample::{SurfelTree, sample_tree};
 use super::settings::SurfelStats;
+use crate::Result;
 use crate::model::TreeModel;
 use crate::render::GpuContext;
 use crate::render::frame::{FrameDesc, FrameStats};
@@ -18,7 +19,6 @@ use crate::render::method::kind::Method;
 use crate::render::pipelines::Layouts;
 use crate::render::vcm_shading::TreeShades;
 use crate::render::world_gpu::{TreeRun, WorldGpu};
-use crate::{Error, Result};
 
 /// Level-0 surfels a species is sampled with (about; its levels add a third).
 pub const SURFEL_BUDGET: u32 = 250_000;
@@ -61,8 +61,6 @@ pub struct SurfelMethod {
     focal_px: f32,
     /// The frame's `surfel_shadow` knob.
     self_shadow: f32,
-    /// How long sampling the species took (ms), once done.
-    sample_ms: f64,
     /// Trees drawn as geometry this frame (whole or fading in), and their runs: trunks and
     /// limbs, then twigs.
     geometry_trees: u32,
@@ -70,22 +68,19 @@ pub struct SurfelMethod {
 }
 
 impl SurfelMethod {
-    /// The species' surfels, sampled and uploaded on first use.
-    fn assets(&mut self, bake: &Bake, ctx: &GpuContext) -> Result<&SurfelAssets> {
+    /// Samples and uploads the species' surfels, on first use.
+    fn ensure_assets(&mut self, bake: &Bake, ctx: &GpuContext) -> Result<()> {
         if self.assets.is_none() {
             let t0 = Instant::now();
             let trees = bake.surfels.sample();
-            self.sample_ms = t0.elapsed().as_secs_f64() * 1e3;
             log::info!(
                 "surfels: {} species sampled in {:.0} ms",
                 trees.len(),
-                self.sample_ms
+                t0.elapsed().as_secs_f64() * 1e3
             );
             self.assets = Some(SurfelAssets::new(ctx, trees)?);
         }
-        self.assets
-            .as_ref()
-            .ok_or_else(|| Error::Gpu("the surfels are not loaded".into()))
+        Ok(())
     }
 }
 
@@ -126,7 +121,7 @@ impl RenderMethod for SurfelMethod {
         };
         let mut sun = SunWork::default();
         if cx.frame.trees {
-            self.assets(bake, cx.ctx)?;
+            self.ensure_assets(bake, cx.ctx)?;
         }
         let vcm = settings.vcm && cx.frame.trees && bake.btf.is_some();
         if vcm && let Some(btf) = bake.btf.as_mut() {

@@ -49,8 +49,9 @@ pub fn walk(
             continue;
         }
         let spacing = tree.spacing(node.level) * scale;
-        let fine_enough =
-            perspective && spacing <= surfel_px * distance_to(&world, eye) / view.focal_px;
+        let fine_enough = perspective
+            && crate::lod::projected_px(spacing, view.focal_px, distance_to(&world, eye))
+                <= surfel_px;
         if node.level == 0 || node.children.is_empty() || fine_enough {
             emit(n as usize);
         } else {
@@ -94,8 +95,8 @@ pub fn near_geometry(
                         .x_axis
                         .truncate()
                         .length();
-                    let z = distance_to(b, view.camera.position).max(1e-3);
-                    let px = tree.spacing0 * scale * view.focal_px / z;
+                    let z = distance_to(b, view.camera.position);
+                    let px = crate::lod::projected_px(tree.spacing0 * scale, view.focal_px, z);
                     let start = geometry_px * (1.0 - GEOMETRY_FADE);
                     ((px - start) / (geometry_px - start)).clamp(0.0, 1.0)
                 }
