@@ -139,13 +139,15 @@ struct Placed {
     local: vec3<f32>,
 }
 
+// A unit normal from its octahedral pair in [-1, 1]² (src/sphere/octa.rs's full layout:
+// +y at the centre, a sign of 0 counting as positive).
 fn octa_decode(e: vec2<f32>) -> vec3<f32> {
-    var n = vec3<f32>(e.x, e.y, 1.0 - abs(e.x) - abs(e.y));
-    if n.z < 0.0 {
-        let xy = (1.0 - abs(n.yx)) * select(vec2<f32>(-1.0), vec2<f32>(1.0), n.xy >= vec2<f32>(0.0));
-        n = vec3<f32>(xy, n.z);
+    let y = 1.0 - abs(e.x) - abs(e.y);
+    var xz = e;
+    if y < 0.0 {
+        xz = (1.0 - abs(e.yx)) * select(vec2<f32>(-1.0), vec2<f32>(1.0), e >= vec2<f32>(0.0));
     }
-    return normalize(n);
+    return normalize(vec3<f32>(xz.x, y, xz.y));
 }
 
 // A hash of `x` in [0, 1) (PCG's output permutation).

@@ -10,6 +10,7 @@ use crate::render::frame_bindings::DepthTarget;
 use crate::render::layer::{LAYER_FORMAT, TreeLayer};
 use crate::render::pipelines::{Layouts, buffer_entry};
 use crate::render::timing::PassSpans;
+use crate::sphere::OctaLayout;
 use crate::{Error, Result};
 
 /// `SurfelParams` of surfel.wgsl.
@@ -72,17 +73,6 @@ pub struct SurfelItem {
 /// Words a surfel takes on the GPU.
 pub const SURFEL_WORDS: usize = 3;
 
-/// A unit vector as an octahedral pair in [-1, 1]².
-fn octa_encode(n: Vec3) -> [f32; 2] {
-    let n = n / n.abs().element_sum().max(1e-12);
-    if n.z >= 0.0 {
-        [n.x, n.y]
-    } else {
-        let s = |v: f32| if v >= 0.0 { 1.0 } else { -1.0 };
-        [(1.0 - n.y.abs()) * s(n.x), (1.0 - n.x.abs()) * s(n.y)]
-    }
-}
-
 /// `s` packed as surfel.wgsl reads it: its position quantised to 16 bits an axis in the box
 /// `qmin + [0, 1]³ qsize`, its normal as an octahedral pair of bytes, its albedo's square
 /// root in bytes, whether it is foliage, and its coverage in 7 bits.
@@ -90,8 +80,10 @@ pub fn pack(s: &Surfel, qmin: Vec3, qsize: Vec3) -> [u32; SURFEL_WORDS] {
     let q =
         ((s.position - qmin) / qsize.max(Vec3::splat(1e-9))).clamp(Vec3::ZERO, Vec3::ONE) * 65535.0;
     let q = q.round().as_uvec3();
-    let e =
-        octa_encode(s.normal).map(|v| ((v * 0.5 + 0.5) * 255.0).round().clamp(0.0, 255.0) as u32);
+    let e = OctaLayout::Full
+        .dir_to_uv(s.normal)
+        .to_array()
+        .map(|v| (v * 255.0).round() as u32);
     let c = s
         .albedo
         .clamp(Vec3::ZERO, Vec3::ONE)
@@ -112,19 +104,15 @@ pub fn unpack(w: [u32; SURFEL_WORDS], qmin: Vec3, qsize: Vec3) -> Surfel {
         (w[0] >> 16) as f32,
         (w[1] & 0xffff) as f32,
     ) / 65535.0;
-    let e = [((w[1] >> 16) & 0xff) as f32, (w[1] >> 24) as f32].map(|v| v / 127.5 - 1.0);
-    let mut n = Vec3::new(e[0], e[1], 1.0 - e[0].abs() - e[1].abs());
-    if n.z < 0.0 {
-        let s = |v: f32| if v >= 0.0 { 1.0 } else { -1.0 };
-        n = Vec3::new((1.0 - n.y.abs()) * s(n.x), (1.0 - n.x.abs()) * s(n.y), n.z);
-    }
+    let uv = glam::Vec2::new(((w[1] >> 16) & 0xff) as f32, (w[1] >> 24) as f32) / 255.0;
+    let n = OctaLayout::Full.uv_to_dir(uv);
     let c = [w[2] & 0xff, (w[2] >> 8) & 0xff, (w[2] >> 16) & 0xff].map(|v| {
         let x = v as f32 / 255.0;
         x * x
     });
     Surfel {
         position: qmin + q * qsize,
-        normal: n.normalize(),
+        normal: n,
         albedo: Vec3::from(c),
         foliage: (w[2] >> 24) & 1 != 0,
         coverage: (w[2] >> 25) as f32 / 127.0,
@@ -521,5 +509,36 @@ impl Splatter {
             spans.render_writes(span, true, true),
         );
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_packed_surfel_unpacks_within_its_quantisation() {
+        let (qmin, qsize) = (Vec3::new(-3.0, 0.0, -2.0), Vec3::new(6.0, 18.0, 4.0));
+        for (k, normal) in [Vec3::Y, -Vec3::Y, Vec3::X, Vec3::new(0.3, -0.8, -0.52)]
+            .into_iter()
+            .enumerate()
+        {
+            let s = Surfel {
+                position: Vec3::new(1.234, 9.87, -0.5),
+                normal: normal.normalize(),
+                albedo: Vec3::new(0.05, 0.2, 0.6),
+                foliage: k % 2 == 0,
+                coverage: 0.4,
+            };
+            let u = unpack(pack(&s, qmin, qsize), qmin, qsize);
+            assert!(
+                (u.position - s.position).abs().max_element() < 3e-4,
+                "{u:?}"
+            );
+            assert!(u.normal.dot(s.normal) > 0.999, "{u:?} against {s:?}");
+            assert!((u.albedo - s.albedo).abs().max_element() < 0.01, "{u:?}");
+            assert_eq!(u.foliage, s.foliage);
+            assert!((u.coverage - s.coverage).abs() < 0.01, "{u:?}");
+        }
     }
 }
