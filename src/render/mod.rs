@@ -185,7 +185,9 @@ impl Renderer {
         baked: &crate::format::Baked,
         world: &World,
     ) -> Result<()> {
-        self.bake = Bake::load(ctx, baked, world)?;
+        let mut bake = Bake::load(ctx, baked, world)?;
+        bake.surfels = std::mem::take(&mut self.bake.surfels);
+        self.bake = bake;
         if let Some(g) = &mut self.ground {
             g.invalidate();
         }

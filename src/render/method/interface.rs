@@ -49,7 +49,8 @@ pub struct Bake {
 }
 
 impl Bake {
-    /// No bake yet: what the methods that need none draw from (`surfel`'s species).
+    /// No bake yet: what the methods that need none draw from (`surfel`'s species, which
+    /// the renderer hands on to each bake it loads).
     pub fn unbaked(world: &World) -> Self {
         Self {
             surfels: SurfelSource::new(world),
@@ -75,7 +76,6 @@ impl Bake {
     pub fn load(ctx: &GpuContext, baked: &Baked, world: &World) -> Result<Self> {
         let mut bake = Self {
             btf: Some(BtfAssets::new(ctx, baked, world)?),
-            surfels: SurfelSource::new(world),
             ..Default::default()
         };
         // A bake handed over before it is done (its tree levels) lacks what its settings ask
