@@ -1,6 +1,6 @@
 //! The `surfel` method: Guennebaud and Paulin's surfel texels (2002) drawn as today's
 //! point renderers draw what is smaller than a pixel. Each species is sampled into an LDC
-//! tree (`sample.rs`: three orthogonal layered depth images per block of an octree, a
+//! tree (`sample/`: three orthogonal layered depth images per block of an octree, a
 //! parent level made from its children at twice the spacing); each frame walks every tree
 //! in view from its root, drawing each block at the coarsest level whose surfel spacing
 //! projects to about one pixel (`prepare.rs`); the blocks are splatted in compute, one
