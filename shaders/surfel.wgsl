@@ -133,6 +133,8 @@ struct Placed {
     normal: vec3<f32>,
     albedo: vec3<f32>,
     foliage: bool,
+    // The share of the sky its own tree leaves open to it.
+    openness: f32,
     // Box coordinates in the VCM box.
     u: vec3<f32>,
     // Where it is in the tree frame.
@@ -164,10 +166,16 @@ fn place(t: SurfelTreeGpu, i: u32, spacing: f32) -> Placed {
     let w0 = surfels[3u * i];
     let w1 = surfels[3u * i + 1u];
     let w2 = surfels[3u * i + 2u];
-    let q = vec3<f32>(f32(w0 & 0xffffu), f32(w0 >> 16u), f32(w1 & 0xffffu)) / 65535.0;
+    // The layout of src/format/mod.rs's SURFEL TREE RECORD.
+    let q = vec3<f32>(
+        f32(w0 & 0x3fffu),
+        f32((w0 >> 14u) & 0x3fffu),
+        f32((w0 >> 28u) | ((w1 & 0x3ffu) << 4u)),
+    ) / 16383.0;
     let p = t.qmin + q * t.qsize;
     out.world = (t.model * vec4<f32>(p, 1.0)).xyz;
-    let e = vec2<f32>(f32((w1 >> 16u) & 0xffu), f32(w1 >> 24u)) / 127.5 - 1.0;
+    let e = vec2<f32>(f32((w1 >> 10u) & 0xffu), f32((w1 >> 18u) & 0xffu)) / 127.5 - 1.0;
+    out.openness = f32(w1 >> 26u) / 63.0;
     out.normal = normalize((t.model * vec4<f32>(octa_decode(e), 0.0)).xyz);
     let c = vec3<f32>(f32(w2 & 0xffu), f32((w2 >> 8u) & 0xffu), f32((w2 >> 16u) & 0xffu)) / 255.0;
     out.albedo = c * c;
@@ -265,14 +273,13 @@ fn lit(t: SurfelTreeGpu, s: Placed, level: u32) -> vec3<f32> {
     }
     var sun_f = trilinear(t.vcm_direct[0], t.vcm_direct[1], s.u);
     var sky_f = trilinear(t.vcm_sky[0], t.vcm_sky[1], s.u);
-    // The tree's own shadow: its extinction towards the sun and straight up, in the tree
-    // frame (the model's rotation and uniform scale undone).
+    // The tree's own shadow: its extinction towards the sun, in the tree frame (the
+    // model's rotation and uniform scale undone), and the sky it leaves open (baked).
     for (var k = 0u; k < select(0u, 1u, sp.self_shadow > 0.0); k++) {
         let m = mat3x3<f32>(t.model[0].xyz, t.model[1].xyz, t.model[2].xyz);
         let to_sun = normalize(transpose(m) * frame.sun_dir);
-        let up = normalize(transpose(m) * vec3<f32>(0.0, 1.0, 0.0));
         sun_f *= exp(-sp.self_shadow * optical_depth(t, s.local, to_sun));
-        sky_f *= exp(-sp.self_shadow * optical_depth(t, s.local, up));
+        sky_f *= pow(max(s.openness, 1e-3), sp.self_shadow);
     }
     let ndl = dot(n, frame.sun_dir);
     var direct = max(ndl, 0.0);

@@ -71,15 +71,16 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     // One byte changed inside the texel volumes' section (kind 3): refused, naming it.
     let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
     let sections = u32_at(12) as usize;
-    // The format's header: 76 fixed bytes, the section table of 28-byte entries, the header
+    // The format's header: 80 fixed bytes, the section table of 28-byte entries, the header
     // checksum.
-    let mut at = 80 + 28 * sections;
+    let mut at = 84 + 28 * sections;
     let mut texel_section = None;
     let mut impostor_section = None;
+    let mut surfel_section = None;
     let mut btf_section = None;
     let mut vcm_section = None;
     for i in 0..sections {
-        let entry = 76 + 28 * i;
+        let entry = 80 + 28 * i;
         let len = u64::from_le_bytes(bytes[entry + 8..entry + 16].try_into().unwrap()) as usize;
         // Packing 1: the sections are stored deflated.
         assert_eq!(u32_at(entry + 16), 1, "section {i} stored deflated");
@@ -88,6 +89,7 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
             2 => vcm_section = Some((at, len)),
             3 => texel_section = Some((at, len)),
             4 => impostor_section = Some((at, len)),
+            5 => surfel_section = Some((at, len)),
             _ => {}
         }
         at += len;
@@ -124,7 +126,7 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     std::fs::write(&bad, &old).unwrap();
     refused(
         render(&lone, &bad, "btf"),
-        "format version 6, but this canopy reads versions 7 to 8; re-bake with `canopy bake`",
+        "format version 6, but this canopy reads versions 7 to 9; re-bake with `canopy bake`",
     );
     let (start, len) = texel_section.expect("the bake has a texel section");
     let mut flipped = bytes.clone();
@@ -140,6 +142,13 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     let bad = tmp("bad-impostors.canopy");
     std::fs::write(&bad, &flipped).unwrap();
     refused(render(&lone, &bad, "btf"), "(impostors)");
+    // One byte changed inside the surfel trees' section (kind 5): refused, naming it.
+    let (start, len) = surfel_section.expect("the bake has a surfel section");
+    let mut flipped = bytes.clone();
+    flipped[start + len / 2] ^= 0x08;
+    let bad = tmp("bad-surfels.canopy");
+    std::fs::write(&bad, &flipped).unwrap();
+    refused(render(&lone, &bad, "surfel"), "(surfel trees)");
     // Missing.
     refused(render(&lone, &tmp("none.canopy"), "btf"), "could not open");
     // A method without baked images.
@@ -324,17 +333,27 @@ fn bakes_are_estimated_and_refused_before_they_start() {
     assert!(err.contains("bake estimate: about"), "{err}");
     let written = std::fs::metadata(&file).unwrap().len();
     let baked: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    // The estimate is the file with every section stored as it is, exactly; the file
-    // written holds the same data, its sections deflated where that shrinks them.
+    // The estimate is the file with every section stored as it is, exactly but for the
+    // surfel trees (sampled: their size is known once made); the file written holds the
+    // same data, its sections deflated where that shrinks them.
     let sections = baked["sections"]
         .as_array()
         .expect("the bake lists its sections");
-    let header = 80 + 28 * sections.len() as u64;
+    let header = 84 + 28 * sections.len() as u64;
     let sum = |key: &str| -> u64 { sections.iter().map(|s| s[key].as_u64().unwrap()).sum() };
+    let surfels = baked["surfel_bytes"].as_u64().unwrap();
+    let estimated_surfels = estimate["surfel_bytes"].as_u64().unwrap();
+    assert!(surfels > 0, "{baked}");
     assert_eq!(
-        estimate["file_bytes"].as_u64(),
+        estimate["file_bytes"]
+            .as_u64()
+            .map(|b| b - estimated_surfels + surfels),
         Some(header + sum("data_bytes")),
         "{estimate} {baked}"
+    );
+    assert!(
+        (0.5..2.0).contains(&(estimated_surfels as f64 / surfels as f64)),
+        "surfel trees: {estimated_surfels} estimated, {surfels} made"
     );
     assert_eq!(header + sum("file_bytes"), written, "{baked}");
     assert!(written < header + sum("data_bytes"), "{baked}");

@@ -170,13 +170,19 @@ fn fix_checksums(b: &mut [u8]) {
     let Some(n) = u32_at(b, 12).map(|n| n as usize).filter(|&n| n <= 64) else {
         return;
     };
-    // The format's header: 76 fixed bytes, then the section table of 28-byte entries
-    // (16 in version 7).
-    let entry_bytes = if u32_at(b, 8) == Some(7) { 16 } else { 28 };
-    let table_end = 76 + entry_bytes * n;
+    // The format's header: 80 fixed bytes (76 before version 9), then the section table
+    // of 28-byte entries (16 in version 7).
+    let version = u32_at(b, 8);
+    let entry_bytes = if version == Some(7) { 16 } else { 28 };
+    let fixed = if version.is_some_and(|v| v >= 9) {
+        80
+    } else {
+        76
+    };
+    let table_end = fixed + entry_bytes * n;
     let mut at = table_end + 4;
     for i in 0..n {
-        let entry = 76 + entry_bytes * i;
+        let entry = fixed + entry_bytes * i;
         let Some(len) = b
             .get(entry + 8..entry + 16)
             .map(|s| u64::from_le_bytes(s.try_into().unwrap_or([0; 8])) as usize)
@@ -201,8 +207,17 @@ fn noise(seed: u32, len: usize) -> Vec<u8> {
     (0..len).map(|_| r.next() as u8).collect()
 }
 
-/// Small valid baked files: VCM sets, texel volumes and an impostor; the same with a BTF
-/// set; and that block-compressed.
+/// A real species' surfel tree, sampled small (about 2,000 level-0 surfels).
+fn surfel_tree() -> format::SurfelSet {
+    let params = canopy::model::preset("broadleaf").expect("a preset");
+    let tree = canopy::model::TreeModel::generate(&params, 3).expect("a tree");
+    canopy::render::method::surfel::sample::sample_species(&[tree], 2_000, 0.0)
+        .pop()
+        .expect("one species")
+}
+
+/// Small valid baked files: VCM sets, texel volumes, an impostor and a surfel tree; the
+/// same with a BTF set; and that block-compressed.
 fn baked_seeds() -> Vec<Vec<u8>> {
     let settings = BakeSettings {
         views: 6,
@@ -216,6 +231,7 @@ fn baked_seeds() -> Vec<Vec<u8>> {
         impostor_resolution: 16,
         impostor_layout: OctaLayout::Hemi,
         compress: false,
+        surfel_budget: 2_000,
     };
     // 4 x 4 frames of 16², 2 levels: (64² + 32²) x 4 bytes an atlas.
     let atlas = (64 * 64 + 32 * 32) * 4;
@@ -254,6 +270,7 @@ fn baked_seeds() -> Vec<Vec<u8>> {
         vcm: vec![vcm(0, Level::Twig), vcm(3, Level::Tree)],
         texels: vec![texel(0, [2, 3, 2]), texel(1, [3, 2, 1])],
         impostors: vec![impostor],
+        surfels: vec![surfel_tree()],
     };
     let image = 32 * 32 * 4;
     let with_btf = Baked {

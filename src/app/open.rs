@@ -177,6 +177,7 @@ mod tests {
             vcm: Vec::new(),
             texels: Vec::new(),
             impostors: Vec::new(),
+            surfels: Vec::new(),
         };
         let other = tmp("other.canopy");
         crate::format::write_atomic(&other, &baked).unwrap();

@@ -27,6 +27,7 @@ pub fn settings_of(scene: &Scene) -> BakeSettings {
         impostor_resolution: scene.bake.impostor_resolution,
         impostor_layout: scene.bake.impostor_layout,
         compress: scene.bake.compress,
+        surfel_budget: scene.bake.surfel_budget,
     }
 }
 
@@ -166,10 +167,12 @@ mod tests {
     fn an_older_cache_reads_and_is_written_again_smaller() {
         use crate::format::test_support::{as_version_7, compressible, sample, scratch_dir};
         let scene = Scene::default_scene();
-        let baked = crate::format::Baked {
+        let mut baked = crate::format::Baked {
             scene_hash: scene_hash(&scene),
             ..compressible(sample())
         };
+        // Version 7 has no surfel budget: it reads as 0.
+        baked.settings.surfel_budget = 0;
         let dir = scratch_dir("old-cache");
         let path = dir.join("c.canopy");
         std::fs::write(&path, as_version_7(&crate::format::to_bytes(&baked))).unwrap();

@@ -97,6 +97,9 @@ fn tree_vcm_seconds(world: &World, objects: u64) -> f64 {
 /// hundredths of a second and are left out.
 const SECONDS_PER_BC7_BYTE: f64 = 8e-8;
 
+/// Seconds a species' surfel tree takes per level-0 surfel of its budget (2 cores).
+const SECONDS_PER_LEVEL0_SURFEL: f64 = 2e-6;
+
 /// Trees sampled by [`mean_neighbours`].
 const NEIGHBOUR_SAMPLES: usize = 256;
 
@@ -109,7 +112,8 @@ const VIEWER_BASE_BYTES: u64 = 696_000_000;
 /// A bake's cost, estimated.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Estimate {
-    /// The baked file with every section stored as it is, exactly: the most it can be
+    /// The baked file with every section stored as it is, exactly but for the surfel
+    /// trees (about): the most it can be
     /// (the file written deflates each section that shrinks, to a quarter or less of this
     /// for canopy's forests).
     pub file_bytes: u64,
@@ -125,6 +129,9 @@ pub struct Estimate {
     pub impostor_bytes: u64,
     /// The share of `seconds` the impostors take.
     pub impostor_seconds: f64,
+    /// Surfel tree records, about (their surfels come from sampling: the budget is about
+    /// their level-0 count, the coarser levels add about a third).
+    pub surfel_bytes: u64,
     /// The viewer showing it: the bake in memory, its textures (with mipmaps) and the VCM
     /// shading's copy, on top of what the viewer holds anyway.
     pub memory_bytes: u64,
@@ -178,22 +185,31 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
     } else {
         vec![impostor::record_bytes(settings); species]
     };
-    let file_bytes = format::file_bytes_for(&btf, &vcm, &texels, &impostors).map_err(|big| {
-        if impostors.contains(&big) {
-            too_large(
-                "impostor",
-                big,
-                "[bake] impostor_frames or impostor_resolution",
-            )
-        } else if texels.contains(&big) {
-            too_large("texel volume", big, "[bake] texel_resolution or lights")
-        } else {
-            too_large("BTF image set", big, "[bake] resolution, views or lights")
-        }
-    })?;
+    let surfels: Vec<u64> = if settings.surfel_budget == 0 {
+        Vec::new()
+    } else {
+        vec![super::surfel::record_bytes(settings.surfel_budget); species]
+    };
+    let file_bytes =
+        format::file_bytes_for(&btf, &vcm, &texels, &impostors, &surfels).map_err(|big| {
+            if surfels.contains(&big) {
+                too_large("surfel tree", big, "[bake] surfel_budget")
+            } else if impostors.contains(&big) {
+                too_large(
+                    "impostor",
+                    big,
+                    "[bake] impostor_frames or impostor_resolution",
+                )
+            } else if texels.contains(&big) {
+                too_large("texel volume", big, "[bake] texel_resolution or lights")
+            } else {
+                too_large("BTF image set", big, "[bake] resolution, views or lights")
+            }
+        })?;
     let (btf_bytes, vcm_bytes, texel_bytes): (u64, u64, u64) =
         (btf.iter().sum(), vcm.iter().sum(), texels.iter().sum());
     let impostor_bytes: u64 = impostors.iter().sum();
+    let surfel_bytes: u64 = surfels.iter().sum();
     // In memory: the bake itself, the BTF texture array and the texel 3D texture with their
     // mipmaps (4/3 and 8/7; BC7 images hold their mips already), and the VCM shading's own
     // copy (as stored). The impostors' mips are in their bytes already.
@@ -204,8 +220,13 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
         btf_bytes * 4 / 3
     };
     let vcm_copy = vcm_bytes;
-    let memory_bytes =
-        VIEWER_BASE_BYTES + file_bytes + btf_gpu + texel_bytes * 8 / 7 + vcm_copy + impostor_bytes;
+    let memory_bytes = VIEWER_BASE_BYTES
+        + file_bytes
+        + btf_gpu
+        + texel_bytes * 8 / 7
+        + vcm_copy
+        + impostor_bytes
+        + surfel_bytes;
     let pixels = (f64::from(settings.resolution) * f64::from(settings.supersample) / 256.0).powi(2);
     let texel_passes = texel::step_count(world, settings.texel_resolution, settings.lights) as f64;
     let texel_scale = (f64::from(settings.texel_resolution) / 64.0).powi(2);
@@ -240,7 +261,10 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
                     + SECONDS_PER_IMPOSTOR_FRAME_PIXELS * impostor_pixels)
         })
         .sum();
+    let surfel_seconds =
+        species as f64 * f64::from(settings.surfel_budget) * SECONDS_PER_LEVEL0_SURFEL;
     let seconds = impostor_seconds
+        + surfel_seconds
         + image_seconds * pixels.max(0.1)
         + tree_vcm_seconds(world, tree_objects)
         + vcm::species_object_count(world) as f64 * SECONDS_PER_VCM_OBJECT
@@ -259,6 +283,7 @@ pub fn estimate(settings: &BakeSettings, world: &World) -> Result<Estimate> {
         texel_bytes,
         impostor_bytes,
         impostor_seconds,
+        surfel_bytes,
         memory_bytes,
         seconds,
     })
@@ -334,7 +359,8 @@ mod tests {
     fn the_default_forest_estimate_adds_up() {
         let w = world();
         let e = estimate(&settings(), &w).unwrap();
-        let data = e.btf_bytes + e.vcm_bytes + e.texel_bytes + e.impostor_bytes;
+        let data = e.btf_bytes + e.vcm_bytes + e.texel_bytes + e.impostor_bytes + e.surfel_bytes;
+        assert!(e.surfel_bytes > 0);
         assert!(e.file_bytes > data);
         assert!(e.file_bytes < data + 1_000_000);
         // One impostor per species (2): 12 x 12 frames of 64², 5 levels, 2 atlases.
@@ -359,6 +385,7 @@ mod tests {
         let raw = estimate(
             &BakeSettings {
                 compress: false,
+                surfel_budget: 0,
                 ..settings()
             },
             &w,

@@ -16,6 +16,7 @@ pub mod impostor;
 pub mod report;
 pub mod sky_cache;
 pub mod stages;
+pub mod surfel;
 pub mod texel;
 pub mod vcm;
 
@@ -116,6 +117,7 @@ pub fn step_count(settings: &BakeSettings, world: &World) -> u64 {
         + vcm::object_count(world)
         + texel::step_count(world, settings.texel_resolution, settings.lights)
         + impostor::step_count(settings, world)
+        + surfel::step_count(settings, world)
 }
 
 /// How long a bake and each of its parts took.
@@ -127,6 +129,7 @@ pub struct BakeTimes {
     pub vcm_seconds: f64,
     pub texel_seconds: f64,
     pub impostor_seconds: f64,
+    pub surfel_seconds: f64,
     /// The block compression of the images and cube maps (0 when `[bake] compress` is off).
     pub compress: compress::CompressTimes,
     /// Writing the file, its sections deflated (0 until it is written).

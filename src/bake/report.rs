@@ -49,6 +49,13 @@ pub struct BakeReport {
     pub impostor_seconds: f64,
     /// One per species' impostor.
     pub impostors: Vec<ImpostorReport>,
+    /// The surfel trees: level-0 surfels a species is sampled with (0: none baked), bytes
+    /// (whole records) and seconds.
+    pub surfel_budget: u32,
+    pub surfel_bytes: u64,
+    pub surfel_seconds: f64,
+    /// One per species' surfel tree.
+    pub surfels: Vec<SurfelReport>,
     /// Views of the twig and main-branch sets, and of the tree-level ones.
     pub views: u32,
     pub tree_views: u32,
@@ -99,6 +106,21 @@ pub struct ImpostorReport {
     /// The bounding sphere its frames frame.
     pub radius_m: f32,
     /// Seconds its frames took to bake.
+    pub seconds: f64,
+}
+
+/// One species' surfel tree in a [`BakeReport`].
+#[derive(Clone, Debug, Serialize)]
+pub struct SurfelReport {
+    pub species: String,
+    /// Surfels of every level, and of level 0.
+    pub surfels: u64,
+    pub level0_surfels: u32,
+    pub levels: usize,
+    /// Level 0's spacing.
+    pub spacing_m: f32,
+    /// The whole record.
+    pub bytes: u64,
     pub seconds: f64,
 }
 
@@ -169,6 +191,19 @@ impl BakeReport {
                 seconds: times.stage(&format!("{} impostor", name(i.species))),
             })
             .collect();
+        let surfels = baked
+            .surfels
+            .iter()
+            .map(|t| SurfelReport {
+                species: name(t.species),
+                surfels: t.surfel_count(),
+                level0_surfels: t.per_level.first().copied().unwrap_or(0),
+                levels: t.levels(),
+                spacing_m: t.spacing0,
+                bytes: t.record_bytes(),
+                seconds: times.stage(&format!("{} surfels", name(t.species))),
+            })
+            .collect();
         let tree_sets: Vec<&crate::format::VcmSet> = baked
             .vcm
             .iter()
@@ -208,6 +243,10 @@ impl BakeReport {
             impostor_bytes: baked.impostor_bytes(),
             impostor_seconds: times.impostor_seconds,
             impostors,
+            surfel_budget: settings.surfel_budget,
+            surfel_bytes: baked.surfel_bytes(),
+            surfel_seconds: times.surfel_seconds,
+            surfels,
             views: settings.views,
             tree_views: settings.tree_views,
             lights: settings.lights,

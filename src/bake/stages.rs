@@ -4,7 +4,7 @@
 //! never kept); then the tree levels (what draws nearly all of a forest): the first
 //! variants' (handed over, a first variant standing in for its siblings), then the other
 //! variants' (handed over again); then the finer levels, the visibility cube maps, the
-//! texel volumes and the impostors. After each stage but the last, what is made so far is
+//! texel volumes, the impostors and the surfel trees. After each stage but the last, what is made so far is
 //! written beside the cache file (`<key>.partial.canopy`, the same format, neither block-
 //! compressed nor deflated, so that keeping it costs the stages little); a bake that finds
 //! one for its scene starts from it. The finished bake is the same file
@@ -12,7 +12,9 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{BakeTimes, Progress, Source, StageClock, cache, compress, impostor, texel, vcm};
+use super::{
+    BakeTimes, Progress, Source, StageClock, cache, compress, impostor, surfel, texel, vcm,
+};
 use crate::format::{BakeSettings, Baked, Packing};
 use crate::model::World;
 use crate::model::params::TexelParams;
@@ -41,7 +43,7 @@ pub enum BakeStage {
 
 /// What a bake that has handed over its tree levels still makes, for the viewer's panel.
 pub const STILL_COMING: &str =
-    "the twig and main-branch levels, cube maps, texel volumes and impostors";
+    "the twig and main-branch levels, cube maps, texel volumes, impostors and surfel trees";
 
 /// Where a bake cached at `path` keeps what it has made so far.
 pub fn partial_path(path: &Path) -> PathBuf {
@@ -157,6 +159,20 @@ pub fn bake_resumable(
         })
     })?;
     let impostor_seconds = t3.elapsed().as_secs_f64();
+
+    let t4 = std::time::Instant::now();
+    let before_surfels = before_impostors + impostor::step_count(settings, world);
+    if baked.surfels.is_empty() {
+        baked.surfels = surfel::bake_surfels(world, settings, &mut |done, what| {
+            clock.step(what);
+            progress(&Progress {
+                done: before_surfels + done,
+                total,
+                what: what.to_owned(),
+            })
+        });
+    }
+    let surfel_seconds = t4.elapsed().as_secs_f64();
     let compress = if settings.compress {
         compress::compress(&mut baked)
     } else {
@@ -168,6 +184,7 @@ pub fn bake_resumable(
         vcm_seconds,
         texel_seconds,
         impostor_seconds,
+        surfel_seconds,
         compress,
         write_seconds: 0.0,
         stages: clock.stages,

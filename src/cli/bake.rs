@@ -129,6 +129,26 @@ pub fn bake(args: BakeArgs) -> anyhow::Result<()> {
                 i.species, i.bytes, i.radius_m, i.seconds
             );
         }
+        if r.surfels.is_empty() {
+            println!("  no surfel trees (surfel_budget = 0)");
+        } else {
+            println!(
+                "  surfel trees (about {} level-0 surfels a species, 12 bytes each): {} bytes, {:.1} s",
+                r.surfel_budget, r.surfel_bytes, r.surfel_seconds
+            );
+        }
+        for t in &r.surfels {
+            println!(
+                "  {:<12} {} surfels ({} at level 0, {:.1} mm apart), {} levels, {} bytes, {:.1} s",
+                t.species,
+                t.surfels,
+                t.level0_surfels,
+                t.spacing_m * 1e3,
+                t.levels,
+                t.bytes,
+                t.seconds
+            );
+        }
         if r.compressed {
             println!(
                 "  block-compressed: BTF images in BC7 (with their mips) {:.1} s, cube maps in BC4 {:.1} s",

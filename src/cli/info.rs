@@ -66,6 +66,23 @@ fn impostor_line(
     )
 }
 
+/// The surfel trees the bake makes: their budget and bytes.
+fn surfel_line(
+    s: &crate::format::BakeSettings,
+    e: &crate::bake::estimate::Estimate,
+    species: usize,
+) -> String {
+    if s.surfel_budget == 0 {
+        return "surfel trees: none (surfel_budget = 0; the surfel method samples them when it first draws)".into();
+    }
+    format!(
+        "surfel trees: {species} (about {} level-0 surfels each, 12 bytes a surfel), about {:.1} MB ({:.1} MB a species)",
+        s.surfel_budget,
+        e.surfel_bytes as f64 / 1e6,
+        e.surfel_bytes as f64 / 1e6 / species.max(1) as f64
+    )
+}
+
 pub fn info(args: InfoArgs) -> anyhow::Result<()> {
     let InfoArgs {
         scene,
@@ -186,6 +203,7 @@ pub fn info(args: InfoArgs) -> anyhow::Result<()> {
                 println!("{}", estimate_line(e));
                 println!("  {}", tree_vcm_line(e, &world));
                 println!("  {}", impostor_line(&settings, e, world.species.len()));
+                println!("  {}", surfel_line(&settings, e, world.species.len()));
             }
             Err(e) => println!("bake refused: {e}"),
         }
@@ -196,6 +214,15 @@ pub fn info(args: InfoArgs) -> anyhow::Result<()> {
                 c.file_bytes as f64 / 1e6,
                 c.data_bytes as f64 / 1e6
             );
+            for k in &c.kinds {
+                println!(
+                    "  {:<14} {:>8.1} MB in the file, {:>8.1} MB of data ({} sections)",
+                    k.kind,
+                    k.file_bytes as f64 / 1e6,
+                    k.data_bytes as f64 / 1e6,
+                    k.sections
+                );
+            }
         }
     }
     Ok(())
@@ -207,15 +234,46 @@ struct Cached {
     path: String,
     file_bytes: u64,
     data_bytes: u64,
+    /// Per kind of section, in file order.
+    kinds: Vec<CachedKind>,
+}
+
+/// The sections of one kind in a cached bake.
+#[derive(serde::Serialize)]
+struct CachedKind {
+    kind: &'static str,
+    sections: usize,
+    file_bytes: u64,
+    data_bytes: u64,
 }
 
 /// The scene's cached bake, if there is one whose header reads.
 fn cached(scene: &crate::scene::Scene) -> Option<Cached> {
     let path = crate::bake::cache::cache_path(scene);
     let sections = crate::format::sections(&path).ok()?;
+    let mut kinds: Vec<CachedKind> = Vec::new();
+    for s in &sections {
+        let name = s.kind.name();
+        let k = match kinds.iter().position(|k| k.kind == name) {
+            Some(i) => &mut kinds[i],
+            None => {
+                kinds.push(CachedKind {
+                    kind: name,
+                    sections: 0,
+                    file_bytes: 0,
+                    data_bytes: 0,
+                });
+                kinds.last_mut().expect("pushed")
+            }
+        };
+        k.sections += 1;
+        k.file_bytes += s.stored_bytes;
+        k.data_bytes += s.data_bytes;
+    }
     Some(Cached {
         path: path.display().to_string(),
         file_bytes: std::fs::metadata(&path).map_or(0, |m| m.len()),
         data_bytes: sections.iter().map(|s| s.data_bytes).sum(),
+        kinds,
     })
 }

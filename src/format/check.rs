@@ -53,6 +53,9 @@ impl BakeSettings {
                 SETTINGS_IMPOSTOR_FRAMES,
             );
         }
+        if self.surfel_budget != 0 && !SURFEL_BUDGET_RANGE.contains(&self.surfel_budget) {
+            return bad("surfel_budget", self.surfel_budget, SETTINGS_SURFEL_BUDGET);
+        }
         if !IMPOSTOR_RESOLUTIONS.contains(&self.impostor_resolution) {
             return bad(
                 "impostor_resolution",
@@ -277,9 +280,18 @@ impl Baked {
                 });
             }
         }
+        for (i, t) in self.surfels.iter().enumerate() {
+            if let Some(reason) = t.problem() {
+                return Err(FormatError::MalformedContent {
+                    section: format!("surfel tree {i} (species {})", t.species),
+                    reason,
+                });
+            }
+        }
         check_unique_btf(&self.btf)?;
         check_unique_texels(&self.texels)?;
         check_unique_impostors(&self.impostors)?;
+        check_unique_surfels(&self.surfels)?;
         let plans = plan_sections(self, section_limit);
         if let Some(p) = plans.iter().find(|p| p.len > section_limit) {
             return Err(FormatError::AbsurdSize {
@@ -338,6 +350,15 @@ pub(super) fn check_unique_impostors(impostors: &[Impostor]) -> Result<(), Forma
         |t| t.species,
         |i, t| format!("impostor {i} (species {})", t.species),
         "an impostor of this species",
+    )
+}
+
+pub(super) fn check_unique_surfels(trees: &[SurfelSet]) -> Result<(), FormatError> {
+    check_unique(
+        trees,
+        |t| t.species,
+        |i, t| format!("surfel tree {i} (species {})", t.species),
+        "a surfel tree of this species",
     )
 }
 

@@ -1,21 +1,22 @@
 //! The `.canopy` file: everything one bake produces (BTF image sets, visibility cube maps,
-//! texel volumes, octahedral impostors),
+//! texel volumes, octahedral impostors, surfel trees),
 //! in one versioned, checksummed file that the viewer caches and validates on load.
 //!
 //! The byte layout is documented here, beside the constants it names; the data types,
 //! the error, reading, writing, planning, checking and BC coding are modules of their own.
 //!
-//! # Byte layout (format version 8)
+//! # Byte layout (format version 9)
 //!
 //! All integers are little-endian, `f32` is IEEE 754 binary32 (little-endian bits). Offsets
 //! are in bytes. There is no padding anywhere.
 //!
 //! ```text
-//! HEADER (80 + 28*N bytes)
+//! HEADER (84 + 28*N bytes)
 //!   off  size  field
 //!    0     8   magic           "CANOPY\r\n" (43 41 4E 4F 50 59 0D 0A); the CR LF pair catches
 //!                              a file whose line endings were converted in transfer
-//!    8     4   version         u32, 8 (a reader also takes 7: see the end of this layout)
+//!    8     4   version         u32, 9 (a reader also takes 7 and 8: see the end of this
+//!                              layout)
 //!   12     4   section_count   u32 N, at most MAX_SECTIONS (4096)
 //!   16     8   file_size       u64, total length of the file in bytes, header included
 //!   24     8   scene_hash      u64, hash of the scene text + bake settings (from the caller)
@@ -36,12 +37,15 @@
 //!                              (pixels a frame side)                |
 //!   68     4   impostor_layout u32, 0 = full sphere, 1 = upper     |
 //!                              hemisphere (`crate::sphere::OctaLayout`)
-//!   72     4   compress        u32, 0 or 1: the bake stores its     /
+//!   72     4   compress        u32, 0 or 1: the bake stores its     |
 //!                              BTF images in BC7 and its cube maps in BC4 (each record
 //!                              says how it is stored: the reader goes by the records)
-//!   76  28*N   section table, one 28-byte entry per section, in file order:
+//!   76     4   surfel_budget   u32, 0 (no surfel trees) or          /
+//!                              1,000..=4,000,000: level-0 surfels each species is sampled
+//!                              with (about)
+//!   80  28*N   section table, one 28-byte entry per section, in file order:
 //!                +0  u32 kind      1 = BTF image sets, 2 = VCM sets, 3 = texel volumes,
-//!                                  4 = impostors (0 and others invalid)
+//!                                  4 = impostors, 5 = surfel trees (0 and others invalid)
 //!                +4  u32 crc32     CRC-32 (IEEE, as crc32fast) of the payload as stored
 //!                +8  u64 length    bytes of the payload as stored, 1..=MAX_SECTION_BYTES
 //!                                  (1 GiB)
@@ -49,16 +53,18 @@
 //!                                  zlib or gzip wrapper)
 //!               +20  u64 plain_length  bytes of the payload once inflated,
 //!                                  4..=MAX_SECTION_BYTES; equal to length when packing is 0
-//!   76+28N  4  header_crc      u32, CRC-32 of header bytes [0, 76+28N)
+//!   80+28N  4  header_crc      u32, CRC-32 of header bytes [0, 80+28N)
 //!
 //! PAYLOADS: the N section payloads as stored, back to back in table order, starting right
-//! after header_crc; their lengths sum to exactly file_size - (80 + 28N) and the file ends
+//! after header_crc; their lengths sum to exactly file_size - (84 + 28N) and the file ends
 //! there. A deflated payload is one DEFLATE stream that inflates to exactly plain_length
 //! bytes and ends exactly at the payload's end.
 //!
-//! Version 7 differs only in the section table: 16-byte entries (kind, crc32, length), every
-//! payload stored as it is; so its header is 80 + 16*N bytes. [`read`] takes both;
-//! [`write_atomic`] writes version 8 with every section that shrinks deflated.
+//! Version 8 has no surfel_budget word (its table starts at 76, its header is 80 + 28*N
+//! bytes) and no surfel trees; version 7 is version 8 with 16-byte table entries (kind,
+//! crc32, length), every payload stored as it is (its header is 80 + 16*N bytes). [`read`]
+//! takes all three (the older ones with a surfel budget of 0); [`write_atomic`] writes
+//! version 9 with every section that shrinks deflated.
 //!
 //! SECTION PAYLOAD (any kind, as inflated)
 //!    0     4   record_count    u32 R
@@ -149,14 +155,47 @@
 //!                              the depth from the frame's plane, 0 at the bounding
 //!                              sphere's side towards the frame's camera, 0.5 at its
 //!                              centre, 1 at its far side; spread like the albedo
+//!
+//! SURFEL TREE RECORD (kind 5; 80 bytes + data): one species' LDC tree (Guennebaud and
+//! Paulin 2002), `crate::format::SurfelSet`
+//!    0     4   species         u32
+//!    4     4   levels          u32 L, 1..=16 (level l's spacing is spacing * 2^l)
+//!    8     4   nodes           u32 M, >= 1: blocks of the octree
+//!   12     4   surfels         u32 S, >= 1
+//!   16    24   box             min then max, 3 x f32 each, finite, max >= min: the tree's
+//!                              bounds, which the surfels' positions are quantised in
+//!   40     4   spacing         f32, finite, > 0: level 0's surfel spacing (m)
+//!   44    12   density_origin  3 x f32, finite: the density volume's lowest corner
+//!   56     4   density_voxel   f32, finite, > 0: its voxel's side (m)
+//!   60    12   density_dims    3 x u32 (x, y, z voxels), each 1..=64
+//!   72     8   data_len        u64, must equal 8*L + 72*M + 12*S + 4*x*y*z
+//!   80     ..  levels          per level, finest first: gain f32 in [1, 16] (its coverages
+//!                              were raised to 1 - (1 - c)^gain), surfels u32 (they sum to S)
+//!          ..  nodes           M x 72 bytes: level u32 (< L), first u32, count u32 (>= 1;
+//!                              first + count <= S), children u32 (0..=8; 0 at level 0),
+//!                              bounds 6 x f32 (min, max; finite), 8 child slots u32: the
+//!                              first `children` each a node of level `level - 1`, the rest
+//!                              0xFFFFFFFF. The nodes of level L-1 are the roots
+//!          ..  surfels         S x 3 u32, grouped by node: w0 = x | y << 14 | (z & 15) << 28,
+//!                              w1 = z >> 4 | nu << 10 | nv << 18 | openness << 26,
+//!                              w2 = r | g << 8 | b << 16 | foliage << 24 | coverage << 25;
+//!                              x, y, z 14 bits each, the position within the box in steps of
+//!                              (max - min) / 16383; (nu, nv) bytes of the normal's
+//!                              octahedral map (`crate::sphere::OctaLayout::Full`, n/255);
+//!                              openness 6 bits (n/63, the share of the sky its tree leaves
+//!                              open); r, g, b the square root of the linear albedo (n/255);
+//!                              foliage 1 bit; coverage 7 bits (n/127, the share of its
+//!                              cell it covers)
+//!          ..  density         x*y*z f32, finite, >= 0: extinction (1/m), voxel (i, j, k)
+//!                              at (k*y + j)*x + i
 //! ```
 //!
 //! A set's own views, lights and resolution are checked against the allowed values but need
 //! not equal the header's settings (nor need an impostor's layout, frames and resolution).
 //! A BTF set of one `(species, level)` appears at most once, a texel volume or an impostor
-//! of one species too. Records of one kind keep their order across sections; the writer
-//! puts all BTF sections first, then the VCM sections, the texel volumes and the
-//! impostors, packing records greedily so no section exceeds [`MAX_SECTION_BYTES`] (one
+//! of one species too, a surfel tree too. Records of one kind keep their order across
+//! sections; the writer puts all BTF sections first, then the VCM sections, the texel
+//! volumes, the impostors and the surfel trees, packing records greedily so no section exceeds [`MAX_SECTION_BYTES`] (one
 //! record must fit in one section). A reader accepts the sections of every kind in any
 //! order.
 //!
@@ -203,6 +242,7 @@ mod read;
 mod records;
 mod section;
 mod settings;
+mod surfel;
 #[cfg(test)]
 pub(crate) mod test_support;
 mod write;
@@ -210,7 +250,8 @@ mod write;
 pub use error::FormatError;
 pub use packed::PackedBytes;
 pub use plan::{
-    btf_record_bytes, file_bytes_for, impostor_record_bytes, texel_record_bytes, vcm_record_bytes,
+    btf_record_bytes, file_bytes_for, impostor_record_bytes, surfel_record_bytes,
+    texel_record_bytes, vcm_record_bytes,
 };
 pub use read::{SectionInfo, from_bytes, read, read_expecting, sections, version_of};
 pub use records::{
@@ -219,6 +260,10 @@ pub use records::{
 };
 pub use section::{Packing, SectionKind};
 pub use settings::BakeSettings;
+pub use surfel::{
+    MAX_SURFEL_LEVELS, SURFEL_BUDGET_RANGE, SURFEL_DENSITY_DIM_RANGE, SURFEL_WORDS, Surfel,
+    SurfelDensity, SurfelNode, SurfelSet, pack_surfel, unpack_surfel,
+};
 pub use write::{to_bytes, to_bytes_packed, write_atomic, write_atomic_packed};
 
 use section::{level_from_tag, level_tag};
@@ -229,7 +274,7 @@ pub const MAGIC: [u8; 8] = *b"CANOPY\r\n";
 /// cell's index in `crate::vcm::cells::ForestCells`), not one tree's.
 pub const VCM_CELL_SPECIES: u32 = u32::MAX;
 /// The format version this code writes.
-pub const VERSION: u32 = 8;
+pub const VERSION: u32 = 9;
 /// The oldest format version this code reads (its section table has no packing: every
 /// payload is stored as it is).
 pub const OLDEST_VERSION: u32 = 7;
@@ -264,9 +309,12 @@ pub const IMPOSTOR_RESOLUTIONS: [u32; 5] = [16, 32, 64, 128, 256];
 pub const IMPOSTOR_MIN_MIP_SIDE: u32 = 4;
 
 /// Bytes of the header before the section table.
-const FIXED_HEADER_BYTES: usize = 76;
+const FIXED_HEADER_BYTES: usize = 80;
+/// Bytes of the header before the section table in a version-7 or version-8 file (no
+/// surfel budget).
+const FIXED_HEADER_BYTES_V8: usize = 76;
 /// Words of the settings in the header (from offset 32).
-const SETTINGS_WORDS: usize = 11;
+const SETTINGS_WORDS: usize = 12;
 /// Bytes of one section-table entry.
 const SECTION_ENTRY_BYTES: usize = 28;
 /// Bytes of one section-table entry in a version-7 file.
@@ -291,6 +339,7 @@ const SETTINGS_IMPOSTOR_FRAMES: &str = "0 (none) or 4 to 32";
 const SETTINGS_IMPOSTOR_RESOLUTION: &str = "16, 32, 64, 128 or 256";
 const SETTINGS_IMPOSTOR_LAYOUT: &str = "0 (full) or 1 (hemi)";
 const SETTINGS_COMPRESS: &str = "0 (no) or 1 (yes)";
+const SETTINGS_SURFEL_BUDGET: &str = "0 (none) or 1000 to 4000000";
 
 #[cfg(test)]
 mod tests {

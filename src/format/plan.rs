@@ -29,6 +29,11 @@ pub(super) fn impostor_record_len(i: &Impostor) -> u64 {
     IMPOSTOR_RECORD_FIXED_BYTES + i.albedo.len() as u64 + i.normal_depth.len() as u64
 }
 
+/// Bytes of a surfel tree record of these counts.
+pub fn surfel_record_bytes(levels: u32, nodes: u32, surfels: u64, density_dims: [u32; 3]) -> u64 {
+    surfel::SURFEL_RECORD_FIXED_BYTES + SurfelSet::data_bytes(levels, nodes, surfels, density_dims)
+}
+
 /// Bytes of an impostor record of these sizes (both atlases, `mip_levels` levels each),
 /// saturating on overflow.
 pub fn impostor_record_bytes(frames: u32, resolution: u32, mip_levels: u32) -> u64 {
@@ -67,19 +72,21 @@ pub fn texel_record_bytes(lights: u32, dims: [u32; 3]) -> u64 {
 }
 
 /// The length of the file the writer makes of records of these sizes (each list in file
-/// order: BTF sets, VCM sets, texel volumes, impostors), or `Err` with the size of a
+/// order: BTF sets, VCM sets, texel volumes, impostors, surfel trees), or `Err` with the size of a
 /// record too large for any section ([`MAX_SECTION_BYTES`]).
 pub fn file_bytes_for(
     btf: &[u64],
     vcm: &[u64],
     texel: &[u64],
     impostor: &[u64],
+    surfel: &[u64],
 ) -> Result<u64, u64> {
     if let Some(&big) = btf
         .iter()
         .chain(vcm)
         .chain(texel)
         .chain(impostor)
+        .chain(surfel)
         .find(|&&s| s.saturating_add(SECTION_PREFIX_BYTES) > MAX_SECTION_BYTES)
     {
         return Err(big);
@@ -90,6 +97,7 @@ pub fn file_bytes_for(
         (SectionKind::Vcm, vcm),
         (SectionKind::Texel, texel),
         (SectionKind::Impostor, impostor),
+        (SectionKind::Surfel, surfel),
     ] {
         pack(kind, sizes.iter().copied(), MAX_SECTION_BYTES, &mut plans);
     }
@@ -122,6 +130,12 @@ pub(super) fn plan_sections(baked: &Baked, limit: u64) -> Vec<PlannedSection> {
     pack(
         SectionKind::Impostor,
         baked.impostors.iter().map(impostor_record_len),
+        limit,
+        &mut plans,
+    );
+    pack(
+        SectionKind::Surfel,
+        baked.surfels.iter().map(SurfelSet::record_bytes),
         limit,
         &mut plans,
     );
@@ -189,17 +203,33 @@ mod tests {
                 .iter()
                 .map(|i| impostor_record_bytes(i.frames, i.resolution, i.mip_levels))
                 .collect();
+            let surfel: Vec<u64> = b
+                .surfels
+                .iter()
+                .map(|t| {
+                    let levels = t.levels() as u32;
+                    surfel_record_bytes(
+                        levels,
+                        t.nodes.len() as u32,
+                        t.surfel_count(),
+                        t.density.dims,
+                    )
+                })
+                .collect();
             assert_eq!(
-                file_bytes_for(&btf, &vcm, &texel, &impostor),
+                file_bytes_for(&btf, &vcm, &texel, &impostor, &surfel),
                 Ok(to_bytes(&b).len() as u64)
             );
         }
         // 258 views x 258 lights at 128² is one 4.4 GB record: no section holds it.
         let huge = btf_record_bytes(258, 258, 128, false);
-        assert_eq!(file_bytes_for(&[huge], &[], &[], &[]), Err(huge));
+        assert_eq!(file_bytes_for(&[huge], &[], &[], &[], &[]), Err(huge));
         // The largest impostor (32 x 32 frames of 256², every level) fits a section.
         let most = impostor_record_bytes(32, 256, impostor_mip_levels(256));
         assert!(most + 4 <= MAX_SECTION_BYTES, "{most}");
-        assert_eq!(file_bytes_for(&[], &[], &[], &[most]).map(|_| ()), Ok(()));
+        assert_eq!(
+            file_bytes_for(&[], &[], &[], &[most], &[]).map(|_| ()),
+            Ok(())
+        );
     }
 }

@@ -6,7 +6,9 @@ use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::Path;
 
-use super::check::{check_unique_btf, check_unique_impostors, check_unique_texels, show_len};
+use super::check::{
+    check_unique_btf, check_unique_impostors, check_unique_surfels, check_unique_texels, show_len,
+};
 use super::*;
 
 /// Reads and validates a `.canopy` file.
@@ -172,6 +174,7 @@ fn decode<R: Read>(
     check_unique_btf(&baked.btf)?;
     check_unique_texels(&baked.texels)?;
     check_unique_impostors(&baked.impostors)?;
+    check_unique_surfels(&baked.surfels)?;
     Ok(baked)
 }
 
@@ -217,9 +220,17 @@ fn decode_header<R: Read>(
         SECTION_ENTRY_BYTES
     };
 
-    // The rest of the fixed header; `rest` starts at file offset 12.
-    let rest = input.array::<{ FIXED_HEADER_BYTES - 12 }>("the header")?;
-    let section_count = u32_at(&rest, 0);
+    // The rest of the fixed header; `rest` starts at file offset 12 (a version-8 or older
+    // file has no surfel budget: it reads as 0).
+    let mut rest = [0u8; FIXED_HEADER_BYTES - 12];
+    let fixed_len = if version >= 9 {
+        FIXED_HEADER_BYTES
+    } else {
+        FIXED_HEADER_BYTES_V8
+    };
+    input.fill(&mut rest[..fixed_len - 12], "the header")?;
+    let rest = &rest[..fixed_len - 12];
+    let section_count = u32_at(rest, 0);
     if section_count > MAX_SECTIONS {
         return Err(FormatError::AbsurdSize {
             field: "section count".into(),
@@ -241,7 +252,7 @@ fn decode_header<R: Read>(
     let mut hasher = crc32fast::Hasher::new();
     hasher.update(&magic);
     hasher.update(&version_bytes);
-    hasher.update(&rest);
+    hasher.update(rest);
     hasher.update(&table);
     let computed = hasher.finalize();
     if stored != computed {
@@ -254,7 +265,7 @@ fn decode_header<R: Read>(
 
     // The header is intact: check what it says.
     let header_len = input.pos;
-    let file_size = u64_at(&rest, 4);
+    let file_size = u64_at(rest, 4);
     if file_size > input.len {
         return Err(FormatError::Truncated {
             what: "the whole file (size from its header)".into(),
@@ -271,7 +282,7 @@ fn decode_header<R: Read>(
             ),
         });
     }
-    let scene_hash = u64_at(&rest, 12);
+    let scene_hash = u64_at(rest, 12);
     if let Some(expected) = expected_hash
         && expected != scene_hash
     {
@@ -280,8 +291,14 @@ fn decode_header<R: Read>(
             expected,
         });
     }
-    let settings =
-        BakeSettings::from_header_words(std::array::from_fn(|i| u32_at(&rest, 20 + 4 * i)))?;
+    let settings = BakeSettings::from_header_words(std::array::from_fn(|i| {
+        let at = 20 + 4 * i;
+        if at + 4 <= rest.len() {
+            u32_at(rest, at)
+        } else {
+            0
+        }
+    }))?;
     settings.validate()?;
 
     let mut entries = Vec::with_capacity(section_count as usize);
@@ -330,7 +347,7 @@ impl TableEntry {
             return Err(FormatError::MalformedContent {
                 section: format!("section {i}"),
                 reason: format!(
-                    "unknown section kind {tag} (known: 1 = btf, 2 = vcm, 3 = texel, 4 = impostor)"
+                    "unknown section kind {tag} (known: 1 = btf, 2 = vcm, 3 = texel, 4 = impostor, 5 = surfel)"
                 ),
             });
         };
@@ -404,6 +421,7 @@ fn decode_records<R: Read>(
         SectionKind::Vcm => decode_vcm(section, &mut baked.vcm),
         SectionKind::Texel => decode_texels(section, &mut baked.texels),
         SectionKind::Impostor => decode_impostors(section, &mut baked.impostors),
+        SectionKind::Surfel => decode_surfels(section, &mut baked.surfels),
     }?;
     if section.remaining != 0 {
         return Err(section.malformed(format!(
@@ -721,6 +739,28 @@ fn decode_impostors<R: Read>(
         }
         imp.normal_depth = s.bytes(normal_len, "the normal-depth atlas")?;
         out.push(imp);
+    }
+    Ok(())
+}
+
+fn decode_surfels<R: Read>(
+    s: &mut Section<'_, '_, R>,
+    out: &mut Vec<SurfelSet>,
+) -> Result<(), FormatError> {
+    const FIXED: usize = surfel::SURFEL_RECORD_FIXED_BYTES as usize;
+    let count = s.record_count(FIXED as u64)?;
+    for index in 0..count {
+        let fixed = s.array::<FIXED>("a surfel tree record")?;
+        let species = u32_at(&fixed, 0);
+        let bad = |s: &Section<'_, '_, R>, reason: String| {
+            s.malformed(format!(
+                "surfel record {index} (species {species}): {reason}"
+            ))
+        };
+        let (mut set, len) = SurfelSet::from_fixed(&fixed).map_err(|r| bad(s, r))?;
+        let data = s.bytes(len, "the surfel tree's data")?;
+        set.fill(&fixed, &data).map_err(|r| bad(s, r))?;
+        out.push(set);
     }
     Ok(())
 }

@@ -17,6 +17,8 @@ pub struct Baked {
     /// Octahedral impostors, one per species (none when the settings' impostor frames
     /// are 0).
     pub impostors: Vec<Impostor>,
+    /// Surfel trees, one per species (none when the settings' surfel budget is 0).
+    pub surfels: Vec<SurfelSet>,
 }
 
 /// The billboard images of one species at one level.
@@ -372,6 +374,7 @@ impl Baked {
             vcm: Vec::new(),
             texels: Vec::new(),
             impostors: Vec::new(),
+            surfels: Vec::new(),
         }
     }
 
@@ -399,6 +402,11 @@ impl Baked {
             .iter()
             .map(|i| i.albedo.len() as u64 + i.normal_depth.len() as u64)
             .sum()
+    }
+
+    /// Bytes of surfel tree records over all trees.
+    pub fn surfel_bytes(&self) -> u64 {
+        self.surfels.iter().map(SurfelSet::record_bytes).sum()
     }
 }
 

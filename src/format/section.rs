@@ -14,6 +14,8 @@ pub enum SectionKind {
     Texel = 3,
     /// [`Impostor`] records.
     Impostor = 4,
+    /// [`SurfelSet`] records.
+    Surfel = 5,
 }
 
 /// How a section's payload is stored in the file.
@@ -44,6 +46,7 @@ impl SectionKind {
             2 => Some(SectionKind::Vcm),
             3 => Some(SectionKind::Texel),
             4 => Some(SectionKind::Impostor),
+            5 => Some(SectionKind::Surfel),
             _ => None,
         }
     }
@@ -54,6 +57,7 @@ impl SectionKind {
             SectionKind::Vcm => "vcm sets",
             SectionKind::Texel => "texel volumes",
             SectionKind::Impostor => "impostors",
+            SectionKind::Surfel => "surfel trees",
         }
     }
 }

@@ -29,6 +29,9 @@ pub struct BakeSettings {
     pub impostor_layout: OctaLayout,
     /// Whether the bake block-compresses its BTF images (BC7) and cube maps (BC4).
     pub compress: bool,
+    /// Level-0 surfels each species' LDC tree is sampled with (about): 0 (no surfel trees)
+    /// or in [`SURFEL_BUDGET_RANGE`].
+    pub surfel_budget: u32,
 }
 
 impl BakeSettings {
@@ -47,6 +50,7 @@ impl BakeSettings {
             self.impostor_resolution,
             self.impostor_layout.tag(),
             u32::from(self.compress),
+            self.surfel_budget,
         ]
     }
 
@@ -83,6 +87,7 @@ impl BakeSettings {
             impostor_resolution: w[8],
             impostor_layout,
             compress,
+            surfel_budget: w[11],
         })
     }
 

@@ -108,6 +108,57 @@ pub(crate) fn settings() -> BakeSettings {
         impostor_resolution: 16,
         impostor_layout: OctaLayout::Full,
         compress: false,
+        surfel_budget: 5_000,
+    }
+}
+
+/// A two-level surfel tree: a leaf block of three surfels under a root of one.
+pub(crate) fn surfel_set(species: u32) -> SurfelSet {
+    use crate::model::mesh::Aabb;
+    use glam::Vec3;
+    let bounds = Aabb::new(Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 3.0, 1.0));
+    let surfel = |k: u32| Surfel {
+        position: Vec3::new(0.1 * k as f32, 1.0 + 0.2 * k as f32, -0.3),
+        normal: Vec3::new(0.0, 1.0, 0.2 * k as f32).normalize(),
+        albedo: Vec3::new(0.1, 0.3 + 0.1 * k as f32, 0.05),
+        foliage: k % 2 == 0,
+        coverage: 0.25 * (k + 1) as f32,
+        openness: 0.9 - 0.2 * k as f32,
+    };
+    let words = (0..4)
+        .flat_map(|k| pack_surfel(&surfel(k), bounds.min, bounds.extent()))
+        .collect();
+    let nodes = vec![
+        SurfelNode {
+            level: 0,
+            bounds,
+            first: 0,
+            count: 3,
+            children: Vec::new(),
+        },
+        SurfelNode {
+            level: 1,
+            bounds,
+            first: 3,
+            count: 1,
+            children: vec![0],
+        },
+    ];
+    SurfelSet {
+        species,
+        bounds,
+        spacing0: 0.05,
+        gains: vec![1.0, 1.5],
+        per_level: vec![3, 1],
+        roots: SurfelSet::roots_of(&nodes, 2),
+        nodes,
+        words,
+        density: SurfelDensity {
+            origin: bounds.min,
+            voxel: 1.5,
+            dims: [2, 2, 2],
+            sigma: (0..8).map(|k| 0.5 * k as f32).collect(),
+        },
     }
 }
 
@@ -172,7 +223,7 @@ pub(crate) fn vcm_set(owner: u32, level: Level, resolution: u32) -> VcmSet {
     }
 }
 
-/// Two BTF sets, two VCM sets, a texel volume and an impostor (about 400 KB).
+/// Two BTF sets, two VCM sets, a texel volume, an impostor and a surfel tree (about 400 KB).
 pub(crate) fn sample() -> Baked {
     Baked {
         scene_hash: 0x0123_4567_89ab_cdef,
@@ -181,6 +232,7 @@ pub(crate) fn sample() -> Baked {
         vcm: vec![vcm_set(0, Level::Twig, 8), vcm_set(7, Level::Branch, 16)],
         texels: vec![texel_volume(0, [8, 16, 8])],
         impostors: vec![impostor(0)],
+        surfels: vec![surfel_set(0)],
     }
 }
 
@@ -193,6 +245,7 @@ pub(crate) fn small() -> Baked {
         vcm: vec![vcm_set(3, Level::Twig, 8), vcm_set(4, Level::Tree, 8)],
         texels: vec![texel_volume(1, [2, 3, 2])],
         impostors: Vec::new(),
+        surfels: Vec::new(),
     }
 }
 
@@ -294,11 +347,11 @@ pub(crate) fn with_section(
     out
 }
 
-/// A version-8 file whose sections are all stored as they are, written as version 7: the
-/// table's entries without their packing and inflated length.
+/// A file whose sections are all stored as they are, written as version 7: no surfel
+/// budget in the header, the table's entries without their packing and inflated length.
 pub(crate) fn as_version_7(bytes: &[u8]) -> Vec<u8> {
     let payloads = &bytes[header_end(bytes) + 4..];
-    let mut out = bytes[..FIXED_HEADER_BYTES].to_vec();
+    let mut out = bytes[..FIXED_HEADER_BYTES_V8].to_vec();
     out[8..12].copy_from_slice(&7u32.to_le_bytes());
     for i in 0..section_count(bytes) {
         let entry = FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * i;

@@ -98,6 +98,11 @@ fn write_section_payload<W: Write + ?Sized>(
                 w.write_all(&i.normal_depth)?;
             }
         }
+        SectionKind::Surfel => {
+            for t in &baked.surfels[range] {
+                t.write(w)?;
+            }
+        }
     }
     Ok(())
 }
@@ -287,8 +292,8 @@ mod tests {
         assert_eq!(u64_at(&bytes, 16), bytes.len() as u64);
         assert_eq!(
             bytes.len() as u64,
-            80 + 4 * 28
-                + 4 * 4
+            84 + 5 * 28
+                + 5 * 4
                 + 2 * 56
                 + 2 * 56
                 + 44
@@ -297,6 +302,7 @@ mod tests {
                 + baked.vcm_bytes()
                 + baked.texel_bytes()
                 + baked.impostor_bytes()
+                + baked.surfel_bytes()
         );
         assert_eq!(to_bytes(&baked), bytes, "encoding is deterministic");
         let (back, peak) = peak_during(|| from_bytes(&bytes).unwrap());
@@ -317,9 +323,10 @@ mod tests {
             vcm: Vec::new(),
             texels: Vec::new(),
             impostors: Vec::new(),
+            surfels: Vec::new(),
         };
         let bytes = to_bytes(&baked);
-        assert_eq!(bytes.len(), 80);
+        assert_eq!(bytes.len(), 84);
         assert_eq!(from_bytes(&bytes).unwrap(), baked);
     }
 
@@ -337,11 +344,12 @@ mod tests {
                 (SectionKind::Btf, 1),
                 (SectionKind::Vcm, 2),
                 (SectionKind::Texel, 1),
-                (SectionKind::Impostor, 1)
+                (SectionKind::Impostor, 1),
+                (SectionKind::Surfel, 1)
             ]
         );
         let bytes = Encoding::new(&baked, limit, Packing::Plain).into_bytes();
-        assert_eq!(section_count(&bytes), 5);
+        assert_eq!(section_count(&bytes), 6);
         assert!(from_bytes(&bytes).unwrap() == baked);
 
         // Sections of both kinds in any order decode too: put VCM first.
@@ -478,8 +486,9 @@ mod tests {
         // One more byte of room and it is written, one record per section.
         write_atomic_with_hook(&path, &baked, limit + 1, Packing::Plain, |_| Ok(())).unwrap();
         let bytes = fs::read(&path).unwrap();
-        // Two btf sections, the vcm sets together, the texel volume, the impostor.
-        assert_eq!(section_count(&bytes), 5);
+        // Two btf sections, the vcm sets together, the texel volume, the impostor, the
+        // surfel tree.
+        assert_eq!(section_count(&bytes), 6);
         assert!(from_bytes(&bytes).unwrap() == baked);
         fs::remove_dir_all(&dir).unwrap();
     }

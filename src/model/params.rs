@@ -51,6 +51,10 @@ pub struct BakeParams {
     /// level encoded at bake time) and the visibility cube maps in BC4, a quarter and a
     /// half of their uncompressed bytes. `false` keeps them RGBA8 and R8.
     pub compress: bool,
+    /// Level-0 surfels each species' LDC tree is sampled with, about (the `surfel`
+    /// method): 0 bakes none (the method then samples them when it first draws), else
+    /// 1000..=4000000 (default 250000; the coarser levels add about a third).
+    pub surfel_budget: u32,
 }
 
 /// The layout of the tree-level visibility cube maps (see `crate::vcm::cells`).
@@ -79,6 +83,7 @@ impl Default for BakeParams {
             impostor_resolution: 64,
             impostor_layout: crate::sphere::OctaLayout::Full,
             compress: true,
+            surfel_budget: 250_000,
         }
     }
 }
@@ -111,6 +116,9 @@ impl BakeParams {
         }
         if self.impostor_frames != 0 {
             check::range_u32("impostor_frames", self.impostor_frames, 4, 32)?;
+        }
+        if self.surfel_budget != 0 {
+            check::range_u32("surfel_budget", self.surfel_budget, 1_000, 4_000_000)?;
         }
         if !BAKE_IMPOSTOR_RESOLUTIONS.contains(&self.impostor_resolution) {
             return Err(FieldError::new(

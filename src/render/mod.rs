@@ -186,7 +186,7 @@ impl Renderer {
         world: &World,
     ) -> Result<()> {
         let mut bake = Bake::load(ctx, baked, world)?;
-        bake.surfels = std::mem::take(&mut self.bake.surfels);
+        bake.surfels = std::mem::take(&mut self.bake.surfels).with_bake(baked);
         self.bake = bake;
         if let Some(g) = &mut self.ground {
             g.invalidate();

@@ -7,6 +7,7 @@ use crate::format::to_bytes;
 use std::fs;
 
 mod packing;
+mod surfel;
 
 #[test]
 fn flipped_payload_byte_is_a_checksum_mismatch() {
@@ -163,7 +164,7 @@ fn wrong_magic_is_not_a_canopy_file() {
 fn wrong_version_is_unsupported() {
     // Version 6 is the last one before block compression, 5 the last before impostors:
     // their files are refused, with the hint; so is a version from the future.
-    for version in [0u32, 1, 2, 3, 4, 5, 6, 9, u32::MAX] {
+    for version in [0u32, 1, 2, 3, 4, 5, 6, 10, u32::MAX] {
         let mut bytes = to_bytes(&small());
         bytes[8..12].copy_from_slice(&version.to_le_bytes());
         reseal_header(&mut bytes);
@@ -176,7 +177,7 @@ fn wrong_version_is_unsupported() {
                 },
             ) => {
                 assert_eq!((found, oldest, supported), (version, 7, VERSION));
-                assert!(e.to_string().contains("reads versions 7 to 8"), "{e}");
+                assert!(e.to_string().contains("reads versions 7 to 9"), "{e}");
                 assert!(e.to_string().contains("re-bake with `canopy bake`"), "{e}");
                 assert!(e.needs_rebake());
             }
@@ -402,13 +403,13 @@ fn reading_a_missing_file_is_an_io_error_naming_it() {
     fs::remove_dir_all(&dir).unwrap();
 }
 
-/// The impostor section (kind 4, the last of `sample`'s sections): every count and size is
+/// The impostor section (kind 4, the last but one of `sample`'s sections): every count and size is
 /// checked against the section before anything is allocated, with the checksums made
 /// right again so only the decoding can notice.
 #[test]
 fn corrupt_impostor_records_are_malformed_without_allocating() {
     let clean = to_bytes(&sample());
-    let last = section_count(&clean) - 1;
+    let last = section_count(&clean) - 2;
     let entry = FIXED_HEADER_BYTES + SECTION_ENTRY_BYTES * last;
     assert_eq!(u32_at(&clean, entry), SectionKind::Impostor as u32);
     let record = payload_start(&clean, last) + 4;

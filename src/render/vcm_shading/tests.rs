@@ -96,11 +96,13 @@ fn baked(vcm: Vec<crate::format::VcmSet>) -> Baked {
             impostor_resolution: 64,
             impostor_layout: Default::default(),
             compress: false,
+            surfel_budget: 0,
         },
         btf: Vec::new(),
         vcm,
         texels: Vec::new(),
         impostors: Vec::new(),
+        surfels: Vec::new(),
     }
 }
 

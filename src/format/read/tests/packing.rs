@@ -5,16 +5,18 @@
 use super::*;
 use crate::format::to_bytes_packed;
 
-/// A version-7 file (16-byte table entries, nothing deflated) reads as the same bake.
+/// A version-7 file (no surfel budget, 16-byte table entries, nothing deflated) reads as
+/// the same bake.
 #[test]
 fn a_version_7_file_reads() {
-    let baked = sample();
+    let mut baked = sample();
+    baked.settings.surfel_budget = 0;
     let v7 = as_version_7(&to_bytes(&baked));
     assert_eq!(u32_at(&v7, 8), 7);
     assert_eq!(
         v7.len(),
-        to_bytes(&baked).len() - 12 * section_count(&v7),
-        "four bytes of packing and eight of inflated length less per entry"
+        to_bytes(&baked).len() - 4 - 12 * section_count(&v7),
+        "no surfel budget, and four bytes of packing and eight of inflated length less per entry"
     );
     let (back, peak) = peak_during(|| from_bytes(&v7).unwrap());
     assert!(back == baked);
@@ -248,13 +250,14 @@ fn sections_lists_what_the_file_holds() {
             SectionKind::Btf,
             SectionKind::Vcm,
             SectionKind::Texel,
-            SectionKind::Impostor
+            SectionKind::Impostor,
+            SectionKind::Surfel
         ]
     );
     let file_len = fs::metadata(&path).unwrap().len();
     let stored: u64 = list.iter().map(|s| s.stored_bytes).sum();
     assert_eq!(
-        stored + (FIXED_HEADER_BYTES + 4 * SECTION_ENTRY_BYTES + 4) as u64,
+        stored + (FIXED_HEADER_BYTES + 5 * SECTION_ENTRY_BYTES + 4) as u64,
         file_len
     );
     for (i, s) in list.iter().enumerate() {

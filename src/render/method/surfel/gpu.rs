@@ -2,15 +2,12 @@
 //! the frame's blocks and trees, the per-pixel buffers the splatting and pull-push passes
 //! share (`shaders/surfel.wgsl`), and the passes themselves.
 
-use glam::Vec3;
-
-use super::sample::{Surfel, SurfelTree};
+use crate::format::{SURFEL_WORDS, SurfelSet};
 use crate::render::GpuContext;
 use crate::render::frame_bindings::DepthTarget;
 use crate::render::layer::{LAYER_FORMAT, TreeLayer};
 use crate::render::pipelines::{Layouts, buffer_entry};
 use crate::render::timing::PassSpans;
-use crate::sphere::OctaLayout;
 use crate::{Error, Result};
 
 /// `SurfelParams` of surfel.wgsl.
@@ -30,7 +27,8 @@ pub struct SurfelParams {
     pub self_shadow: f32,
 }
 
-/// `SurfelTreeGpu` of surfel.wgsl: one drawn tree.
+/// `SurfelTreeGpu` of surfel.wgsl: one drawn tree (its surfels packed as the file stores
+/// them: `crate::format::pack_surfel`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct SurfelTreeGpu {
@@ -70,60 +68,11 @@ pub struct SurfelItem {
     pub _pad: [u32; 2],
 }
 
-/// Words a surfel takes on the GPU.
-pub const SURFEL_WORDS: usize = 3;
-
-/// `s` packed as surfel.wgsl reads it: its position quantised to 16 bits an axis in the box
-/// `qmin + [0, 1]³ qsize`, its normal as an octahedral pair of bytes, its albedo's square
-/// root in bytes, whether it is foliage, and its coverage in 7 bits.
-pub fn pack(s: &Surfel, qmin: Vec3, qsize: Vec3) -> [u32; SURFEL_WORDS] {
-    let q =
-        ((s.position - qmin) / qsize.max(Vec3::splat(1e-9))).clamp(Vec3::ZERO, Vec3::ONE) * 65535.0;
-    let q = q.round().as_uvec3();
-    let e = OctaLayout::Full
-        .dir_to_uv(s.normal)
-        .to_array()
-        .map(|v| (v * 255.0).round() as u32);
-    let c = s
-        .albedo
-        .clamp(Vec3::ZERO, Vec3::ONE)
-        .to_array()
-        .map(|v| (v.sqrt() * 255.0).round() as u32);
-    let cover = (s.coverage.clamp(0.0, 1.0) * 127.0).round().max(1.0) as u32;
-    [
-        q.x | (q.y << 16),
-        q.z | (e[0] << 16) | (e[1] << 24),
-        c[0] | (c[1] << 8) | (c[2] << 16) | (u32::from(s.foliage) << 24) | (cover << 25),
-    ]
-}
-
-/// The inverse of [`pack`] (for tests and tools).
-pub fn unpack(w: [u32; SURFEL_WORDS], qmin: Vec3, qsize: Vec3) -> Surfel {
-    let q = Vec3::new(
-        (w[0] & 0xffff) as f32,
-        (w[0] >> 16) as f32,
-        (w[1] & 0xffff) as f32,
-    ) / 65535.0;
-    let uv = glam::Vec2::new(((w[1] >> 16) & 0xff) as f32, (w[1] >> 24) as f32) / 255.0;
-    let n = OctaLayout::Full.uv_to_dir(uv);
-    let c = [w[2] & 0xff, (w[2] >> 8) & 0xff, (w[2] >> 16) & 0xff].map(|v| {
-        let x = v as f32 / 255.0;
-        x * x
-    });
-    Surfel {
-        position: qmin + q * qsize,
-        normal: n,
-        albedo: Vec3::from(c),
-        foliage: (w[2] >> 24) & 1 != 0,
-        coverage: (w[2] >> 25) as f32 / 127.0,
-    }
-}
-
 /// Every species' LDC tree on the GPU (their nodes kept on the CPU for the traversal).
 pub struct SurfelAssets {
-    /// Per species: its LDC tree (surfels dropped once uploaded) and where its surfels
-    /// start in the buffer.
-    pub species: Vec<(SurfelTree, u32)>,
+    /// Per species: its LDC tree (surfels and density dropped once uploaded) and where its
+    /// surfels start in the buffer.
+    pub species: Vec<(SurfelSet, u32)>,
     /// Where each species' density volume starts in `volumes`.
     pub volume_offsets: Vec<u32>,
     pub surfels: wgpu::Buffer,
@@ -133,13 +82,13 @@ pub struct SurfelAssets {
 }
 
 impl SurfelAssets {
-    pub fn new(ctx: &GpuContext, trees: Vec<SurfelTree>) -> Result<Self> {
-        let count: u64 = trees.iter().map(|t| t.surfels.len() as u64).sum();
+    pub fn new(ctx: &GpuContext, trees: Vec<SurfelSet>) -> Result<Self> {
+        let count: u64 = trees.iter().map(SurfelSet::surfel_count).sum();
         let bytes = (count.max(1)) * (SURFEL_WORDS as u64) * 4;
         let limit = ctx.device.limits().max_storage_buffer_binding_size;
         if bytes > limit {
             return Err(Error::BadInput(format!(
-                "the trees' surfels take {bytes} bytes, more than this GPU binds in one buffer ({limit}): lower the surfel budget"
+                "the trees' surfels take {bytes} bytes, more than this GPU binds in one buffer ({limit}): lower `[bake] surfel_budget` in the scene file"
             )));
         }
         let mut words: Vec<u32> = Vec::with_capacity((count as usize) * SURFEL_WORDS);
@@ -151,11 +100,7 @@ impl SurfelAssets {
             sigma.extend_from_slice(&t.density.sigma);
             t.density.sigma = Vec::new();
             let base = (words.len() / SURFEL_WORDS) as u32;
-            let (qmin, qsize) = (t.bounds.min, t.bounds.extent());
-            for s in &t.surfels {
-                words.extend_from_slice(&pack(s, qmin, qsize));
-            }
-            t.surfels = Vec::new();
+            words.append(&mut t.words);
             species.push((t, base));
         }
         if words.is_empty() {
@@ -509,36 +454,5 @@ impl Splatter {
             spans.render_writes(span, true, true),
         );
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_packed_surfel_unpacks_within_its_quantisation() {
-        let (qmin, qsize) = (Vec3::new(-3.0, 0.0, -2.0), Vec3::new(6.0, 18.0, 4.0));
-        for (k, normal) in [Vec3::Y, -Vec3::Y, Vec3::X, Vec3::new(0.3, -0.8, -0.52)]
-            .into_iter()
-            .enumerate()
-        {
-            let s = Surfel {
-                position: Vec3::new(1.234, 9.87, -0.5),
-                normal: normal.normalize(),
-                albedo: Vec3::new(0.05, 0.2, 0.6),
-                foliage: k % 2 == 0,
-                coverage: 0.4,
-            };
-            let u = unpack(pack(&s, qmin, qsize), qmin, qsize);
-            assert!(
-                (u.position - s.position).abs().max_element() < 3e-4,
-                "{u:?}"
-            );
-            assert!(u.normal.dot(s.normal) > 0.999, "{u:?} against {s:?}");
-            assert!((u.albedo - s.albedo).abs().max_element() < 0.01, "{u:?}");
-            assert_eq!(u.foliage, s.foliage);
-            assert!((u.coverage - s.coverage).abs() < 0.01, "{u:?}");
-        }
     }
 }

@@ -43,7 +43,7 @@ pub static KNOBS: &[Knob] = &[
     Knob::number(
         "surfel_shadow",
         "self-shadowing",
-        "multiplies each tree's own extinction (its surfels' area as a volume) between a surfel and the sun, and the sky straight above it; 0: none",
+        "multiplies each tree's own extinction (its surfels' area as a volume) between a surfel and the sun, and between it and the sky (the share of the sky its tree leaves it, baked); 0: none",
         (0.0, 8.0),
         |d| d.surfel.self_shadow,
         |d, v| d.surfel.self_shadow = v,

@@ -4,9 +4,10 @@ use std::time::Instant;
 
 use super::gpu::{SplatInput, Splatter, SurfelAssets};
 use super::prepare::{SurfelFrame, near_geometry, prepare};
-use super::sample::{SurfelTree, sample_tree};
+use super::sample::sample_species;
 use super::settings::SurfelStats;
 use crate::Result;
+use crate::format::SurfelSet;
 use crate::model::TreeModel;
 use crate::render::GpuContext;
 use crate::render::frame::{FrameDesc, FrameStats};
@@ -20,31 +21,69 @@ use crate::render::pipelines::Layouts;
 use crate::render::vcm_shading::TreeShades;
 use crate::render::world_gpu::{TreeRun, WorldGpu};
 
-/// Level-0 surfels a species is sampled with (about; its levels add a third).
+/// Level-0 surfels a species is sampled with when the bake holds none (about; its levels
+/// add a third).
 pub const SURFEL_BUDGET: u32 = 250_000;
 /// The finest spacing a species is sampled at (m).
 pub const MIN_SPACING: f32 = 0.004;
 
-/// The species a bake's surfels are sampled from, until a frame of `surfel` asks for them.
+/// Where the `surfel` method's LDC trees come from: the bake's, when it holds one for
+/// every species, else the species sampled when a frame first asks for them.
 #[derive(Default)]
 pub struct SurfelSource {
     prototypes: Vec<TreeModel>,
+    baked: Option<Vec<SurfelSet>>,
+    /// Changes with every bake handed in, so that the method uploads the new trees.
+    generation: u64,
 }
 
 impl SurfelSource {
     pub fn new(world: &crate::model::World) -> Self {
         Self {
             prototypes: world.species.clone(),
+            baked: None,
+            generation: 0,
         }
     }
 
-    /// Every species sampled into its LDC tree, in parallel.
-    pub fn sample(&self) -> Vec<SurfelTree> {
-        use rayon::prelude::*;
-        self.prototypes
-            .par_iter()
-            .map(|t| sample_tree(t, SURFEL_BUDGET, MIN_SPACING))
-            .collect()
+    /// This source with `baked`'s surfel trees, when it holds one for every species (a
+    /// bake without them, or handed over before they are made, leaves them to sampling).
+    pub fn with_bake(self, baked: &crate::format::Baked) -> Self {
+        let n = self.prototypes.len();
+        let mut sets: Vec<SurfelSet> = baked
+            .surfels
+            .iter()
+            .filter(|s| (s.species as usize) < n)
+            .cloned()
+            .collect();
+        sets.sort_by_key(|s| s.species);
+        let whole = sets.len() == n
+            && sets
+                .iter()
+                .enumerate()
+                .all(|(i, s)| s.species as usize == i);
+        Self {
+            baked: whole.then_some(sets),
+            generation: self.generation + 1,
+            ..self
+        }
+    }
+
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+
+    /// Whether the trees come from the bake.
+    pub fn is_baked(&self) -> bool {
+        self.baked.is_some()
+    }
+
+    /// Every species' LDC tree: the bake's, or sampled now (in parallel).
+    pub fn sets(&self) -> Vec<SurfelSet> {
+        match &self.baked {
+            Some(sets) => sets.clone(),
+            None => sample_species(&self.prototypes, SURFEL_BUDGET, MIN_SPACING),
+        }
     }
 }
 
@@ -52,6 +91,8 @@ impl SurfelSource {
 #[derive(Default)]
 pub struct SurfelMethod {
     assets: Option<SurfelAssets>,
+    /// The [`SurfelSource::generation`] the assets came from.
+    generation: u64,
     splatter: Option<Splatter>,
     frame: SurfelFrame,
     /// Levels holes are filled from (surfel.wgsl's `fill`).
@@ -68,17 +109,26 @@ pub struct SurfelMethod {
 }
 
 impl SurfelMethod {
-    /// Samples and uploads the species' surfels, on first use.
+    /// Uploads the species' surfels (sampling them if the bake has none), on first use
+    /// and for each new bake.
     fn ensure_assets(&mut self, bake: &Bake, ctx: &GpuContext) -> Result<()> {
-        if self.assets.is_none() {
+        let generation = bake.surfels.generation();
+        if self.assets.is_none() || self.generation != generation {
+            self.assets = None;
             let t0 = Instant::now();
-            let trees = bake.surfels.sample();
+            let trees = bake.surfels.sets();
             log::info!(
-                "surfels: {} species sampled in {:.0} ms",
+                "surfels: {} species {} in {:.0} ms",
                 trees.len(),
+                if bake.surfels.is_baked() {
+                    "loaded from the bake"
+                } else {
+                    "sampled"
+                },
                 t0.elapsed().as_secs_f64() * 1e3
             );
             self.assets = Some(SurfelAssets::new(ctx, trees)?);
+            self.generation = generation;
         }
         Ok(())
     }

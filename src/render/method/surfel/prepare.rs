@@ -6,8 +6,8 @@
 use glam::{Mat4, Vec3};
 
 use super::gpu::{SurfelItem, SurfelTreeGpu};
-use super::sample::SurfelTree;
 use super::settings::{SurfelSettings, SurfelStats};
+use crate::format::SurfelSet;
 use crate::model::mesh::Aabb;
 use crate::render::method::view::PrepareView;
 use crate::render::vcm_shading::{Shade, TreeShade};
@@ -30,7 +30,7 @@ fn distance_to(b: &Aabb, p: Vec3) -> f32 {
 /// from the roots down, each in the frustum, at the coarsest level whose world spacing is
 /// at most `surfel_px` pixels at the block's nearest point; `emit(node)` for each.
 pub fn walk(
-    tree: &SurfelTree,
+    tree: &SurfelSet,
     model: &Mat4,
     scale: f32,
     view: &PrepareView<'_>,
@@ -72,7 +72,7 @@ const GEOMETRY_FADE: f32 = 0.2;
 /// over the last fifth before it; and the rest of `visible`, the trees drawn as surfels
 /// (those fading in too).
 pub fn near_geometry(
-    species: &[(SurfelTree, u32)],
+    species: &[(SurfelSet, u32)],
     trees: &[TreeGpu],
     bounds: &[Aabb],
     visible: &[Vec<u32>],
@@ -117,7 +117,7 @@ pub fn near_geometry(
 /// tree and where its surfels start (`species`), and `shade(t, species, model)` the tree's
 /// VCM factors and box (None: unshaded).
 pub fn prepare(
-    species: &[(SurfelTree, u32)],
+    species: &[(SurfelSet, u32)],
     volume_offsets: &[u32],
     trees: &[TreeGpu],
     visible: &[Vec<u32>],

@@ -13,8 +13,8 @@ pub struct SurfelSettings {
     pub fill: bool,
     /// Shade with the trees' visibility cube maps.
     pub vcm: bool,
-    /// Multiplies each tree's own extinction between a surfel and the sun (and the sky
-    /// above it); 0: no self-shadowing.
+    /// Multiplies each tree's own extinction between a surfel and the sun (and that
+    /// between it and the sky, baked as its openness); 0: no self-shadowing.
     pub self_shadow: f32,
     /// Colour each surfel by its level.
     pub show_lod: bool,

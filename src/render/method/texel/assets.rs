@@ -138,6 +138,7 @@ impl PendingTexel {
                 vcm: Vec::new(),
                 texels: Vec::new(),
                 impostors: Vec::new(),
+                surfels: Vec::new(),
             },
             volumes: PackedVolumes::pack(&baked.texels),
             species_count: world.species.len(),

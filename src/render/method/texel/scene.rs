@@ -268,11 +268,13 @@ mod tests {
                 impostor_resolution: 64,
                 impostor_layout: Default::default(),
                 compress: false,
+                surfel_budget: 0,
             },
             btf: Vec::new(),
             vcm: Vec::new(),
             texels,
             impostors: Vec::new(),
+            surfels: Vec::new(),
         };
         let scene = TexelScene::new(&baked, world.species.len(), 2048).unwrap();
         let atlas = scene.atlas_size();

@@ -15,6 +15,7 @@ use std::collections::HashMap;
 
 use glam::{Mat3, Mat4, Vec2, Vec3};
 
+use crate::format::{Surfel, SurfelDensity, SurfelNode, SurfelSet, pack_surfel};
 use crate::model::TreeModel;
 use crate::model::gltf::Material;
 use crate::model::mesh::{Aabb, Mesh};
@@ -22,107 +23,110 @@ use crate::model::mesh::{Aabb, Mesh};
 /// Cells on a block's side at every level (the paper's b).
 pub const BLOCK: u32 = 8;
 /// Most levels of a tree (the finest spacing's side then spans at most BLOCK · 2^(MAX-1)).
-pub const MAX_LEVELS: usize = 16;
+pub const MAX_LEVELS: usize = crate::format::MAX_SURFEL_LEVELS as usize;
 
-/// One sample of a tree's surface, in the tree frame.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Surfel {
-    pub position: Vec3,
-    /// Unit normal (a leaf's, which is two-sided, turned upwards).
-    pub normal: Vec3,
-    /// Linear albedo.
-    pub albedo: Vec3,
-    /// Lit as foliage (two-sided, the tree's tint); bark otherwise.
-    pub foliage: bool,
-    /// The share of its cell (its level's spacing squared, across its LDI's axis) the
-    /// surfaces it stands for cover: a surfel is drawn with this probability, so that a
-    /// sparse crown seen from afar lets as much through as its triangles do.
-    pub coverage: f32,
-}
-
-/// A block of one level: its surfels (a range of the tree's), its bounds in the tree frame
-/// and its children one level finer.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Node {
-    pub level: u32,
-    pub bounds: Aabb,
-    pub first: u32,
-    pub count: u32,
-    /// Indices of the child nodes (none at level 0).
-    pub children: Vec<u32>,
-}
-
-/// A tree's LDC tree.
+/// A tree's LDC tree: the set as the file stores it and the method draws it, and its
+/// surfels unpacked (those `set.words` holds packed), grouped by node.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SurfelTree {
-    /// The box the surfels' positions are quantised in (the tree's bounds).
-    pub bounds: Aabb,
-    /// Spacing of level 0 (m); level l has `spacing0 · 2^l`.
-    pub spacing0: f32,
-    /// Every surfel, grouped by node.
+    pub set: SurfelSet,
     pub surfels: Vec<Surfel>,
-    /// Every node; the coarsest level's are the roots.
-    pub nodes: Vec<Node>,
-    pub roots: Vec<u32>,
-    /// Surfels per level, finest first.
-    pub per_level: Vec<u32>,
-    /// The tree's own foliage and bark as an extinction volume, for its self-shadowing.
-    pub density: Density,
-    /// Per level, the gain its coverages were raised by (1 - (1 - c)^gain) so that its
-    /// silhouettes match level 0's ([`calibration`]).
-    pub gains: Vec<f32>,
 }
 
-/// Voxels on the longest side of a tree's [`Density`].
+/// Voxels on the longest side of a tree's density volume.
 pub const DENSITY_SIDE: u32 = 32;
 
-/// A tree's surfaces as a volume of extinction coefficients (1/m) over its bounds: each
-/// voxel's surface area (from the level-0 surfels) times a half (the mean share of a
-/// randomly turned leaf's area a ray sees) over the voxel's volume.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct Density {
-    pub origin: Vec3,
-    pub voxel: f32,
-    pub dims: [u32; 3],
-    pub sigma: Vec<f32>,
-}
-
-impl Density {
-    fn of(bounds: &Aabb, surfels: &[(Surfel, f32)]) -> Density {
-        let ext = bounds.extent().max(Vec3::splat(1e-3));
-        let voxel = ext.max_element() / DENSITY_SIDE as f32;
-        let dims = (ext / voxel)
-            .ceil()
-            .as_uvec3()
-            .max(glam::UVec3::ONE)
-            .to_array();
-        let mut sigma = vec![0.0f32; (dims[0] * dims[1] * dims[2]) as usize];
-        let volume = voxel * voxel * voxel;
-        for (s, area) in surfels {
-            let v = ((s.position - bounds.min) / voxel)
-                .max(Vec3::ZERO)
-                .as_uvec3();
-            let v = v.min(glam::UVec3::from(dims) - 1);
-            sigma[((v.z * dims[1] + v.y) * dims[0] + v.x) as usize] += 0.5 * area / volume;
-        }
-        Density {
-            origin: bounds.min,
-            voxel,
-            dims,
-            sigma,
-        }
+/// A tree's surfaces over `bounds` as a volume of extinction coefficients (1/m): each
+/// voxel's surface area (from the level-0 surfels and the area each stands for) times a
+/// half (the mean share of a randomly turned leaf's area a ray sees) over the voxel's
+/// volume.
+fn density_of(bounds: &Aabb, surfels: &[(Surfel, f32)]) -> SurfelDensity {
+    let ext = bounds.extent().max(Vec3::splat(1e-3));
+    let voxel = ext.max_element() / DENSITY_SIDE as f32;
+    let dims = (ext / voxel)
+        .ceil()
+        .as_uvec3()
+        .clamp(glam::UVec3::ONE, glam::UVec3::splat(DENSITY_SIDE))
+        .to_array();
+    let mut sigma = vec![0.0f32; (dims[0] * dims[1] * dims[2]) as usize];
+    let volume = voxel * voxel * voxel;
+    for (s, area) in surfels {
+        let v = ((s.position - bounds.min) / voxel)
+            .max(Vec3::ZERO)
+            .as_uvec3();
+        let v = v.min(glam::UVec3::from(dims) - 1);
+        sigma[((v.z * dims[1] + v.y) * dims[0] + v.x) as usize] += 0.5 * area / volume;
+    }
+    SurfelDensity {
+        origin: bounds.min,
+        voxel,
+        dims,
+        sigma,
     }
 }
 
-impl SurfelTree {
-    pub fn levels(&self) -> usize {
-        self.per_level.len()
-    }
+/// Sky directions the openness is averaged over (cosine-distributed on the upper
+/// hemisphere).
+const SKY_DIRECTIONS: u32 = 32;
 
-    /// Spacing of level `l` (m, tree frame).
-    pub fn spacing(&self, level: u32) -> f32 {
-        self.spacing0 * (1u32 << level.min(31)) as f32
-    }
+/// Per voxel of `d`, the share of the sky the volume leaves open from its centre: the
+/// transmittance along [`SKY_DIRECTIONS`] cosine-distributed directions of the upper
+/// hemisphere, a voxel a step from half a voxel out, averaged.
+fn openness_volume(d: &SurfelDensity) -> Vec<f32> {
+    use rayon::prelude::*;
+    // A Fibonacci spiral over the disc, lifted onto the hemisphere (cosine-distributed).
+    let dirs: Vec<Vec3> = (0..SKY_DIRECTIONS)
+        .map(|k| {
+            let r = ((k as f32 + 0.5) / SKY_DIRECTIONS as f32).sqrt();
+            let a = k as f32 * 2.399_963;
+            Vec3::new(r * a.cos(), (1.0 - r * r).max(0.0).sqrt(), r * a.sin())
+        })
+        .collect();
+    let [nx, ny, nz] = d.dims;
+    let dims = Vec3::new(nx as f32, ny as f32, nz as f32);
+    (0..nx * ny * nz)
+        .into_par_iter()
+        .map(|i| {
+            let c = Vec3::new(
+                (i % nx) as f32,
+                ((i / nx) % ny) as f32,
+                (i / (nx * ny)) as f32,
+            ) + 0.5;
+            let mut open = 0.0;
+            for dir in &dirs {
+                let mut x = c + 0.5 * *dir;
+                let mut tau = 0.0;
+                while x.cmpge(Vec3::ZERO).all() && x.cmplt(dims).all() {
+                    let v = x.as_uvec3();
+                    tau += d.sigma[((v.z * ny + v.y) * nx + v.x) as usize];
+                    x += *dir;
+                }
+                open += (-tau * d.voxel).exp();
+            }
+            open / SKY_DIRECTIONS as f32
+        })
+        .collect()
+}
+
+/// The value of the voxel volume `values` (laid out as `d`) at `p` (tree frame),
+/// trilinear between voxel centres.
+fn trilinear(d: &SurfelDensity, values: &[f32], p: Vec3) -> f32 {
+    let [nx, ny, nz] = d.dims;
+    let hi = Vec3::new(nx as f32, ny as f32, nz as f32) - 1.0;
+    let x = ((p - d.origin) / d.voxel - 0.5).clamp(Vec3::ZERO, hi);
+    let i0 = x.floor().as_uvec3();
+    let i1 = (i0 + 1).min(glam::UVec3::new(nx - 1, ny - 1, nz - 1));
+    let f = x - x.floor();
+    let at = |i: u32, j: u32, k: u32| values[((k * ny + j) * nx + i) as usize];
+    let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+    let plane = |k: u32| {
+        lerp(
+            lerp(at(i0.x, i0.y, k), at(i1.x, i0.y, k), f.x),
+            lerp(at(i0.x, i1.y, k), at(i1.x, i1.y, k), f.x),
+            f.y,
+        )
+    };
+    lerp(plane(i0.z), plane(i1.z), f.z)
 }
 
 /// A triangle to sample, in the tree frame.
@@ -264,6 +268,7 @@ fn surfel_at(tri: &Tri, b: Vec3, materials: &[Material]) -> Option<Surfel> {
         albedo,
         foliage: tri.foliage,
         coverage: 1.0,
+        openness: 1.0,
     })
 }
 
@@ -443,6 +448,7 @@ fn merge(group: &[Entry]) -> Entry {
             albedo,
             foliage: foliage >= 0.5,
             coverage: 1.0,
+            openness: 1.0,
         },
     }
 }
@@ -534,6 +540,20 @@ fn spacing_for(tris: &[Tri], budget: u32, min: f32, bounds: &Aabb) -> f32 {
     hi
 }
 
+/// Every species of `species` sampled into its LDC tree (about `budget` level-0 surfels
+/// each, no finer than `min_spacing`), in parallel; each set numbered by its species.
+pub fn sample_species(species: &[TreeModel], budget: u32, min_spacing: f32) -> Vec<SurfelSet> {
+    use rayon::prelude::*;
+    species
+        .par_iter()
+        .enumerate()
+        .map(|(i, t)| SurfelSet {
+            species: i as u32,
+            ..sample_tree(t, budget, min_spacing).set
+        })
+        .collect()
+}
+
 /// `tree` sampled into an LDC tree of about `budget` surfels at its finest level, no finer
 /// than `min_spacing` (m).
 pub fn sample_tree(tree: &TreeModel, budget: u32, min_spacing: f32) -> SurfelTree {
@@ -562,16 +582,10 @@ fn sample_triangles(
         let cells = (1u64 << (2 * levels.len())) as f32;
         levels.push([0, 1, 2].map(|a| parent(&below[a], spacing, cells)));
     }
-    let mut tree = SurfelTree {
-        bounds,
-        spacing0,
-        surfels: Vec::new(),
-        nodes: Vec::new(),
-        roots: Vec::new(),
-        per_level: Vec::new(),
-        density: Density::default(),
-        gains: Vec::new(),
-    };
+    let mut surfels: Vec<Surfel> = Vec::new();
+    let mut nodes: Vec<SurfelNode> = Vec::new();
+    let mut per_level = Vec::new();
+    let mut gains = Vec::new();
     // The surface each level-0 surfel stands for: its share of a cell, over the cosine
     // between its normal and its LDI's axis.
     let cell = spacing0 * spacing0;
@@ -584,14 +598,15 @@ fn sample_triangles(
             })
         })
         .collect();
-    tree.density = Density::of(&bounds, &areas);
+    let density = density_of(&bounds, &areas);
+    let open = openness_volume(&density);
     // Nodes level by level, finest first, so that a node's children are known when it is
     // made; each level's blocks are cells of BLOCK · spacing from the bounds' corner.
     let target = silhouette(&levels[0], 1.0, 1.0);
     let mut below: HashMap<[u32; 3], u32> = HashMap::new();
     for (l, ldis) in levels.iter().enumerate() {
         let gain = calibration(ldis, (1u64 << (2 * l)) as f32, target);
-        tree.gains.push(gain);
+        gains.push(gain);
         let side = BLOCK as f32 * spacing0 * (1u32 << l) as f32;
         let key = |p: Vec3| {
             let c = ((p - bounds.min) / side).max(Vec3::ZERO);
@@ -605,6 +620,7 @@ fn sample_triangles(
                 ldi.entries.iter().map(|e| {
                     let s = Surfel {
                         coverage: gained((e.weight / cells).min(1.0), gain),
+                        openness: trilinear(&density, &open, e.s.position),
                         ..e.s
                     };
                     (s, key(e.s.position))
@@ -612,16 +628,16 @@ fn sample_triangles(
             })
             .collect();
         all.sort_by_key(|(_, k)| (k[2], k[1], k[0]));
-        tree.per_level.push(all.len() as u32);
+        per_level.push(all.len() as u32);
         let mut here: HashMap<[u32; 3], u32> = HashMap::new();
         let mut k = 0;
         while k < all.len() {
             let block = all[k].1;
             let mut end = k;
-            let first = tree.surfels.len() as u32;
+            let first = surfels.len() as u32;
             let mut b = Aabb::EMPTY;
             while end < all.len() && all[end].1 == block {
-                tree.surfels.push(all[end].0);
+                surfels.push(all[end].0);
                 b = b.including(all[end].0.position);
                 end += 1;
             }
@@ -642,8 +658,8 @@ fn sample_triangles(
                 }
                 c
             };
-            here.insert(block, tree.nodes.len() as u32);
-            tree.nodes.push(Node {
+            here.insert(block, nodes.len() as u32);
+            nodes.push(SurfelNode {
                 level: l as u32,
                 bounds: Aabb::new(b.min - pad, b.max + pad),
                 first,
@@ -654,9 +670,27 @@ fn sample_triangles(
         }
         below = here;
     }
-    tree.roots = below.values().copied().collect();
-    tree.roots.sort_unstable();
-    tree
+    let (qmin, qsize) = (bounds.min, bounds.extent());
+    let words = surfels
+        .iter()
+        .flat_map(|s| pack_surfel(s, qmin, qsize))
+        .collect();
+    let roots = SurfelSet::roots_of(&nodes, per_level.len());
+    debug_assert_eq!(roots.len(), below.len());
+    SurfelTree {
+        set: SurfelSet {
+            species: 0,
+            bounds,
+            spacing0,
+            gains,
+            per_level,
+            nodes,
+            roots,
+            words,
+            density,
+        },
+        surfels,
+    }
 }
 
 #[cfg(test)]

@@ -44,11 +44,11 @@ fn a_quad_is_covered_at_every_level_with_its_colour() {
     let tree = quad(4.0, color);
     let s = sample_tree(&tree, 10_000, 0.0);
     // About 10,000 surfels at level 0 (all in the LDI along z).
-    let l0 = s.per_level[0];
+    let l0 = s.set.per_level[0];
     assert!((8_000..=12_000).contains(&l0), "{l0}");
-    assert!(s.levels() >= 3, "{}", s.levels());
-    assert_eq!(s.roots.len(), 1);
-    for node in &s.nodes {
+    assert!(s.set.levels() >= 3, "{}", s.set.levels());
+    assert_eq!(s.set.roots.len(), 1);
+    for node in &s.set.nodes {
         for x in &s.surfels[node.first as usize..(node.first + node.count) as usize] {
             assert!((x.albedo - color).abs().max_element() < 1e-5);
             assert!(x.position.z.abs() < 1e-5);
@@ -57,11 +57,11 @@ fn a_quad_is_covered_at_every_level_with_its_colour() {
         }
     }
     // Each level covers the quad: every cell of its spacing holds a surfel.
-    for l in 0..s.levels() as u32 {
-        let r = s.spacing(l);
+    for l in 0..s.set.levels() as u32 {
+        let r = s.set.spacing(l);
         let n = (4.0 / r).floor() as i32;
         let mut covered = std::collections::HashSet::new();
-        for node in s.nodes.iter().filter(|n| n.level == l) {
+        for node in s.set.nodes.iter().filter(|n| n.level == l) {
             for x in &s.surfels[node.first as usize..(node.first + node.count) as usize] {
                 covered.insert((((x.position.x + 2.0) / r) as i32, (x.position.y / r) as i32));
             }
@@ -79,9 +79,9 @@ fn a_quad_is_covered_at_every_level_with_its_colour() {
 /// spacing, each surfel leaving open 1 - its coverage seen along the axis), summed over
 /// the three axes in m², and their coverage-weighted mean albedo.
 fn level_totals(s: &SurfelTree) -> Vec<(f32, Vec3)> {
-    (0..s.levels() as u32)
+    (0..s.set.levels() as u32)
         .map(|l| {
-            let r = s.spacing(l);
+            let r = s.set.spacing(l);
             let cell = r;
             let mut area = 0.0f32;
             let mut colour = Vec3::ZERO;
@@ -89,14 +89,14 @@ fn level_totals(s: &SurfelTree) -> Vec<(f32, Vec3)> {
             for axis in 0..3 {
                 let (a, b) = across(axis);
                 let mut open: HashMap<(i32, i32), f32> = HashMap::new();
-                for node in s.nodes.iter().filter(|n| n.level == l) {
+                for node in s.set.nodes.iter().filter(|n| n.level == l) {
                     for x in &s.surfels[node.first as usize..(node.first + node.count) as usize] {
                         let n = x.normal.abs();
                         let seen = n[axis] / n.max_element().max(0.3);
                         let k = (r * r) / (cell * cell) * seen;
                         let key = (
-                            ((x.position[a] - s.bounds.min[a]) / cell) as i32,
-                            ((x.position[b] - s.bounds.min[b]) / cell) as i32,
+                            ((x.position[a] - s.set.bounds.min[a]) / cell) as i32,
+                            ((x.position[b] - s.set.bounds.min[b]) / cell) as i32,
                         );
                         *open.entry(key).or_insert(1.0) *= (1.0 - x.coverage).powf(k);
                         colour += x.albedo * x.coverage;
@@ -117,30 +117,30 @@ fn parent_levels_keep_a_trees_coverage_and_mean_colour() {
         let tree = TreeModel::generate(&params, 7).unwrap();
         let s = sample_tree(&tree, 60_000, 0.0);
         let totals = level_totals(&s);
-        assert_eq!(s.gains[0], 1.0, "{name}");
+        assert_eq!(s.set.gains[0], 1.0, "{name}");
         assert!(
-            s.gains.iter().all(|g| (1.0..=16.0).contains(g)),
+            s.set.gains.iter().all(|g| (1.0..=16.0).contains(g)),
             "{name}: {:?}",
-            s.gains
+            s.set.gains
         );
         let (area0, colour0) = totals[0];
         // The levels down to one block: the coarsest is a single root.
-        assert!(s.levels() >= 4, "{name}: {} levels", s.levels());
-        assert_eq!(s.roots.len(), 1, "{name}");
+        assert!(s.set.levels() >= 4, "{name}: {} levels", s.set.levels());
+        assert_eq!(s.set.roots.len(), 1, "{name}");
         // Every node's surfels lie in its bounds; children are one level finer.
-        for n in &s.nodes {
+        for n in &s.set.nodes {
             for x in &s.surfels[n.first as usize..(n.first + n.count) as usize] {
                 assert!(n.bounds.contains(x.position), "{name}");
             }
             for &c in &n.children {
-                assert_eq!(s.nodes[c as usize].level + 1, n.level, "{name}");
+                assert_eq!(s.set.nodes[c as usize].level + 1, n.level, "{name}");
             }
         }
         for (l, (area, colour)) in totals.iter().enumerate() {
             eprintln!(
                 "{name} level {l} ({:.3} m): {} surfels, silhouettes {:.2} m² (level 0: {area0:.2}), mean albedo {colour:.3}",
-                s.spacing(l as u32),
-                s.per_level[l],
+                s.set.spacing(l as u32),
+                s.set.per_level[l],
                 area
             );
             // The silhouettes along the three axes as the surfels of each level cover
