@@ -337,7 +337,8 @@ fn the_bench_window_shows_a_folders_table_or_what_is_missing() {
 /// and asks again when another prototype is picked.
 #[test]
 fn the_species_gallery_asks_for_each_choice_once_and_shows_its_stats() {
-    use canopy::app::gallery::{Gallery, PrototypeInfo};
+    use canopy::app::gallery::{Choice, Gallery, PrototypeInfo};
+    use canopy::render::Method;
     let scene = Scene::default_scene();
     let world = scene.build_world().expect("default world");
     let protos = PrototypeInfo::of_world(&world, &canopy::bake::cache::settings_of(&scene));
@@ -350,7 +351,7 @@ fn the_species_gallery_asks_for_each_choice_once_and_shows_its_stats() {
     );
     struct G {
         gallery: Gallery,
-        asked: Vec<(usize, f32)>,
+        asked: Vec<Choice>,
     }
     let mut gallery = Gallery::default();
     gallery.open = true;
@@ -373,14 +374,36 @@ fn the_species_gallery_asks_for_each_choice_once_and_shows_its_stats() {
     let t = protos[0].triangles;
     harness.get_by_label(&format!("{} / {} / {}", t[0], t[1], t[2]));
     harness.get_by_label(&protos[0].trees.to_string());
+    // The surfel tree's bytes, about (the default bake makes them).
+    assert!(
+        protos[0].surfel_bytes > 1_000_000,
+        "{}",
+        protos[0].surfel_bytes
+    );
+    harness.get_by_label(&format!("{:.1} MB", protos[0].surfel_bytes as f64 / 1e6));
+    let asked = |prototype, method| Choice {
+        prototype,
+        distance: 50.0,
+        method,
+    };
     // One request for the first prototype at the default distance, however many frames.
-    assert_eq!(harness.state().asked, vec![(0, 50.0)]);
+    assert_eq!(harness.state().asked, vec![asked(0, Method::Geometry)]);
     // Picking the second prototype asks for it.
     harness.get_by_label("prototype").click();
     harness.run();
     harness.get_by_label(&protos[1].name).click();
     harness.run();
-    assert_eq!(harness.state().asked, vec![(0, 50.0), (1, 50.0)]);
+    assert_eq!(
+        harness.state().asked,
+        vec![asked(0, Method::Geometry), asked(1, Method::Geometry)]
+    );
     let t = protos[1].triangles;
     harness.get_by_label(&format!("{} / {} / {}", t[0], t[1], t[2]));
+    // Drawing it as surfels asks for that.
+    harness.get_by_label("surfel").click();
+    harness.run();
+    assert_eq!(
+        harness.state().asked.last(),
+        Some(&asked(1, Method::Surfel))
+    );
 }

@@ -1,7 +1,7 @@
 //! The species gallery: a window showing one prototype of the scene (each species'
-//! variants included) alone on flat ground, drawn as full geometry from a chosen distance
-//! under the viewer's sun and sky, with its triangles per level and what its bake holds.
-//! The picture is drawn once per choice, not every frame.
+//! variants included) alone on flat ground, drawn as full geometry or as its surfel tree
+//! from a chosen distance under the viewer's sun and sky, with its triangles per level and
+//! what its bake holds. The picture is drawn once per choice, not every frame.
 
 use glam::Vec3;
 use image::RgbaImage;
@@ -15,6 +15,16 @@ use crate::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 pub const PICTURE: (u32, u32) = (240, 300);
 /// The distances the slider offers (m).
 pub const DISTANCES: (f32, f32) = (5.0, 500.0);
+/// The methods a prototype can be drawn with (neither needs a bake).
+pub const METHODS: [Method; 2] = [Method::Geometry, Method::Surfel];
+
+/// What the gallery draws: a prototype, from a distance, with a method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Choice {
+    pub prototype: usize,
+    pub distance: f32,
+    pub method: Method,
+}
 
 /// What the gallery lists of one prototype.
 #[derive(Clone, Debug, PartialEq)]
@@ -28,6 +38,8 @@ pub struct PrototypeInfo {
     /// Bytes its bake holds: BTF images of its three levels and the cube maps of its
     /// main branches and twigs.
     pub baked_bytes: u64,
+    /// Bytes of its surfel tree in the bake, about (0: the bake makes none).
+    pub surfel_bytes: u64,
     /// Side-view crown coverage (share of the crown's silhouette hull covered, mean of four
     /// azimuths; [`crate::model::silhouette`]).
     pub crown_coverage: f32,
@@ -65,6 +77,11 @@ impl PrototypeInfo {
                     triangles: [c.twig, c.branch, c.tree],
                     trees,
                     baked_bytes: btf + objects * vcm,
+                    surfel_bytes: if settings.surfel_budget == 0 {
+                        0
+                    } else {
+                        crate::bake::surfel::record_bytes(settings.surfel_budget)
+                    },
                     crown_coverage: crate::model::silhouette::crown_coverage(t).mean,
                     levels_note: t.levels_note.clone(),
                 }
@@ -80,18 +97,23 @@ pub struct Gallery {
     pub open: bool,
     selected: usize,
     distance: Option<f32>,
+    method: Option<Method>,
     /// The picture on show.
     shown: Option<egui::TextureHandle>,
     /// Why the last picture could not be drawn.
     error: Option<String>,
-    /// The (prototype, distance) of the last picture drawn or tried.
-    drawn_for: Option<(usize, f32)>,
+    /// The choice of the last picture drawn or tried.
+    drawn_for: Option<Choice>,
 }
 
 impl Gallery {
-    /// The prototype and distance chosen.
-    pub fn choice(&self) -> (usize, f32) {
-        (self.selected, self.distance.unwrap_or(50.0))
+    /// The prototype, distance and method chosen.
+    pub fn choice(&self) -> Choice {
+        Choice {
+            prototype: self.selected,
+            distance: self.distance.unwrap_or(50.0),
+            method: self.method.unwrap_or(Method::Geometry),
+        }
     }
 
     /// Forgets the picture (another scene is on show).
@@ -103,7 +125,7 @@ impl Gallery {
     }
 
     /// Shows `img`, drawn for `choice`.
-    pub fn set_picture(&mut self, ctx: &egui::Context, choice: (usize, f32), img: &RgbaImage) {
+    pub fn set_picture(&mut self, ctx: &egui::Context, choice: Choice, img: &RgbaImage) {
         let size = [img.width() as usize, img.height() as usize];
         self.shown = Some(ctx.load_texture(
             "species gallery",
@@ -115,20 +137,21 @@ impl Gallery {
     }
 
     /// Says why the picture for `choice` could not be drawn.
-    pub fn set_error(&mut self, choice: (usize, f32), error: String) {
+    pub fn set_error(&mut self, choice: Choice, error: String) {
         self.error = Some(error);
         self.drawn_for = Some(choice);
     }
 
-    /// Draws the window when open. Returns the (prototype, distance) to draw when the
-    /// picture on show is not of the current choice (and the slider is not being dragged).
-    pub fn show(&mut self, ctx: &egui::Context, protos: &[PrototypeInfo]) -> Option<(usize, f32)> {
+    /// Draws the window when open. Returns the choice to draw when the picture on show is
+    /// not of the current choice (and the slider is not being dragged).
+    pub fn show(&mut self, ctx: &egui::Context, protos: &[PrototypeInfo]) -> Option<Choice> {
         if !self.open {
             return None;
         }
         let mut open = self.open;
         let mut settled = true;
         let mut distance = self.distance.unwrap_or(50.0);
+        let mut method = self.method.unwrap_or(Method::Geometry);
         if self.selected >= protos.len() {
             self.selected = 0;
         }
@@ -154,6 +177,12 @@ impl Gallery {
                         .text("distance"),
                 );
                 settled = !slider.dragged();
+                ui.horizontal(|ui| {
+                    ui.label("drawn as");
+                    for m in METHODS {
+                        ui.selectable_value(&mut method, m, m.name());
+                    }
+                });
                 match (&self.shown, &self.error) {
                     (_, Some(e)) => {
                         ui.colored_label(egui::Color32::from_rgb(230, 80, 70), e);
@@ -184,6 +213,13 @@ impl Gallery {
                         ui.label("baked (BTF + VCMs)");
                         ui.label(format!("{:.1} MB", p.baked_bytes as f64 / 1e6));
                         ui.end_row();
+                        ui.label("surfel tree (about)");
+                        ui.label(if p.surfel_bytes == 0 {
+                            "none baked".to_string()
+                        } else {
+                            format!("{:.1} MB", p.surfel_bytes as f64 / 1e6)
+                        });
+                        ui.end_row();
                         ui.label("crown covered from the side");
                         ui.label(format!("{:.0} %", 100.0 * p.crown_coverage));
                         ui.end_row();
@@ -194,18 +230,21 @@ impl Gallery {
             });
         self.open = open;
         self.distance = Some(distance);
-        let want = (self.selected, distance);
+        self.method = Some(method);
+        let want = self.choice();
         (self.open && settled && !protos.is_empty() && self.drawn_for != Some(want)).then_some(want)
     }
 }
 
 /// Draws `tree` alone on flat ground from `distance` metres (a little above its middle,
-/// looking at it) as full geometry, under the sun, sky and fog of `base`.
+/// looking at it) with `method` (one of [`METHODS`]: full geometry, or its surfel tree
+/// sampled now), under the sun, sky and fog of `base`.
 pub fn render_prototype(
     gpu: &GpuContext,
     tree: &TreeModel,
     base: &FrameDesc,
     distance: f32,
+    method: Method,
 ) -> Result<RgbaImage> {
     let world = World::lone(tree.clone(), (4.0 * distance).clamp(60.0, 4000.0));
     let mut renderer = Renderer::new(gpu, &world)?;
@@ -217,7 +256,7 @@ pub fn render_prototype(
     );
     let eye = target + Vec3::new(0.0, 0.15 * distance, -distance);
     let mut frame = *base;
-    frame.method = Method::Geometry;
+    frame.method = method;
     frame.trees = true;
     frame.camera = Camera::look_at(eye, target, 40.0);
     frame.sun_held = false;

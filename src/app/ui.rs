@@ -17,7 +17,7 @@ pub(super) struct PanelRequests {
     /// The "Bench results" window's.
     pub(super) bench: BenchWindowActions,
     /// The gallery's choice of a prototype and a view to draw.
-    pub(super) gallery: Option<(usize, f32)>,
+    pub(super) gallery: Option<gallery::Choice>,
 }
 
 impl App {
@@ -129,9 +129,16 @@ impl App {
         }
         if let Some(choice) = requests.gallery {
             // Drawn once per choice (a fraction of a second on a software renderer).
-            match self.world.species.get(choice.0) {
+            match self.world.species.get(choice.prototype) {
                 Some(tree) => {
-                    match gallery::render_prototype(&r.ctx, tree, &self.frame, choice.1) {
+                    let picture = gallery::render_prototype(
+                        &r.ctx,
+                        tree,
+                        &self.frame,
+                        choice.distance,
+                        choice.method,
+                    );
+                    match picture {
                         Ok(img) => self
                             .gallery
                             .set_picture(r.egui_state.egui_ctx(), choice, &img),

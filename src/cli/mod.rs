@@ -32,8 +32,8 @@ pub enum Command {
     View(view::ViewArgs),
     /// Render one frame to a PNG, no window needed.
     Render(render::RenderArgs),
-    /// Bake a scene's BTF image sets, visibility cube maps and texel volumes (default: into
-    /// the cache the viewer and `render` use).
+    /// Bake a scene's BTF image sets, visibility cube maps, texel volumes, impostors and
+    /// surfel trees (default: into the cache the viewer and `render` use).
     Bake(bake::BakeArgs),
     /// Mean FLIP and percentiles between two images (A is the reference).
     Compare(compare::CompareArgs),
