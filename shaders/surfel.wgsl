@@ -76,8 +76,7 @@ struct SurfelItem {
     level: u32,
     // The level's spacing in the world (m).
     spacing: f32,
-    _pad0: u32,
-    _pad1: u32,
+    _pad: vec2<u32>,
 }
 
 @group(1) @binding(0) var<uniform> sp: SurfelParams;

@@ -427,3 +427,60 @@ fn impostor_record_and_params_match_impostor_wgsl() {
         }),
     );
 }
+
+#[test]
+fn surfel_structs_match_surfel_wgsl() {
+    use canopy::render::method::surfel::gpu::{SurfelItem, SurfelParams, SurfelTreeGpu};
+    let source = canopy::render::shaders::surfel();
+    check(
+        "SurfelParams",
+        wgsl_layout(&source, "SurfelParams"),
+        rust_layout!(SurfelParams {
+            size,
+            half_size,
+            quarter_size,
+            items,
+            row,
+            fill,
+            mode,
+            focal_px,
+            self_shadow,
+        }),
+    );
+    check(
+        "SurfelTreeGpu",
+        wgsl_layout(&source, "SurfelTreeGpu"),
+        rust_layout!(SurfelTreeGpu {
+            model,
+            qmin,
+            instance,
+            qsize,
+            scale,
+            tint,
+            _pad0,
+            vcm_min,
+            _pad1,
+            vcm_inv_size,
+            _pad2,
+            vcm_direct,
+            vcm_sky,
+            vol_origin,
+            vol_voxel,
+            vol_dims,
+            vol_offset,
+        }),
+    );
+    check(
+        "SurfelItem",
+        wgsl_layout(&source, "SurfelItem"),
+        rust_layout!(SurfelItem {
+            tree,
+            first,
+            count,
+            tolerance,
+            level,
+            spacing,
+            _pad,
+        }),
+    );
+}
