@@ -237,7 +237,7 @@ impl SurfelSet {
         {
             return Some(p);
         }
-        if self.words.len() % SURFEL_WORDS != 0 || self.gains.len() != levels {
+        if !self.words.len().is_multiple_of(SURFEL_WORDS) || self.gains.len() != levels {
             return Some("its surfel words or its gains do not match its counts".into());
         }
         let voxels: u64 = self.density.dims.iter().map(|&d| u64::from(d)).product();
@@ -461,7 +461,7 @@ mod tests {
                 position: qmin + qsize * Vec3::new(t, (t * 7.3).fract(), (t * 3.1).fract()),
                 normal: Vec3::new((t * 9.0).sin(), (t * 5.0).cos(), t - 0.5).normalize(),
                 albedo: Vec3::new(t, 1.0 - t, 0.5 * t),
-                foliage: k % 3 == 0,
+                foliage: k.is_multiple_of(3),
                 coverage: t.max(1.0 / 127.0),
                 openness: 1.0 - t,
             };

@@ -121,7 +121,7 @@ pub(crate) fn surfel_set(species: u32) -> SurfelSet {
         position: Vec3::new(0.1 * k as f32, 1.0 + 0.2 * k as f32, -0.3),
         normal: Vec3::new(0.0, 1.0, 0.2 * k as f32).normalize(),
         albedo: Vec3::new(0.1, 0.3 + 0.1 * k as f32, 0.05),
-        foliage: k % 2 == 0,
+        foliage: k.is_multiple_of(2),
         coverage: 0.25 * (k + 1) as f32,
         openness: 0.9 - 0.2 * k as f32,
     };

@@ -30,7 +30,8 @@ fn a_surfel_tree_round_trips() {
 fn broken_surfel_trees_are_refused_on_write_and_on_read() {
     // (what breaks it, what the reason names, whether the record it writes still has the
     // sizes its counts give, so that the reader reaches the same check)
-    let breakers: [(fn(&mut SurfelSet), &str, bool); 14] = [
+    type Breaker = (fn(&mut SurfelSet), &'static str, bool);
+    let breakers: [Breaker; 14] = [
         (|t| t.words.pop().map_or((), drop), "words", false),
         (|t| t.gains[1] = 0.5, "gain", true),
         (|t| t.gains[1] = f32::NAN, "gain", true),
