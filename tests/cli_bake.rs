@@ -10,6 +10,32 @@ use std::process::Command;
 /// `--baked FILE`: a file from `bake --out` is used as it is (no bake, no cache); one of
 /// another scene, a truncated one, a missing one, or `--baked` with a method that draws no
 /// baked images exits with 2 and the specific reason, and nothing is baked in its place.
+/// Where each kind of section (1 to 5: BTF, VCM, texel, impostor, surfel) lies in the
+/// baked file `bytes` (its last section of the kind: start, length), checking that every
+/// section is stored deflated.
+fn deflated_sections(bytes: &[u8]) -> [Option<(usize, usize)>; 5] {
+    let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
+    let sections = u32_at(12) as usize;
+    // The format's header: 80 fixed bytes, the section table of 28-byte entries, the header
+    // checksum.
+    let mut at = 84 + 28 * sections;
+    let mut found = [None; 5];
+    for i in 0..sections {
+        let entry = 80 + 28 * i;
+        let len = u64::from_le_bytes(bytes[entry + 8..entry + 16].try_into().unwrap()) as usize;
+        // Packing 1: the sections are stored deflated.
+        assert_eq!(u32_at(entry + 16), 1, "section {i} stored deflated");
+        if let Some(slot) = (u32_at(entry) as usize)
+            .checked_sub(1)
+            .and_then(|k| found.get_mut(k))
+        {
+            *slot = Some((at, len));
+        }
+        at += len;
+    }
+    found
+}
+
 #[test]
 fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     let cache = tmp("baked-cache");
@@ -68,32 +94,23 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     // The texel method draws from the file too.
     let o = render(&lone, &file, "texel");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    // One byte changed inside the texel volumes' section (kind 3): refused, naming it.
     let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
-    let sections = u32_at(12) as usize;
-    // The format's header: 80 fixed bytes, the section table of 28-byte entries, the header
-    // checksum.
-    let mut at = 84 + 28 * sections;
-    let mut texel_section = None;
-    let mut impostor_section = None;
-    let mut surfel_section = None;
-    let mut btf_section = None;
-    let mut vcm_section = None;
-    for i in 0..sections {
-        let entry = 80 + 28 * i;
-        let len = u64::from_le_bytes(bytes[entry + 8..entry + 16].try_into().unwrap()) as usize;
-        // Packing 1: the sections are stored deflated.
-        assert_eq!(u32_at(entry + 16), 1, "section {i} stored deflated");
-        match u32_at(entry) {
-            1 => btf_section = Some((at, len)),
-            2 => vcm_section = Some((at, len)),
-            3 => texel_section = Some((at, len)),
-            4 => impostor_section = Some((at, len)),
-            5 => surfel_section = Some((at, len)),
-            _ => {}
-        }
-        at += len;
-    }
+    let [
+        btf_section,
+        vcm_section,
+        texel_section,
+        impostor_section,
+        surfel_section,
+    ] = deflated_sections(&bytes);
+    // The bake written again as `file_name` with one byte of `(start, len)` changed at
+    // `start + len / part`.
+    let flipped = |(start, len): (usize, usize), part: usize, bit: u8, file_name: &str| {
+        let mut b = bytes.clone();
+        b[start + len / part] ^= bit;
+        let path = tmp(file_name);
+        std::fs::write(&path, &b).unwrap();
+        path
+    };
     // The bake is block-compressed by default: BC7 images (encoding byte 1 after the
     // first record's level), BC4 cube maps. A byte changed in their blocks: refused with
     // the section's checksum.
@@ -109,10 +126,7 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
         .unwrap();
         let encoding = if name == "vcm sets" { 4 + 9 } else { 4 + 5 };
         assert_eq!(payload[encoding], 1, "{name}: stored compressed");
-        let mut flipped = bytes.clone();
-        flipped[start + len / 2] ^= 0x10;
-        let bad = tmp("bad-blocks.canopy");
-        std::fs::write(&bad, &flipped).unwrap();
+        let bad = flipped((start, len), 2, 0x10, "bad-blocks.canopy");
         refused(
             render(&lone, &bad, "btf"),
             &format!("({name}) does not match its bytes"),
@@ -128,26 +142,18 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
         render(&lone, &bad, "btf"),
         "format version 6, but this canopy reads versions 7 to 9; re-bake with `canopy bake`",
     );
-    let (start, len) = texel_section.expect("the bake has a texel section");
-    let mut flipped = bytes.clone();
-    flipped[start + len / 2] ^= 0x40;
-    let bad = tmp("bad-texels.canopy");
-    std::fs::write(&bad, &flipped).unwrap();
+    // One byte changed inside the texel volumes' section (kind 3): refused, naming it.
+    let texels = texel_section.expect("the bake has a texel section");
+    let bad = flipped(texels, 2, 0x40, "bad-texels.canopy");
     refused(render(&lone, &bad, "texel"), "texel");
     refused(render(&lone, &bad, "btf"), "checksum");
     // One byte changed inside the impostors' section (kind 4): refused, naming it.
-    let (start, len) = impostor_section.expect("the bake has an impostor section");
-    let mut flipped = bytes.clone();
-    flipped[start + len / 3] ^= 0x04;
-    let bad = tmp("bad-impostors.canopy");
-    std::fs::write(&bad, &flipped).unwrap();
+    let impostors = impostor_section.expect("the bake has an impostor section");
+    let bad = flipped(impostors, 3, 0x04, "bad-impostors.canopy");
     refused(render(&lone, &bad, "btf"), "(impostors)");
     // One byte changed inside the surfel trees' section (kind 5): refused, naming it.
-    let (start, len) = surfel_section.expect("the bake has a surfel section");
-    let mut flipped = bytes.clone();
-    flipped[start + len / 2] ^= 0x08;
-    let bad = tmp("bad-surfels.canopy");
-    std::fs::write(&bad, &flipped).unwrap();
+    let surfels = surfel_section.expect("the bake has a surfel section");
+    let bad = flipped(surfels, 2, 0x08, "bad-surfels.canopy");
     refused(render(&lone, &bad, "surfel"), "(surfel trees)");
     // Missing.
     refused(render(&lone, &tmp("none.canopy"), "btf"), "could not open");
