@@ -182,7 +182,7 @@ fn a_named_baked_file_is_used_or_refused_with_its_reason() {
 #[test]
 fn concurrent_bakes_leave_one_valid_file_and_an_unwritable_cache_is_only_a_warning() {
     let cache = tmp("concurrent-cache");
-    let lone = common::data("lone_tree.toml");
+    let lone = btf_only_fir("concurrent");
     let bake = || {
         canopy()
             .env("CANOPY_CACHE_DIR", &cache)
@@ -244,6 +244,25 @@ fn concurrent_bakes_leave_one_valid_file_and_an_unwritable_cache_is_only_a_warni
     assert!(tmp("uncached.png").exists());
 }
 
+/// The lone fir's scene baking what `btf` draws only (no texel volumes, impostor or surfel
+/// trees: less than half its bake), written as `{name}-fir.toml` in the tests' directory:
+/// for the tests of how bakes reach the cache, which draw it with `btf`.
+fn btf_only_fir(name: &str) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(common::data("lone_tree.toml")).unwrap();
+    let mut bake = String::from("[bake]\n");
+    for line in text.split("[bake]\n").nth(1).unwrap().lines() {
+        let key = line.split('=').next().unwrap_or("").trim();
+        if !matches!(key, "texel_resolution" | "impostor_frames" | "surfel_budget") {
+            bake.push_str(line);
+            bake.push('\n');
+        }
+    }
+    bake.push_str("texel_resolution = 0\nimpostor_frames = 0\nsurfel_budget = 0\n");
+    let path = tmp(&format!("{name}-fir.toml"));
+    std::fs::write(&path, format!("{}{bake}", text.split("[bake]\n").next().unwrap())).unwrap();
+    path
+}
+
 /// A full disk (a 64 KiB tmpfs, where the machine lets the tests mount one): a screenshot
 /// that does not fit is an error naming the path and the reason, and leaves no file, not
 /// even a temporary; a bake the cache cannot hold is drawn from memory with a warning.
@@ -285,7 +304,7 @@ fn a_full_disk_is_reported_and_leaves_nothing_half_written() {
             .env("CANOPY_CACHE_DIR", dir.join("cache"))
             .env("RUST_LOG", "warn")
             .arg("render")
-            .arg(common::data("lone_tree.toml"))
+            .arg(btf_only_fir("full-disk"))
             .args([
                 "--method", "btf", "--size", "32x24", "--frames", "1", "--cpu",
             ])

@@ -16,6 +16,8 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
     let dir = common::scratch_dir("tune-test");
     let scene_path = dir.join("stand.toml");
     std::fs::copy(common::data("btf.toml"), &scene_path).unwrap();
+    // The stand's bake is in the cache (the run's shared one): tune measures, it does not bake.
+    let cache_dir = common::cache_holding(&common::btf_stand(), &dir.join("cache"));
     let target = TuneTarget::new(0.3, 2.0).unwrap();
     let req = TuneRequest {
         scene: Some(scene_path.clone()),
@@ -31,7 +33,7 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
         write: true,
         bake: false,
         method: canopy::render::Method::Btf,
-        cache_dir: dir.join("cache"),
+        cache_dir: cache_dir.clone(),
     };
     let o = run_tune(&req).unwrap();
     let i = o.chosen.expect("a loose target is met");
@@ -67,7 +69,7 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
     let world = scene.build_world().unwrap();
     let ctx = GpuContext::headless(AdapterPreference::Cpu).unwrap();
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
-    let cache = canopy::bake::cache::cache_path_in(&dir.join("cache"), &scene);
+    let cache = canopy::bake::cache::cache_path_in(&cache_dir, &scene);
     let (baked, _) =
         canopy::bake::load_or_bake_at(&cache, &ctx, &scene, &world, &mut |_| {}).unwrap();
     renderer.attach_btf(&ctx, &baked, &world).unwrap();
@@ -85,7 +87,7 @@ fn tune_picks_what_meets_the_target_and_looser_targets_cost_no_more() {
         height: 64,
         truth_supersample: 1,
         repeats: 1,
-        cache_dir: dir.join("cache"),
+        cache_dir: cache_dir.clone(),
         scene_content: canopy::bench::scene_content(&scene),
         // The same truth as `tune`'s: the reference.
         reference: Some(canopy::render::Reference::default()),
