@@ -82,19 +82,12 @@ fn far_frame(scene: &Scene, distance: f32) -> FrameDesc {
 /// `frame` drawn as the reference (2x supersampled) at `size`.
 fn reference_image(
     ctx: &GpuContext,
-    world: &World,
+    (scene, world): (&Scene, &World),
     renderer: &mut Renderer,
     frame: &FrameDesc,
     (w, h): (u32, u32),
 ) -> image::RgbaImage {
-    renderer
-        .prepare_reference(
-            ctx,
-            world,
-            canopy::render::sky_visibility::SKY_DIRECTIONS,
-            true,
-        )
-        .unwrap();
+    prepare_reference(renderer, ctx, scene, world);
     let mut reference = *frame;
     reference.reference = Some(canopy::render::Reference::default());
     renderer.render_image(ctx, &reference, w, h, 2).unwrap().0
@@ -122,7 +115,7 @@ fn btf_matches_geometry_where_the_tree_level_is_valid() {
     // measure 0.161 against 0.143 without.)
     frame.btf.vcm = false;
     let (w, h) = (192, 192);
-    let truth = reference_image(&ctx, &world, &mut renderer, &frame, (w, h));
+    let truth = reference_image(&ctx, (&scene, &world), &mut renderer, &frame, (w, h));
     frame.method = Method::Btf;
     let (btf, stats) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
     let b = stats.btf.expect("btf stats");
@@ -177,7 +170,7 @@ fn the_light_gain_brings_btf_closer_to_the_reference_between_light_samples() {
     frame.sun.azimuth_deg = 135.0;
     frame.sun.elevation_deg = 35.0;
     let (w, h) = (192, 192);
-    let truth = reference_image(&ctx, &world, &mut renderer, &frame, (w, h));
+    let truth = reference_image(&ctx, (&scene, &world), &mut renderer, &frame, (w, h));
     frame.method = Method::Btf;
     let (with, _) = renderer.render_image(&ctx, &frame, w, h, 1).unwrap();
     frame.btf.light_gain = 0.0;
@@ -298,10 +291,11 @@ fn renderer_texels(renderer: &Renderer, species: usize) -> canopy::lod::LevelTex
 #[test]
 fn the_cache_is_reused_and_a_corrupt_file_is_baked_again() {
     let ctx = gpu();
-    let (scene, world) = built(btf_stand());
+    // The lone fir (every kind of section, in half the stand's bake time).
+    let (scene, world) = built(lone_fir());
     let path = cache_file("own.canopy");
     let _ = std::fs::remove_file(&path);
-    let first = stand_baked().clone();
+    let first = baked(&scene).clone();
     canopy::format::write_atomic(&path, &first).unwrap();
     let (again, source) = bake::load_or_bake_at(&path, &ctx, &scene, &world, &mut |_| {}).unwrap();
     assert_eq!(source, Source::Cache);
@@ -510,7 +504,7 @@ fn the_ground_sky_brings_the_ground_among_the_trees_closer_to_the_reference() {
     frame.sun.elevation_deg = -5.0;
     let (w, h) = (192, 144);
     // (This prepares the sky visibility the ground reads.)
-    let truth = reference_image(&ctx, &world, &mut renderer, &frame, (w, h));
+    let truth = reference_image(&ctx, (&scene, &world), &mut renderer, &frame, (w, h));
     // The ground's pixels: red in the geometry's pixel classes.
     let mut classes = frame;
     classes.pixel_classes = true;

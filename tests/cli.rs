@@ -22,8 +22,8 @@ pub(crate) fn tmp(name: &str) -> std::path::PathBuf {
 
 #[test]
 fn render_then_compare_end_to_end() {
-    let out = tmp("small.png");
-    let scene = common::data("small.toml");
+    let out = tmp("lone.png");
+    let scene = common::data("lone_tree.toml");
     render_reports_its_frames_and_memory(&scene, &out);
     the_reference_reports_its_sky_volume(&scene);
     an_image_against_itself_has_zero_error(&out);
@@ -31,7 +31,7 @@ fn render_then_compare_end_to_end() {
     pixel_classes_split_the_comparison(&scene, &out, &out2);
 }
 
-/// `render --json` of the small scene: its frames, their time and where the memory is.
+/// `render --json` of the lone fir: its frames, their time and where the memory is.
 fn render_reports_its_frames_and_memory(scene: &Path, out: &Path) {
     let started = std::time::Instant::now();
     let o = canopy()
@@ -51,11 +51,10 @@ fn render_reports_its_frames_and_memory(scene: &Path, out: &Path) {
     assert_eq!(json["method"], "geometry");
     assert_eq!(json["width"], 96);
     assert_eq!(json["height"], 64);
-    // The frames' time in milliseconds. Measured on lavapipe (2 cores shared with other
-    // builds): 4976 to 5885 ms a frame (2 M triangles, 7 M in the shadow maps), 63 to 69 %
-    // of the command's 15 to 17 s. The timed frames fit in the command's own time (a time
-    // in microseconds would not), and lavapipe draws no frame of this scene in under
-    // 20 ms (a time in seconds, or one that timed only the submission, would be).
+    // The frames' time in milliseconds. The timed frames fit in the command's own time (a
+    // time in microseconds would not), and lavapipe draws no frame of this scene (89,000
+    // triangles, 267,000 in the shadow maps) in under 20 ms (a time in seconds, or one that
+    // timed only the submission, would be).
     let frame_ms = json["frame_ms"].as_f64().unwrap();
     assert_eq!(json["frames_timed"], 2, "{json}");
     assert!(
@@ -101,7 +100,7 @@ fn the_reference_reports_its_sky_volume(scene: &Path) {
         .args(["render"])
         .arg(scene)
         .args(["--out"])
-        .arg(tmp("small-reference.png"))
+        .arg(tmp("lone-reference.png"))
         .args(["--size", "32x24", "--frames", "1", "--cpu", "--json"])
         .args(["--reference", "--sky-directions", "8"])
         .output()
@@ -112,7 +111,7 @@ fn the_reference_reports_its_sky_volume(scene: &Path) {
     assert_eq!(json["sky_directions"], 8);
     assert!(json["sky_cell_m"].as_f64().unwrap() >= 0.5, "{json}");
     let bytes = json["sky_volume_bytes"].as_u64().unwrap();
-    // About 2 M cells at most, one byte each (2.14 MB measured on this scene).
+    // About 2 M cells at most, one byte each (1.05 MB measured on this scene).
     assert!(bytes > 1 && bytes <= 3_000_000, "{json}");
 }
 
@@ -134,7 +133,7 @@ fn an_image_against_itself_has_zero_error(out: &Path) {
 
 fn another_sun_has_a_positive_error(scene: &Path, out: &Path) -> std::path::PathBuf {
     // Another sun: a positive error, and a diff image on request.
-    let out2 = tmp("small-sun.png");
+    let out2 = tmp("lone-sun.png");
     let o = canopy()
         .arg("render")
         .arg(scene)
@@ -166,7 +165,7 @@ fn another_sun_has_a_positive_error(scene: &Path, out: &Path) -> std::path::Path
 fn pixel_classes_split_the_comparison(scene: &Path, out: &Path, out2: &Path) {
     // Split by the first frame's pixel classes: each class says how bright both images are
     // there (the same image: equal; the other sun: the ground differs).
-    let classes = tmp("small-classes.png");
+    let classes = tmp("lone-classes.png");
     let o = canopy()
         .arg("render")
         .arg(scene)
@@ -326,7 +325,7 @@ fn an_unwritable_output_path_is_an_error_and_leaves_nothing() {
     let out = blocker.join("out.png");
     let o = canopy()
         .arg("render")
-        .arg(common::data("small.toml"))
+        .arg(common::data("lone_tree.toml"))
         .arg("--out")
         .arg(&out)
         .args(["--size", "32x32", "--frames", "1", "--cpu"])

@@ -252,14 +252,21 @@ fn btf_only_fir(name: &str) -> std::path::PathBuf {
     let mut bake = String::from("[bake]\n");
     for line in text.split("[bake]\n").nth(1).unwrap().lines() {
         let key = line.split('=').next().unwrap_or("").trim();
-        if !matches!(key, "texel_resolution" | "impostor_frames" | "surfel_budget") {
+        if !matches!(
+            key,
+            "texel_resolution" | "impostor_frames" | "surfel_budget"
+        ) {
             bake.push_str(line);
             bake.push('\n');
         }
     }
     bake.push_str("texel_resolution = 0\nimpostor_frames = 0\nsurfel_budget = 0\n");
     let path = tmp(&format!("{name}-fir.toml"));
-    std::fs::write(&path, format!("{}{bake}", text.split("[bake]\n").next().unwrap())).unwrap();
+    std::fs::write(
+        &path,
+        format!("{}{bake}", text.split("[bake]\n").next().unwrap()),
+    )
+    .unwrap();
     path
 }
 

@@ -40,20 +40,13 @@ const BC7_MAX_REFERENCE_COST: f32 = 0.005;
 /// `frame` drawn as the reference (2x supersampled) at `size`.
 fn reference_image(
     ctx: &canopy::render::GpuContext,
-    world: &canopy::model::World,
+    (scene, world): (&canopy::scene::Scene, &canopy::model::World),
     frame: &FrameDesc,
     (w, h): (u32, u32),
 ) -> RgbaImage {
     let mut renderer = Renderer::new(ctx, world).unwrap();
     renderer.attach_btf(ctx, raw_bake(), world).unwrap();
-    renderer
-        .prepare_reference(
-            ctx,
-            world,
-            canopy::render::sky_visibility::SKY_DIRECTIONS,
-            true,
-        )
-        .unwrap();
+    prepare_reference(&mut renderer, ctx, scene, world);
     let mut reference = *frame;
     reference.reference = Some(canopy::render::Reference::default());
     renderer.render_image(ctx, &reference, w, h, 2).unwrap().0
@@ -231,7 +224,7 @@ fn the_stand_drawn_from_bc7_is_close_to_rgba8_and_the_decoded_fallback_matches()
         assert!(fallback_trees <= 0.008, "{fallback_trees}");
         // Against the 2x supersampled reference, BC7 costs little on top of the BTF's own
         // error.
-        let reference = reference_image(&ctx, &world, &f, (w, h));
+        let reference = reference_image(&ctx, (&scene, &world), &f, (w, h));
         let (to_ref_rgba8, _) = flip_over_trees(&rgba8, &reference, &bare);
         let (to_ref_bc7, _) = flip_over_trees(&bc7, &reference, &bare);
         eprintln!(

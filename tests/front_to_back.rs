@@ -104,7 +104,7 @@ fn front_to_back_is_as_near_the_reference_as_back_to_front_on_the_gpus_sort() {
     assert!(f.btf.gpu_far, "the defaults changed");
     let p = check(&ctx, &mut renderer, &f, "GPU sort");
     assert!(p.s_on.btf.unwrap().gpu_billboards > 0);
-    renderer.prepare_reference(&ctx, &world, 64, true).unwrap();
+    prepare_reference(&mut renderer, &ctx, &scene, &world);
     let mut t = f;
     t.method = Method::Geometry;
     t.reference = Some(Reference::default());

@@ -40,10 +40,10 @@ fn a_preset_exported_comes_back_with_its_levels_and_draws_alike_in_every_method(
     }
 
     // The pictures: each method, the round trip against the preset, from near and mid.
-    let preset_bake = load_or_bake(&preset, &dir.join("preset-cache"));
+    let preset_bake = baked(&preset);
     let bake = load_or_bake(&scene, &dir.join("cache"));
     let mut a = Renderer::new(&ctx, &preset_world).unwrap();
-    a.attach_btf(&ctx, &preset_bake, &preset_world).unwrap();
+    a.attach_btf(&ctx, preset_bake, &preset_world).unwrap();
     let mut b = Renderer::new(&ctx, &world).unwrap();
     b.attach_btf(&ctx, &bake, &world).unwrap();
     let tree = world.forest.instances[0].position;

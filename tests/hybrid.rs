@@ -4,7 +4,6 @@
 //! impostors where the bake has them. (The switch's cross-fade is judged in
 //! tests/stability.rs.)
 
-use canopy::render::sky_visibility::SKY_DIRECTIONS;
 use canopy::render::{Camera, FrameDesc, Method, Reference, Renderer};
 use canopy::scene::Scene;
 use glam::{Mat4, Vec3};
@@ -34,9 +33,7 @@ fn up_close_hybrid_draws_geometry_and_far_away_it_is_btf() {
     let baked = baked(&scene);
     let mut renderer = Renderer::new(&ctx, &world).unwrap();
     renderer.attach_btf(&ctx, baked, &world).unwrap();
-    renderer
-        .prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
-        .unwrap();
+    prepare_reference(&mut renderer, &ctx, &scene, &world);
     let tree = world.forest.instances[0];
     let centre = world.species[0]
         .tree_bounds

@@ -9,7 +9,7 @@ use crate::common;
 
 use std::sync::OnceLock;
 
-use crate::common::{gpu, lone_fir, rgb};
+use crate::common::{gpu, lone_fir, prepare_reference, rgb};
 use canopy::format::Baked;
 use canopy::model::World;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
@@ -39,16 +39,11 @@ fn baked() -> &'static Baked {
 }
 
 fn setup(ctx: &GpuContext) -> (World, Renderer) {
-    let world = lone_fir().build_world().unwrap();
+    let scene = lone_fir();
+    let world = scene.build_world().unwrap();
     let mut r = Renderer::new(ctx, &world).unwrap();
     r.attach_btf(ctx, baked(), &world).unwrap();
-    r.prepare_reference(
-        ctx,
-        &world,
-        canopy::render::sky_visibility::SKY_DIRECTIONS,
-        true,
-    )
-    .unwrap();
+    prepare_reference(&mut r, ctx, &scene, &world);
     (world, r)
 }
 

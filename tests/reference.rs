@@ -160,8 +160,7 @@ fn lone_fir_against_the_reference(
     frame.btf.lod_fade = 0.0;
     let mut r = Renderer::new(&ctx, &world).unwrap();
     r.attach_btf(&ctx, &baked, &world).unwrap();
-    r.prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
-        .unwrap();
+    prepare_reference(&mut r, &ctx, scene, &world);
     let size = 2 * settings.resolution;
     let mut reference = frame;
     reference.reference = Some(Reference::default());
@@ -328,8 +327,7 @@ fn far_fir_against_near(self_map_size: u32) -> (f32, f32) {
     let bounds = world.species[0].tree_bounds.transformed(tree.transform());
     let (centre, radius) = (bounds.center(), 0.5 * bounds.extent().length());
     let mut r = Renderer::new(&ctx, &world).unwrap();
-    r.prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
-        .unwrap();
+    prepare_reference(&mut r, &ctx, &scene, &world);
     let mut frame = FrameDesc::from_scene(&scene);
     frame.fog_density = 0.0;
     frame.sun = canopy::render::Sun {

@@ -8,7 +8,6 @@ use canopy::model::mesh::{Aabb, Mesh, Vertex};
 use canopy::model::params::TexelSource;
 use canopy::model::tree::TreeModel;
 use canopy::render::method::texel::TexelMode;
-use canopy::render::sky_visibility::SKY_DIRECTIONS;
 use canopy::render::{Camera, FrameDesc, Method, Reference, Renderer};
 use canopy::scene::Scene;
 use canopy::sphere::DirectionSet;
@@ -315,9 +314,7 @@ impl LoneTree {
         let mut renderer = Renderer::new(&ctx, &world).unwrap();
         renderer.attach_btf(&ctx, baked, &world).unwrap();
         assert!(renderer.has_texels());
-        renderer
-            .prepare_reference(&ctx, &world, SKY_DIRECTIONS, true)
-            .unwrap();
+        prepare_reference(&mut renderer, &ctx, &scene, &world);
         Self {
             ctx,
             scene,

@@ -267,21 +267,16 @@ fn dense_stand_flips_as(
     let (w, h) = (320u32, 240u32);
     let mut renderer = Renderer::new(ctx, &world).unwrap();
     renderer.attach_btf(ctx, baked, &world).unwrap();
-    renderer
-        .prepare_reference(
-            ctx,
-            &world,
-            canopy::render::sky_visibility::SKY_DIRECTIONS,
-            true,
-        )
-        .unwrap();
+    prepare_reference(&mut renderer, ctx, &scene, &world);
     let mut frame = FrameDesc::from_scene(&scene);
     if let Some(e) = elevation {
         frame.sun.elevation_deg = e;
     }
-    let mut truth = frame;
-    truth.reference = Some(canopy::render::Reference::default());
-    let truth = rgb(&renderer.render_image(ctx, &truth, w, h, 1).unwrap().0);
+    let truth = dense_stand_truth(elevation, || {
+        let mut truth = frame;
+        truth.reference = Some(canopy::render::Reference::default());
+        rgb(&renderer.render_image(ctx, &truth, w, h, 1).unwrap().0)
+    });
     frame.method = Method::Btf;
     let mut flip = |frame: &FrameDesc| {
         let img = rgb(&renderer.render_image(ctx, frame, w, h, 1).unwrap().0);
@@ -298,6 +293,25 @@ fn dense_stand_flips_as(
         renderer.vcm_bytes()
     );
     (with, sun_only, without)
+}
+
+/// The dense stand's reference at the sun `elevation` (the scene's own when `None`): drawn
+/// by `draw` the first time it is asked for, then kept for the run (it draws every tree as
+/// geometry: the bake and its cube maps' layout change nothing in it).
+fn dense_stand_truth(
+    elevation: Option<f32>,
+    draw: impl FnOnce() -> image::RgbImage,
+) -> image::RgbImage {
+    type Truths = Vec<(Option<u32>, image::RgbImage)>;
+    static TRUTHS: std::sync::Mutex<Truths> = std::sync::Mutex::new(Vec::new());
+    let key = elevation.map(f32::to_bits);
+    let mut truths = TRUTHS.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, img)) = truths.iter().find(|(k, _)| *k == key) {
+        return img.clone();
+    }
+    let img = draw();
+    truths.push((key, img.clone()));
+    img
 }
 
 /// How much farther from the reference `btf` may be with forest cells than with a cube
@@ -410,13 +424,7 @@ fn lone_tree_level_flips(scene: &Scene) -> Vec<(canopy::model::Level, f32, f32, 
     baked.vcm = bake::vcm::bake_vcm(&world, &baked.btf, 32, &mut |_, _| {}).unwrap();
     let mut r = Renderer::new(&ctx, &world).unwrap();
     r.attach_btf(&ctx, &baked, &world).unwrap();
-    r.prepare_reference(
-        &ctx,
-        &world,
-        canopy::render::sky_visibility::SKY_DIRECTIONS,
-        true,
-    )
-    .unwrap();
+    prepare_reference(&mut r, &ctx, scene, &world);
     let tree = world.forest.instances[0];
     let bounds = world.species[0].tree_bounds.transformed(tree.transform());
     let (centre, radius) = (bounds.center(), 0.5 * bounds.extent().length());

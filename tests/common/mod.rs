@@ -141,6 +141,28 @@ pub fn cache_holding(scene: &Scene, dir: &Path) -> PathBuf {
     dir.to_path_buf()
 }
 
+/// `renderer` made ready for reference frames of `world`, which `scene` built and nothing
+/// changed since: its sky visibility from the reference's directions is computed once per
+/// run for each scene (one test at a time; the others wait and read it) and kept in the
+/// run's directory of shared bakes, as `canopy render` keeps it in its cache.
+pub fn prepare_reference(renderer: &mut Renderer, ctx: &GpuContext, scene: &Scene, world: &World) {
+    type Lock = &'static Mutex<()>;
+    static LOCKS: Mutex<BTreeMap<u64, Lock>> = Mutex::new(BTreeMap::new());
+    let directions = canopy::render::sky_visibility::SKY_DIRECTIONS;
+    let lock: Lock = *LOCKS
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .entry(canopy::bake::cache::scene_hash(scene))
+        .or_insert_with(|| Box::leak(Box::new(Mutex::new(()))));
+    let volume = {
+        let _one_at_a_time = lock.lock().unwrap_or_else(|e| e.into_inner());
+        canopy::bake::sky_cache::sky_volume_in(&fixtures_dir(), scene, world, directions, true)
+    };
+    renderer
+        .prepare_reference_with(ctx, world, directions, true, |_| volume)
+        .unwrap();
+}
+
 /// `scene`'s world and a renderer for it with the scene's shared bake ([`baked`]) attached.
 pub fn baked_renderer(ctx: &GpuContext, scene: &Scene) -> (World, Renderer) {
     let world = scene.build_world().unwrap();
@@ -276,14 +298,7 @@ pub fn against_reference(
     use canopy::render::{Method, Reference};
     let mut renderer = Renderer::new(ctx, world).unwrap();
     renderer.attach_btf(ctx, baked, world).unwrap();
-    renderer
-        .prepare_reference(
-            ctx,
-            world,
-            canopy::render::sky_visibility::SKY_DIRECTIONS,
-            true,
-        )
-        .unwrap();
+    prepare_reference(&mut renderer, ctx, scene, world);
     let (w, h) = (160, 120);
     let mut out = Vec::new();
     for &(name, distance) in views {
