@@ -5,7 +5,7 @@
 use canopy::bake::{self, Source};
 use canopy::model::Level;
 use canopy::model::World;
-use canopy::render::btf::BtfSettings;
+use canopy::render::method::btf::BtfSettings;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 
@@ -379,8 +379,8 @@ fn crossed_planes_are_drawn_and_stay_near_the_ground_truth() {
         frame.btf.planes = planes;
         renderer.render_image(&ctx, &frame, w, h, 1).unwrap()
     };
-    let (single, s1) = shot(canopy::render::btf::PlaneMode::Single);
-    let (crossed, s3) = shot(canopy::render::btf::PlaneMode::Crossed);
+    let (single, s1) = shot(canopy::render::method::btf::PlaneMode::Single);
+    let (crossed, s3) = shot(canopy::render::method::btf::PlaneMode::Crossed);
     let (b1, b3) = (s1.btf.unwrap(), s3.btf.unwrap());
     // One record per billboard in both modes; the crossed one bounds its three planes.
     assert_eq!(b1.total_billboards(), b3.total_billboards());

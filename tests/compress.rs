@@ -204,9 +204,9 @@ fn the_stand_drawn_from_bc7_is_close_to_rgba8_and_the_decoded_fallback_matches()
         let rgba8 = draw(raw, &f);
         // lavapipe is a CPU adapter: BC7 images are decoded on load unless asked.
         let decoded = draw(&packed, &f);
-        canopy::render::btf::BC7_ON_CPU_ADAPTERS.store(true, Ordering::SeqCst);
+        canopy::render::method::btf::BC7_ON_CPU_ADAPTERS.store(true, Ordering::SeqCst);
         let bc7 = draw(&packed, &f);
-        canopy::render::btf::BC7_ON_CPU_ADAPTERS.store(false, Ordering::SeqCst);
+        canopy::render::method::btf::BC7_ON_CPU_ADAPTERS.store(false, Ordering::SeqCst);
         let mut bare_frame = f;
         bare_frame.trees = false;
         let bare = draw(raw, &bare_frame);

@@ -5,9 +5,11 @@
 
 use std::mem::{offset_of, size_of};
 
-use canopy::render::btf::far::{DirSetGpu, FarParamsGpu, FarShadeGpu, FarTreeGpu, SortStepGpu};
-use canopy::render::btf::far_canopy::CanopyGpuParams;
-use canopy::render::btf::{BillboardGpu, NearDrawGpu};
+use canopy::render::method::btf::far::{
+    DirSetGpu, FarParamsGpu, FarShadeGpu, FarTreeGpu, SortStepGpu,
+};
+use canopy::render::method::btf::far_canopy::CanopyGpuParams;
+use canopy::render::method::btf::{BillboardGpu, NearDrawGpu};
 use canopy::render::self_shadow::SelfLightGpu;
 use canopy::render::uniforms::FrameUniforms;
 use canopy::render::world_gpu::{PartSetGpu, TreeGpu};

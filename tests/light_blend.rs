@@ -3,7 +3,7 @@
 //! reads a fragment instead of 15; and they are made again only when the sun moves.
 
 use canopy::model::World;
-use canopy::render::btf::BtfStats;
+use canopy::render::method::btf::BtfStats;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
@@ -134,7 +134,7 @@ fn yaw_bins_cost_a_bounded_change_and_the_near_levels_keep_their_reads() {
     assert!(
         mean.0 < bound.0 && mean.1 < bound.1,
         "light blends at {} yaw bins: mean FLIP {mean:?}, bound {bound:?}",
-        canopy::render::btf::light_blend::LIGHT_BINS
+        canopy::render::method::btf::light_blend::LIGHT_BINS
     );
     // Near, the main-branch and twig levels still read 15 images a billboard, the tree
     // level 9: the mean lies between.

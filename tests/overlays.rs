@@ -9,7 +9,7 @@
 
 use canopy::format::Baked;
 use canopy::model::{Level, PerLevel, World};
-use canopy::render::btf::LOD_COLORS;
+use canopy::render::method::btf::LOD_COLORS;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use glam::Vec3;
 use image::RgbaImage;

@@ -63,7 +63,7 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
         actions: PanelActions::default(),
     };
     let frame_stats = canopy::render::FrameStats {
-        btf: Some(canopy::render::btf::BtfStats {
+        btf: Some(canopy::render::method::btf::BtfStats {
             billboards: PerLevel {
                 twig: 10,
                 branch: 20,
@@ -142,7 +142,7 @@ fn the_btf_controls_appear_with_the_btf_method_and_show_its_stats() {
     harness.run();
     assert_eq!(
         harness.state().frame.btf.planes,
-        canopy::render::btf::PlaneMode::Crossed
+        canopy::render::method::btf::PlaneMode::Crossed
     );
     // The texel method's controls come from its own knob table.
     assert!(harness.query_by_label("stacks").is_none());

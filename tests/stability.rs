@@ -8,8 +8,8 @@ use canopy::bench::flight::{FlightFrame, Knobs};
 use canopy::bench::run::{self, BenchOptions, Config};
 use canopy::format::Baked;
 use canopy::model::World;
-use canopy::render::btf::BtfSettings;
 use canopy::render::knob::{Knob, KnobValues};
+use canopy::render::method::btf::BtfSettings;
 use canopy::render::{Camera, FrameDesc, GpuContext, Method, Renderer};
 use canopy::scene::Scene;
 use glam::Vec3;
@@ -59,7 +59,7 @@ fn btf(label: &str, f: impl FnOnce(&mut BtfSettings)) -> Config {
     // The btf knobs alone: each test's frame keeps its own ground knobs.
     let mut d = FrameDesc::from_scene(&Scene::default_scene());
     d.btf = btf;
-    let own: Vec<&'static Knob> = canopy::render::btf::knobs::KNOBS.iter().collect();
+    let own: Vec<&'static Knob> = canopy::render::method::btf::knobs::KNOBS.iter().collect();
     Config {
         label: label.into(),
         method: Method::Btf,

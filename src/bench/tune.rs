@@ -4,7 +4,7 @@
 //! measured once: a looser target can only pick a configuration as cheap or cheaper.
 
 use super::run::{Config, ConfigSummary};
-use crate::render::btf::{BtfSettings, PlaneMode};
+use crate::render::method::btf::{BtfSettings, PlaneMode};
 use crate::render::method::knobs_of;
 use crate::render::{FrameDesc, Method};
 use crate::{Error, Result};

@@ -135,7 +135,7 @@ impl Bc7Textures {
     /// Sets it for the bakes attached from now on.
     pub fn apply(&self) {
         if self.bc7_textures {
-            crate::render::btf::BC7_ON_CPU_ADAPTERS
+            crate::render::method::btf::BC7_ON_CPU_ADAPTERS
                 .store(true, std::sync::atomic::Ordering::Relaxed);
         }
     }

@@ -6,8 +6,8 @@
 use image::RgbaImage;
 use serde::{Serialize, Serializer};
 
-use super::btf::BtfStats;
 use super::knob::{KnobValue, KnobValues};
+use super::method::btf::BtfStats;
 use super::method::knobs_of;
 use super::timing::PassTimes;
 use super::{FrameDesc, FrameStats, GpuContext, Renderer};

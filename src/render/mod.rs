@@ -55,7 +55,6 @@ pub use frame::{
 pub use ground::{
     GROUND_DEPTH_FORMAT, GROUND_FORMAT, GROUND_MAP_SIZE, ground_map_side, ground_preview_side,
 };
-pub use method::btf;
 pub use target::{OFFSCREEN_FORMAT, OffscreenTarget};
 
 use frame_bindings::{DepthTarget, FrameBindings};

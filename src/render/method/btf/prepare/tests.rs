@@ -1,8 +1,8 @@
 //! The CPU prepare step: levels, fades, expansion, culling by weight, sorting.
 
 use super::*;
-use crate::render::btf::{LOD_COLORS, NO_LIGHT_BLEND};
 use crate::render::camera::Camera;
+use crate::render::method::btf::{LOD_COLORS, NO_LIGHT_BLEND};
 
 const BRANCHES: usize = 4;
 const BRANCH_TWIGS: usize = 5;
