@@ -357,6 +357,7 @@ const METHODS: &[&str] = &[
     "texel",
     "hybrid",
     "impostor",
+    "surfel",
 ];
 
 /// The imports of one method by another that are allowed, with why: `hybrid` composes
@@ -408,6 +409,17 @@ fn methods_named(rel: &str, text: &str, own: &str) -> Vec<(String, usize)> {
         }
     }
     out
+}
+
+#[test]
+fn every_method_is_in_the_import_check() {
+    for m in canopy::render::Method::ALL {
+        assert!(
+            METHODS.contains(&m.name()),
+            "{} is a method: add it to METHODS",
+            m.name()
+        );
+    }
 }
 
 #[test]
