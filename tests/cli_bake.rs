@@ -7,9 +7,6 @@ use crate::common;
 
 use std::process::Command;
 
-/// `--baked FILE`: a file from `bake --out` is used as it is (no bake, no cache); one of
-/// another scene, a truncated one, a missing one, or `--baked` with a method that draws no
-/// baked images exits with 2 and the specific reason, and nothing is baked in its place.
 /// Where each kind of section (1 to 5: BTF, VCM, texel, impostor, surfel) lies in the
 /// baked file `bytes` (its last section of the kind: start, length), checking that every
 /// section is stored deflated.
@@ -36,6 +33,9 @@ fn deflated_sections(bytes: &[u8]) -> [Option<(usize, usize)>; 5] {
     found
 }
 
+/// `--baked FILE`: a file from `bake --out` is used as it is (no bake, no cache); one of
+/// another scene, a truncated one, a missing one, or `--baked` with a method that draws no
+/// baked images exits with 2 and the specific reason, and nothing is baked in its place.
 #[test]
 fn a_named_baked_file_is_used_or_refused_with_its_reason() {
     let cache = tmp("baked-cache");
@@ -248,25 +248,8 @@ fn concurrent_bakes_leave_one_valid_file_and_an_unwritable_cache_is_only_a_warni
 /// trees: less than half its bake), written as `{name}-fir.toml` in the tests' directory:
 /// for the tests of how bakes reach the cache, which draw it with `btf`.
 fn btf_only_fir(name: &str) -> std::path::PathBuf {
-    let text = std::fs::read_to_string(common::data("lone_tree.toml")).unwrap();
-    let mut bake = String::from("[bake]\n");
-    for line in text.split("[bake]\n").nth(1).unwrap().lines() {
-        let key = line.split('=').next().unwrap_or("").trim();
-        if !matches!(
-            key,
-            "texel_resolution" | "impostor_frames" | "surfel_budget"
-        ) {
-            bake.push_str(line);
-            bake.push('\n');
-        }
-    }
-    bake.push_str("texel_resolution = 0\nimpostor_frames = 0\nsurfel_budget = 0\n");
     let path = tmp(&format!("{name}-fir.toml"));
-    std::fs::write(
-        &path,
-        format!("{}{bake}", text.split("[bake]\n").next().unwrap()),
-    )
-    .unwrap();
+    std::fs::write(&path, common::lone_fir_for_btf_only()).unwrap();
     path
 }
 

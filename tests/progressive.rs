@@ -224,12 +224,7 @@ fn tree_levels_alone_draw_the_forest(
 #[test]
 fn a_viewer_bake_first_hands_over_a_preview_at_18_views() {
     let dir = scratch_dir("progressive-preview");
-    let text = std::fs::read_to_string(data("lone_tree.toml"))
-        .unwrap()
-        .replace("tree_views = 6", "tree_views = 66")
-        .replace("impostor_frames = 4", "impostor_frames = 0")
-        .replace("surfel_budget = 20000", "surfel_budget = 0")
-        .replace("[bake]\n", "[bake]\ntexel_resolution = 0\n");
+    let text = lone_fir_for_btf_only().replace("tree_views = 6", "tree_views = 66");
     let path = dir.join("fir66.toml");
     std::fs::write(&path, text).unwrap();
     let scene = Scene::load(&path).unwrap();

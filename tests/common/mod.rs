@@ -163,6 +163,16 @@ pub fn prepare_reference(renderer: &mut Renderer, ctx: &GpuContext, scene: &Scen
         .unwrap();
 }
 
+/// The text of `tests/data/lone_tree.toml` baking what `btf` draws only: no texel volumes,
+/// impostor or surfel tree (less than half its bake).
+pub fn lone_fir_for_btf_only() -> String {
+    std::fs::read_to_string(data("lone_tree.toml"))
+        .unwrap()
+        .replace("impostor_frames = 4", "impostor_frames = 0")
+        .replace("surfel_budget = 20000", "surfel_budget = 0")
+        .replace("[bake]\n", "[bake]\ntexel_resolution = 0\n")
+}
+
 /// `scene`'s world and a renderer for it with the scene's shared bake ([`baked`]) attached.
 pub fn baked_renderer(ctx: &GpuContext, scene: &Scene) -> (World, Renderer) {
     let world = scene.build_world().unwrap();
